@@ -1,0 +1,121 @@
+//! Speed figures for the paper's convergence test at h = k = 1/L: end-to-end time, time per
+//! step, and per-step time divided by one forward+backward substitution with the velocity
+//! factor (a ratio that is stable on a noisy shared machine, measured in the same run).
+
+use crate::scene::{self, presets, Overrides};
+use crate::solve::stepper::Simulation;
+use crate::solve::SolverSettings;
+use serde::Serialize;
+use std::time::Instant;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchLevel {
+    pub level: usize,
+    pub nodes: usize,
+    pub unknowns: usize,
+    pub steps: usize,
+    /// Validation + meshing + assembly + factorisations.
+    pub setup_s: f64,
+    pub solve_s: f64,
+    pub total_s: f64,
+    pub per_step_s: f64,
+    /// Median time of one forward+backward substitution with the K_II factor.
+    pub substitution_s: f64,
+    pub step_over_substitution: f64,
+    pub w_v: f64,
+    pub zeta_l2: f64,
+    /// Peak resident memory of the process so far (VmHWM), MiB; None off Linux.
+    pub peak_rss_mib: Option<f64>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchReport {
+    pub preset: &'static str,
+    pub repeat: usize,
+    pub levels: Vec<BenchLevel>,
+}
+
+impl BenchReport {
+    /// A plain-text table for humans.
+    pub fn table(&self) -> String {
+        let mut s = String::from("  1/h   nodes  unknowns steps  setup_s  solve_s  total_s  step_ms  subst_ms  step/subst  peak_MiB\n");
+        for l in &self.levels {
+            s += &format!(
+                "{:5} {:7} {:9} {:5} {:8.4} {:8.4} {:8.4} {:8.3} {:9.3} {:11.2} {:9}\n",
+                l.level,
+                l.nodes,
+                l.unknowns,
+                l.steps,
+                l.setup_s,
+                l.solve_s,
+                l.total_s,
+                1e3 * l.per_step_s,
+                1e3 * l.substitution_s,
+                l.step_over_substitution,
+                l.peak_rss_mib.map_or("-".into(), |m| format!("{m:.0}")),
+            );
+        }
+        s
+    }
+}
+
+/// Runs the levels, each `repeat` times (fastest end-to-end run reported).
+pub fn run(levels: &[usize], repeat: usize) -> Result<BenchReport, Box<dyn std::error::Error>> {
+    let preset = "paper-convergence";
+    let mut out = Vec::new();
+    for &level in levels {
+        let mut best: Option<BenchLevel> = None;
+        for _ in 0..repeat {
+            let r = one(preset, level)?;
+            if best.as_ref().is_none_or(|b| r.total_s < b.total_s) {
+                best = Some(r);
+            }
+        }
+        out.push(best.expect("repeat ≥ 1"));
+    }
+    Ok(BenchReport { preset, repeat, levels: out })
+}
+
+fn one(preset: &str, level: usize) -> Result<BenchLevel, Box<dyn std::error::Error>> {
+    let start = Instant::now();
+    let mut doc = presets::get(preset).ok_or("unknown preset")?;
+    let frac = serde_json::Value::String(format!("1/{level}"));
+    scene::apply_overrides(&mut doc, &Overrides { h: Some(frac.clone()), k: Some(frac), t_end: None });
+    let problem = scene::validate(&doc)?;
+    let mut sim = Simulation::new(problem, SolverSettings::default())?;
+    let setup_s = start.elapsed().as_secs_f64();
+    let t0 = Instant::now();
+    let mut last = None;
+    while !sim.finished() {
+        last = Some(sim.step()?);
+    }
+    let solve_s = t0.elapsed().as_secs_f64();
+    let total_s = start.elapsed().as_secs_f64();
+    let mut subs: Vec<f64> = (0..21).map(|_| sim.time_one_substitution()).collect();
+    subs.sort_by(f64::total_cmp);
+    let substitution_s = subs[subs.len() / 2];
+    let steps = sim.problem.steps;
+    let last = last.ok_or("no steps")?;
+    Ok(BenchLevel {
+        level,
+        nodes: sim.mesh.n_nodes(),
+        unknowns: sim.dofs.n_free(),
+        steps,
+        setup_s,
+        solve_s,
+        total_s,
+        per_step_s: solve_s / steps as f64,
+        substitution_s,
+        step_over_substitution: solve_s / steps as f64 / substitution_s,
+        w_v: last.w_v,
+        zeta_l2: last.zeta_l2,
+        peak_rss_mib: peak_rss_mib(),
+    })
+}
+
+fn peak_rss_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}

@@ -1,0 +1,11 @@
+//! P1 finite elements on the triangulation: element kernels, the degree-of-freedom map with
+//! Γ1/Γ3 constraints, pattern-once assembly of the scheme's matrices, load vectors and norms.
+
+pub mod assembly;
+pub mod dofs;
+pub mod element;
+pub mod loads;
+pub mod norms;
+
+pub use dofs::{DofMap, Slot};
+pub use element::Geometry;

@@ -1,0 +1,19 @@
+//! The norms of SCHEME.md: |v|_V = ‖ε(v)‖_L2(Ω) and |ζ|_Z0 = (ζᵀ M ζ)^½.
+
+use super::Geometry;
+use crate::linalg::Csr;
+use crate::mesh::Mesh;
+
+/// ‖ε(v)‖_L2 = (Σ_T |T| ε:ε)^½ for a global nodal vector field v.
+pub fn strain_norm(mesh: &Mesh, geo: &Geometry, v: &[f64]) -> f64 {
+    (0..mesh.triangles.len())
+        .map(|t| geo.area[t] * geo.strain(mesh, t, v).norm_squared())
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// (zᵀ M z)^½ with the consistent mass matrix M.
+pub fn mass_norm(m: &Csr, z: &[f64], scratch: &mut [f64]) -> f64 {
+    m.mul_vec(z, scratch);
+    z.iter().zip(scratch.iter()).map(|(a, b)| a * b).sum::<f64>().max(0.0).sqrt()
+}

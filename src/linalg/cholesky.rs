@@ -1,0 +1,175 @@
+//! Sparse Cholesky LLᵀ with faer's low-level API: the symbolic analysis (AMD ordering,
+//! supernodal structure) is done once, the numeric factor lives in our own buffer and can be
+//! recomputed for new values on the same pattern, and solves reuse one scratch buffer.
+//!
+//! faer's automatic simplicial/supernodal switch picks the slower variant for P1 meshes of
+//! these sizes (ECOSYSTEM.md: 2–5×), so the supernodal path is forced. Parallelism is `Seq`:
+//! jobs and the two sub-problems of a step are parallel instead.
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky,
+    SymmetricOrdering,
+};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::SparseColMatRef;
+use faer::{Conj, MatMut, Par, Side};
+
+#[derive(Debug, thiserror::Error)]
+pub enum FactorError {
+    #[error("symbolic Cholesky analysis failed: {0:?}")]
+    Symbolic(faer::sparse::FaerError),
+    #[error("matrix is not numerically positive definite (Cholesky broke down)")]
+    NotPositiveDefinite,
+}
+
+/// A factorised SPD matrix A = P Lᵀ L Pᵀ (faer's convention), n × n.
+pub struct Cholesky {
+    symbolic: SymbolicCholesky<usize>,
+    l_values: Vec<f64>,
+    factor_scratch: MemBuffer,
+    /// Scratch for single right-hand-side solves.
+    solve_scratch: MemBuffer,
+}
+
+impl std::fmt::Debug for Cholesky {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Cholesky")
+            .field("n", &self.n())
+            .field("nnz_l", &self.l_values.len())
+            .finish()
+    }
+}
+
+impl Cholesky {
+    /// Symbolic analysis and first numeric factorisation of the lower triangle `a_lower`.
+    pub fn new(a_lower: SparseColMatRef<'_, usize, f64>) -> Result<Self, FactorError> {
+        let params = CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+            ..Default::default()
+        };
+        let symbolic = factorize_symbolic_cholesky(
+            a_lower.symbolic(),
+            Side::Lower,
+            SymmetricOrdering::Amd,
+            params,
+        )
+        .map_err(FactorError::Symbolic)?;
+        let factor_scratch = MemBuffer::new(
+            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+        );
+        let solve_scratch = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
+        let mut this = Cholesky {
+            l_values: vec![0.0; symbolic.len_val()],
+            symbolic,
+            factor_scratch,
+            solve_scratch,
+        };
+        this.refactor(a_lower)?;
+        Ok(this)
+    }
+
+    pub fn n(&self) -> usize {
+        self.symbolic.nrows()
+    }
+
+    /// Number of stored entries of the factor L.
+    pub fn nnz_l(&self) -> usize {
+        self.l_values.len()
+    }
+
+    /// Numeric factorisation of new values on the pattern given to [`Cholesky::new`].
+    pub fn refactor(&mut self, a_lower: SparseColMatRef<'_, usize, f64>) -> Result<(), FactorError> {
+        self.symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut self.l_values,
+                a_lower,
+                Side::Lower,
+                LltRegularization::default(),
+                Par::Seq,
+                MemStack::new(&mut self.factor_scratch),
+                Default::default(),
+            )
+            .map_err(|_| FactorError::NotPositiveDefinite)?;
+        Ok(())
+    }
+
+    /// x ← A⁻¹ x (one forward and one backward substitution).
+    pub fn solve_in_place(&mut self, x: &mut [f64]) {
+        let n = self.n();
+        assert_eq!(x.len(), n);
+        let rhs = MatMut::from_column_major_slice_mut(x, n, 1);
+        LltRef::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(
+            Conj::No,
+            rhs,
+            Par::Seq,
+            MemStack::new(&mut self.solve_scratch),
+        );
+    }
+
+    /// X ← A⁻¹ X for a block of right-hand sides (column-major, n × ncols); the supernodal
+    /// kernels work on the whole block at once, which is what makes a Schur complement cheap.
+    pub fn solve_block_in_place(&self, x: &mut [f64], ncols: usize) {
+        let n = self.n();
+        assert_eq!(x.len(), n * ncols);
+        let mut scratch = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(ncols, Par::Seq));
+        let rhs = MatMut::from_column_major_slice_mut(x, n, ncols);
+        LltRef::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(
+            Conj::No,
+            rhs,
+            Par::Seq,
+            MemStack::new(&mut scratch),
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linalg::Csr;
+
+    /// 1D Laplacian with Dirichlet ends: tridiag(-1, 2, -1).
+    fn laplace_1d(n: usize) -> Csr {
+        let mut t = Vec::new();
+        for i in 0..n {
+            t.push((i, i, 2.0));
+            if i + 1 < n {
+                t.push((i, i + 1, -1.0));
+                t.push((i + 1, i, -1.0));
+            }
+        }
+        Csr::from_triplets(n, n, t)
+    }
+
+    #[test]
+    fn solves_and_refactors_on_same_pattern() {
+        let a = laplace_1d(50);
+        let mut chol = Cholesky::new(a.lower_csc().as_ref()).unwrap();
+        let xs: Vec<f64> = (0..50).map(|i| (i as f64 * 0.37).sin()).collect();
+        let mut b = vec![0.0; 50];
+        a.mul_vec(&xs, &mut b);
+        chol.solve_in_place(&mut b);
+        for (u, v) in b.iter().zip(&xs) {
+            assert!((u - v).abs() < 1e-12);
+        }
+        // Scale the matrix by 3: same pattern, new values.
+        let mut a3 = a.clone();
+        a3.values.iter_mut().for_each(|v| *v *= 3.0);
+        chol.refactor(a3.lower_csc().as_ref()).unwrap();
+        let mut b = vec![0.0; 50];
+        a3.mul_vec(&xs, &mut b);
+        let mut blk = [b.clone(), b].concat();
+        chol.solve_block_in_place(&mut blk, 2);
+        for i in 0..50 {
+            assert!((blk[i] - xs[i]).abs() < 1e-12 && (blk[50 + i] - xs[i]).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn indefinite_matrix_is_an_error() {
+        let mut a = laplace_1d(5);
+        a.values.iter_mut().for_each(|v| *v = -*v);
+        assert!(Cholesky::new(a.lower_csc().as_ref()).is_err());
+    }
+}

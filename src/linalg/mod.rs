@@ -1,0 +1,8 @@
+//! Sparse storage and the cached sparse Cholesky factorisation (faer), plus small dense helpers.
+
+pub mod cholesky;
+pub mod csr;
+pub mod dense;
+
+pub use cholesky::Cholesky;
+pub use csr::Csr;

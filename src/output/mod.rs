@@ -1,0 +1,7 @@
+//! What a run produces: the summary JSON (norms per step, solver iterations and residuals,
+//! timings, smallness estimate) and the per-step fields.
+
+pub mod fields;
+pub mod summary;
+
+pub use summary::Summary;

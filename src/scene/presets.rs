@@ -1,0 +1,263 @@
+//! The paper's scenes (Han, Jureczka & Ochal 2020, section 4), written out in full.
+//!
+//! Every field is given explicitly, defaults included, so that `contact-sim preset NAME`
+//! prints a complete, self-documenting scene to start from. Common data (SCHEME.md, "Paper
+//! data"): T = 1; A and B of (4.1) with η = ξ = 2, μ = λ = 4; u0 = 0; j(ξ) = 20|ξ|;
+//! φ of (4.2); κ = 0.5; ζ0 = 1.
+
+use serde_json::{json, Value};
+
+struct Preset {
+    name: &'static str,
+    description: &'static str,
+    build: fn() -> Value,
+}
+
+const PRESETS: &[Preset] = &[
+    Preset {
+        name: "paper-exp1",
+        description: "Experiment 1: Ω = (0,2)×(0,1) clamped on the left, pushed down by the body \
+                      force f0 = (0, −0.2); no contact; h = k = 1/32.",
+        build: exp1,
+    },
+    Preset {
+        name: "paper-exp2",
+        description: "Experiment 2: as experiment 1 with frictional contact on [0,1]×{0} and \
+                      f0 = (0, −0.8); h = k = 1/32.",
+        build: exp2,
+    },
+    Preset {
+        name: "paper-exp3",
+        description: "Experiment 3: contact on the whole bottom [0,2]×{0}, traction \
+                      f2 = (−1, −1) on the top and right sides, f0 = 0; h = k = 1/32.",
+        build: exp3,
+    },
+    Preset {
+        name: "paper-convergence",
+        description: "Convergence test: Ω = (0,1)², contact on the bottom, traction \
+                      f2 = (−1.4, −0.2) on the top and right; the paper's reference run \
+                      h = k = 1/128 (|w|_V ≈ 0.23525, |ζ|_Z0 ≈ 0.75375).",
+        build: convergence,
+    },
+];
+
+/// The preset names, in presentation order.
+pub fn names() -> &'static [&'static str] {
+    const NAMES: &[&str] = &[
+        "paper-exp1",
+        "paper-exp2",
+        "paper-exp3",
+        "paper-convergence",
+    ];
+    NAMES
+}
+
+/// One line describing a preset.
+pub fn description(name: &str) -> Option<&'static str> {
+    find(name).map(|p| p.description)
+}
+
+/// The full scene document of a preset.
+pub fn get(name: &str) -> Option<Value> {
+    find(name).map(|p| (p.build)())
+}
+
+fn find(name: &str) -> Option<&'static Preset> {
+    PRESETS.iter().find(|p| p.name == name)
+}
+
+/// Whole numbers are written as JSON integers ([0, 1], not [0.0, 1.0]): the printed presets
+/// are meant to be read and edited.
+fn num(x: f64) -> Value {
+    if x.fract() == 0.0 && x.abs() < 1e15 {
+        json!(x as i64)
+    } else {
+        json!(x)
+    }
+}
+
+fn vector(v: [f64; 2]) -> Value {
+    json!([num(v[0]), num(v[1])])
+}
+
+fn segment(kind: &str, from: [f64; 2], to: [f64; 2]) -> Value {
+    json!({"type": kind, "from": vector(from), "to": vector(to)})
+}
+
+fn traction(from: [f64; 2], to: [f64; 2], f2: [f64; 2]) -> Value {
+    json!({"type": "traction", "from": vector(from), "to": vector(to), "f2": vector(f2)})
+}
+
+/// The fields every paper scene shares; `boundary`, `loads` and the geometry vary.
+fn paper_scene(
+    name: &str,
+    (width, height): (f64, f64),
+    hk: &str,
+    boundary: Vec<Value>,
+    f0: [f64; 2],
+) -> Value {
+    json!({
+        "name": name,
+        "domain": {"width": num(width), "height": num(height)},
+        "mesh": {"h": hk, "pattern": "diagonal"},
+        "time": {"t_end": 1, "k": hk},
+        "boundary": boundary,
+        "loads": {"f0": vector(f0)},
+        "material": {
+            "viscosity": {"eta": 2, "xi": 2},
+            "elasticity": {"type": "linear", "mu": 4, "lambda": 4}
+        },
+        "friction": {"law": "tresca", "g": 20},
+        "smallness": "refuse",
+        "damage": {
+            "kappa": 0.5,
+            "source": {"a": 2, "b": 20, "zeta_star": 0.2},
+            "zeta0": 1
+        },
+        "initial": {"u0": [0, 0]},
+        "output": {
+            "every": 1,
+            "last": true,
+            "fields": ["u", "w", "zeta", "sigma", "von_mises", "contact"]
+        }
+    })
+}
+
+fn exp1() -> Value {
+    paper_scene(
+        "paper-exp1",
+        (2.0, 1.0),
+        "1/32",
+        vec![
+            segment("clamped", [0.0, 0.0], [0.0, 1.0]),
+            traction([0.0, 1.0], [2.0, 1.0], [0.0, 0.0]),
+            traction([2.0, 0.0], [2.0, 1.0], [0.0, 0.0]),
+            traction([0.0, 0.0], [2.0, 0.0], [0.0, 0.0]),
+        ],
+        [0.0, -0.2],
+    )
+}
+
+fn exp2() -> Value {
+    paper_scene(
+        "paper-exp2",
+        (2.0, 1.0),
+        "1/32",
+        vec![
+            segment("clamped", [0.0, 0.0], [0.0, 1.0]),
+            segment("contact", [0.0, 0.0], [1.0, 0.0]),
+            traction([0.0, 1.0], [2.0, 1.0], [0.0, 0.0]),
+            traction([2.0, 0.0], [2.0, 1.0], [0.0, 0.0]),
+            traction([1.0, 0.0], [2.0, 0.0], [0.0, 0.0]),
+        ],
+        [0.0, -0.8],
+    )
+}
+
+fn exp3() -> Value {
+    paper_scene(
+        "paper-exp3",
+        (2.0, 1.0),
+        "1/32",
+        vec![
+            segment("clamped", [0.0, 0.0], [0.0, 1.0]),
+            segment("contact", [0.0, 0.0], [2.0, 0.0]),
+            traction([0.0, 1.0], [2.0, 1.0], [-1.0, -1.0]),
+            traction([2.0, 0.0], [2.0, 1.0], [-1.0, -1.0]),
+        ],
+        [0.0, 0.0],
+    )
+}
+
+fn convergence() -> Value {
+    paper_scene(
+        "paper-convergence",
+        (1.0, 1.0),
+        "1/128",
+        vec![
+            segment("clamped", [0.0, 0.0], [0.0, 1.0]),
+            segment("contact", [0.0, 0.0], [1.0, 0.0]),
+            traction([0.0, 1.0], [1.0, 1.0], [-1.4, -0.2]),
+            traction([1.0, 0.0], [1.0, 1.0], [-1.4, -0.2]),
+        ],
+        [0.0, 0.0],
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::problem::{BoundaryKind, FrictionLaw};
+    use crate::scene::validate;
+
+    #[test]
+    fn names_and_table_agree() {
+        let table: Vec<&str> = PRESETS.iter().map(|p| p.name).collect();
+        assert_eq!(names(), table.as_slice());
+        for name in names() {
+            assert!(description(name).is_some_and(|d| !d.is_empty()));
+            assert_eq!(get(name).unwrap()["name"], *name);
+        }
+        assert!(get("paper-exp4").is_none());
+        assert_eq!(
+            get("paper-exp3").unwrap()["boundary"][0]["to"],
+            json!([0, 1])
+        );
+        assert!(description("nope").is_none());
+    }
+
+    #[test]
+    fn every_preset_validates() {
+        for name in names() {
+            let doc = get(name).unwrap();
+            let p = validate(&doc).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(p.name, *name);
+            assert_eq!(p.t_end, 1.0);
+            assert_eq!(p.friction, FrictionLaw::Tresca { g: 20.0 });
+            assert!(p.damage.is_some());
+            assert!(p.u0.is_zero());
+        }
+    }
+
+    #[test]
+    fn paper_values() {
+        let p = validate(&get("paper-exp1").unwrap()).unwrap();
+        assert_eq!((p.steps, p.cells_per_unit, p.cells()), (32, 32, (64, 32)));
+        assert_eq!(p.boundary.len(), 4);
+        assert!(!p
+            .boundary
+            .iter()
+            .any(|b| matches!(b.kind, BoundaryKind::Contact)));
+        assert_eq!(p.body_force.eval(1.0, 0.5, 0.3), [0.0, -0.2]);
+
+        let p = validate(&get("paper-exp2").unwrap()).unwrap();
+        assert_eq!(p.boundary.len(), 5);
+        assert_eq!(p.body_force.eval(0.0, 0.0, 0.0), [0.0, -0.8]);
+
+        let p = validate(&get("paper-exp3").unwrap()).unwrap();
+        assert_eq!(p.boundary.len(), 4);
+        assert!(p.body_force.is_zero());
+        let tractions: Vec<_> = p
+            .boundary
+            .iter()
+            .filter_map(|b| match &b.kind {
+                BoundaryKind::Traction(f) => Some(f.eval(0.0, 0.0, 0.0)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(tractions, vec![[-1.0, -1.0]; 2]);
+
+        let p = validate(&get("paper-convergence").unwrap()).unwrap();
+        assert_eq!(
+            (p.steps, p.cells_per_unit, p.cells()),
+            (128, 128, (128, 128))
+        );
+        assert_eq!(p.k(), 1.0 / 128.0);
+        let damage = p.damage.unwrap();
+        assert_eq!(damage.kappa, 0.5);
+        assert_eq!(
+            (damage.source.a, damage.source.b, damage.source.zeta_star),
+            (2.0, 20.0, 0.2)
+        );
+    }
+}

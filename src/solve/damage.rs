@@ -1,0 +1,282 @@
+//! The damage step (3.10) as a box-constrained QP:
+//!   ζ_n = argmin ½ ζᵀ H ζ − gᵀ ζ  subject to 0 ≤ ζ_i ≤ 1,
+//! H = M/k + κK (fixed for the whole run), g = M ζ_{n−1}/k + F_{n−1}.
+//!
+//! Method: primal–dual active set (PDAS, i.e. semismooth Newton on
+//! ζ = P_[0,1](ζ − D⁻¹(Hζ − g)), D = diag H). Each iteration fixes the active nodes at their
+//! bound and solves for the rest. faer has no rank update, so the pattern of H is kept and
+//! active rows/columns are replaced by the identity; the symbolic analysis is reused and a
+//! numeric refactorisation happens only when the active set changes. The active set of the
+//! previous step is the warm start, so a step whose active set does not change costs one
+//! triangular solve pair.
+//!
+//! KKT conditions (checked as the residual): with λ = Hζ − g,
+//!   0 < ζ_i < 1 ⇒ λ_i = 0;  ζ_i = 0 ⇒ λ_i ≥ 0;  ζ_i = 1 ⇒ λ_i ≤ 0.
+
+use super::{SolveError, SolverReport, SolverSettings};
+use crate::linalg::{Cholesky, Csr};
+use faer::sparse::SparseColMat;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Bound {
+    Free,
+    Lower,
+    Upper,
+}
+
+pub struct DamageStep {
+    h: Csr,
+    diag: Vec<f64>,
+    /// Lower triangle of H in faer's CSC form; its values are refilled with the masked H.
+    lower: SparseColMat<usize, f64>,
+    /// (row, col) of each stored entry of `lower`.
+    entries: Vec<(usize, usize)>,
+    lower_values: Vec<f64>,
+    chol: Cholesky,
+    /// Active set the current factor was computed for.
+    factored: Vec<Bound>,
+    /// Warm start for the next solve.
+    active: Vec<Bound>,
+    /// Numeric factorisations done so far (for the summary).
+    pub refactorizations: usize,
+}
+
+impl DamageStep {
+    pub fn new(h: Csr) -> Result<Self, SolveError> {
+        let lower = h.lower_csc();
+        let (sym, vals) = lower.as_ref().parts();
+        let mut entries = Vec::with_capacity(vals.len());
+        for c in 0..sym.ncols() {
+            for &r in sym.row_idx_of_col_raw(c) {
+                entries.push((r, c));
+            }
+        }
+        let lower_values = vals.to_vec();
+        let chol = Cholesky::new(lower.as_ref()).map_err(|source| SolveError::Factor { what: "damage", source })?;
+        let n = h.nrows;
+        Ok(DamageStep {
+            diag: h.diagonal(),
+            h,
+            lower,
+            entries,
+            lower_values,
+            chol,
+            factored: vec![Bound::Free; n],
+            active: vec![Bound::Free; n],
+            refactorizations: 1,
+        })
+    }
+
+    /// Refactor H with the rows/columns of `active` replaced by the identity.
+    fn factor_for(&mut self, active: &[Bound]) -> Result<(), SolveError> {
+        {
+            let vals = self.lower.val_mut();
+            for (k, &(r, c)) in self.entries.iter().enumerate() {
+                vals[k] = if active[r] != Bound::Free || active[c] != Bound::Free {
+                    if r == c { 1.0 } else { 0.0 }
+                } else {
+                    self.lower_values[k]
+                };
+            }
+        }
+        self.chol
+            .refactor(self.lower.as_ref())
+            .map_err(|source| SolveError::Factor { what: "damage", source })?;
+        self.factored.copy_from_slice(active);
+        self.refactorizations += 1;
+        Ok(())
+    }
+
+    /// Solves the QP for the linear term `g`; `zeta` holds the previous ζ on entry (used
+    /// only for its size) and ζ_n on exit.
+    pub fn solve(&mut self, g: &[f64], zeta: &mut [f64], settings: &SolverSettings, step: usize) -> Result<SolverReport, SolveError> {
+        let n = g.len();
+        let scale = g.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
+        // Hysteresis against rounding at degenerate nodes (bound active with zero multiplier).
+        let eps = 1e-13;
+        let mut active = self.active.clone();
+        let mut rhs = vec![0.0; n];
+        let mut lambda = vec![0.0; n];
+        let mut fixed = vec![0.0; n];
+        for it in 1..=settings.max_iterations {
+            if active != self.factored {
+                self.factor_for(&active)?;
+            }
+            // rhs_i = bound for active i; g_i − Σ_{j active} H_ij ζ_j for free i.
+            for i in 0..n {
+                fixed[i] = match active[i] {
+                    Bound::Free => 0.0,
+                    Bound::Lower => 0.0,
+                    Bound::Upper => 1.0,
+                };
+            }
+            self.h.mul_vec(&fixed, &mut lambda);
+            for i in 0..n {
+                rhs[i] = match active[i] {
+                    Bound::Free => g[i] - lambda[i],
+                    _ => fixed[i],
+                };
+            }
+            self.chol.solve_in_place(&mut rhs);
+            zeta.copy_from_slice(&rhs);
+            self.h.mul_vec(zeta, &mut lambda);
+            lambda.iter_mut().zip(g).for_each(|(l, g)| *l -= g);
+            // New active set from ζ − λ/d, keeping degenerate nodes where they are.
+            let mut next = active.clone();
+            for i in 0..n {
+                let t = zeta[i] - lambda[i] / self.diag[i];
+                next[i] = match active[i] {
+                    Bound::Free if zeta[i] < -eps => Bound::Lower,
+                    Bound::Free if zeta[i] > 1.0 + eps => Bound::Upper,
+                    Bound::Lower if lambda[i] < -eps * scale => if t > 1.0 { Bound::Upper } else { Bound::Free },
+                    Bound::Upper if lambda[i] > eps * scale => if t < 0.0 { Bound::Lower } else { Bound::Free },
+                    b => b,
+                };
+            }
+            if next == active {
+                for z in zeta.iter_mut() {
+                    *z = z.clamp(0.0, 1.0);
+                }
+                let residual = kkt_residual(&self.h, g, zeta);
+                if !residual.is_finite() {
+                    return Err(SolveError::NonFinite("damage", step));
+                }
+                if residual > settings.tolerance {
+                    return Err(SolveError::NotConverged {
+                        what: "damage step",
+                        step,
+                        iterations: it,
+                        residual,
+                        tolerance: settings.tolerance,
+                    });
+                }
+                self.active = active;
+                return Ok(SolverReport { iterations: it, residual });
+            }
+            active = next;
+        }
+        Err(SolveError::NotConverged {
+            what: "damage step (active set cycling)",
+            step,
+            iterations: settings.max_iterations,
+            residual: kkt_residual(&self.h, g, zeta),
+            tolerance: settings.tolerance,
+        })
+    }
+
+    /// Warm start from a given ζ (e.g. the initial data or a checkpoint).
+    pub fn set_active_from(&mut self, zeta: &[f64]) {
+        for (a, &z) in self.active.iter_mut().zip(zeta) {
+            *a = if z <= 0.0 {
+                Bound::Lower
+            } else if z >= 1.0 {
+                Bound::Upper
+            } else {
+                Bound::Free
+            };
+        }
+    }
+}
+
+/// Relative KKT residual of the box QP at ζ, computed from scratch:
+/// max_i of |λ_i| (free), max(0, −λ_i) (at 0), max(0, λ_i) (at 1), and bound violations,
+/// over max(‖g‖_∞, ‖Hζ‖_∞).
+pub fn kkt_residual(h: &Csr, g: &[f64], zeta: &[f64]) -> f64 {
+    let mut hz = vec![0.0; zeta.len()];
+    h.mul_vec(zeta, &mut hz);
+    let scale = g.iter().chain(&hz).fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
+    let mut worst = 0.0f64;
+    for i in 0..zeta.len() {
+        let l = hz[i] - g[i];
+        let z = zeta[i];
+        let v = if z <= 0.0 {
+            (-l).max(0.0) + (-z) * scale
+        } else if z >= 1.0 {
+            l.max(0.0) + (z - 1.0) * scale
+        } else {
+            l.abs()
+        };
+        worst = worst.max(v);
+    }
+    worst / scale
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fem::{assembly, Geometry};
+    use crate::mesh::Mesh;
+    use crate::problem::MeshPattern;
+
+    fn h_matrix(n: usize, k: f64, kappa: f64) -> (Csr, Csr, usize) {
+        let mesh = Mesh::rectangle(1.0, 1.0, n, n, MeshPattern::Diagonal);
+        let geo = Geometry::new(&mesh);
+        let m = assembly::mass(&mesh, &geo);
+        let lap = assembly::laplacian(&mesh, &geo);
+        (assembly::combine(1.0 / k, &m, kappa, &lap), m, mesh.n_nodes())
+    }
+
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> f64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// Independent check of the KKT conditions (not via `kkt_residual`).
+    fn assert_kkt(h: &Csr, g: &[f64], z: &[f64]) {
+        let mut hz = vec![0.0; z.len()];
+        h.mul_vec(z, &mut hz);
+        let scale = g.iter().fold(1e-300f64, |s, v| s.max(v.abs()));
+        for i in 0..z.len() {
+            assert!((0.0..=1.0).contains(&z[i]));
+            let l = hz[i] - g[i];
+            if z[i] > 0.0 && z[i] < 1.0 {
+                assert!(l.abs() <= 1e-9 * scale, "free node {i}: λ = {l}");
+            } else if z[i] == 0.0 {
+                assert!(l >= -1e-9 * scale);
+            } else {
+                assert!(l <= 1e-9 * scale);
+            }
+        }
+    }
+
+    #[test]
+    fn random_and_adversarial_box_qps() {
+        let mut rng = Rng(7);
+        for &(n, k, kappa) in &[(8, 1.0 / 128.0, 0.5), (8, 1.0, 1e-4), (12, 1.0 / 4096.0, 100.0), (6, 0.5, 0.5)] {
+            let (h, m, nn) = h_matrix(n, k, kappa);
+            let mut solver = DamageStep::new(h.clone()).unwrap();
+            let mut zeta = vec![1.0; nn];
+            solver.set_active_from(&zeta);
+            for trial in 0..12 {
+                // g = M ζ_prev / k + F with F strongly signed in patches: many nodes hit 0 and 1.
+                let mut mz = vec![0.0; nn];
+                m.mul_vec(&zeta, &mut mz);
+                let amp = [0.1, 1.0, 10.0, 100.0][trial % 4];
+                let g: Vec<f64> = mz.iter().map(|v| v / k + amp * (rng.next() - 0.5) * 2.0 / (n * n) as f64).collect();
+                let rep = solver.solve(&g, &mut zeta, &SolverSettings::default(), trial).unwrap();
+                assert!(rep.residual <= 1e-10);
+                assert_kkt(&h, &g, &zeta);
+            }
+        }
+    }
+
+    #[test]
+    fn unconstrained_solution_is_the_linear_solve() {
+        let (h, _, nn) = h_matrix(5, 0.1, 0.5);
+        let zs: Vec<f64> = (0..nn).map(|i| 0.2 + 0.6 * ((i * 7) % 11) as f64 / 11.0).collect();
+        let mut g = vec![0.0; nn];
+        h.mul_vec(&zs, &mut g);
+        let mut solver = DamageStep::new(h).unwrap();
+        let mut z = vec![0.0; nn];
+        let rep = solver.solve(&g, &mut z, &SolverSettings::default(), 0).unwrap();
+        assert_eq!(rep.iterations, 1);
+        for (a, b) in z.iter().zip(&zs) {
+            assert!((a - b).abs() < 1e-12);
+        }
+    }
+}

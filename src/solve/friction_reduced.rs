@@ -1,0 +1,324 @@
+//! The velocity HVI (3.13) reduced to the tangential DOFs x ∈ R^m of the Γ3 nodes:
+//!
+//!   minimise Φ(x) = ½ xᵀ S x − bᵀ x + Σ_i ω_i j(|x_i|),   j(r) = ∫_0^r μ(s) ds,
+//!
+//! with S the (dense, SPD) Schur complement of the velocity operator, b the reduced load and
+//! ω_i the nodal trapezoid weights. The optimality (Clarke stationarity) conditions are, per
+//! node, with g = S x − b:
+//!   stick:  x_i = 0  and |g_i| ≤ ω_i μ(0),
+//!   slip:   x_i ≠ 0  and g_i + ω_i μ(|x_i|) sign(x_i) = 0.
+//! Under the (discrete) smallness condition S − diag(ω c2τ) ≻ 0, Φ is strongly convex even
+//! for non-convex j, so its stationary point is unique and is the minimiser.
+//!
+//! Method: a semismooth Newton / active-set iteration (stick/slip prediction from the local
+//! force, Newton step on the slip equations), globalised by requiring decrease of Φ, with a
+//! proximal-gradient step as the fallback that always decreases Φ. For Tresca the Newton
+//! step is exact once the stick/slip partition is right, so it terminates finitely.
+
+use super::{SolveError, SolverReport, SolverSettings};
+use crate::linalg::dense::solve_principal;
+use crate::problem::FrictionLaw;
+use nalgebra::DMatrix;
+
+/// The reduced problem's data.
+pub struct Reduced<'a> {
+    pub s: &'a DMatrix<f64>,
+    pub b: &'a [f64],
+    pub weights: &'a [f64],
+    pub law: &'a FrictionLaw,
+}
+
+impl Reduced<'_> {
+    fn m(&self) -> usize {
+        self.b.len()
+    }
+
+    /// g = S x − b.
+    pub fn gradient(&self, x: &[f64]) -> Vec<f64> {
+        let m = self.m();
+        (0..m)
+            .map(|i| (0..m).map(|j| self.s[(i, j)] * x[j]).sum::<f64>() - self.b[i])
+            .collect()
+    }
+
+    /// Φ(x).
+    pub fn energy(&self, x: &[f64]) -> f64 {
+        let g = self.gradient(x);
+        (0..self.m())
+            .map(|i| 0.5 * x[i] * (g[i] - self.b[i]) + self.weights[i] * self.law.potential(x[i].abs()))
+            .sum()
+    }
+
+    /// Scale of the problem's forces, for relative residuals.
+    fn scale(&self) -> f64 {
+        let b = self.b.iter().fold(0.0f64, |s, v| s.max(v.abs()));
+        b.max(f64::MIN_POSITIVE)
+    }
+
+    /// Relative KKT residual: max over nodes of the violation of the stick/slip conditions
+    /// above, divided by ‖b‖_∞.
+    pub fn residual(&self, x: &[f64]) -> f64 {
+        let g = self.gradient(x);
+        kkt_violation(&g, x, self.weights, self.law) / self.scale()
+    }
+}
+
+/// max_i of the distance of −g_i to ω_i ∂j(x_i) (Clarke subdifferential).
+pub fn kkt_violation(g: &[f64], x: &[f64], weights: &[f64], law: &FrictionLaw) -> f64 {
+    g.iter()
+        .zip(x)
+        .zip(weights)
+        .map(|((&gi, &xi), &w)| {
+            if xi == 0.0 {
+                (gi.abs() - w * law.mu(0.0)).max(0.0)
+            } else {
+                (gi + w * law.mu(xi.abs()) * xi.signum()).abs()
+            }
+        })
+        .fold(0.0, f64::max)
+}
+
+/// prox of c·j(|·|) at z (c > 0): 0 if |z| ≤ c μ(0), else sign(z)·r with r + c μ(r) = |z|.
+/// Unique when 1 + c μ'(r) > 0 (guaranteed by the step size under the smallness condition).
+pub fn prox(law: &FrictionLaw, c: f64, z: f64) -> f64 {
+    let az = z.abs();
+    if az <= c * law.mu(0.0) {
+        return 0.0;
+    }
+    if let FrictionLaw::Tresca { g } = law {
+        return z.signum() * (az - c * g);
+    }
+    // q(r) = r + c μ(r) − |z| is increasing with q(0) < 0 ≤ q(|z|): safeguarded Newton.
+    let (mut lo, mut hi) = (0.0, az);
+    let mut r = 0.5 * az;
+    for _ in 0..200 {
+        let q = r + c * law.mu(r) - az;
+        if q.abs() <= 1e-15 * az {
+            break;
+        }
+        if q < 0.0 {
+            lo = r;
+        } else {
+            hi = r;
+        }
+        let dq = 1.0 + c * law.dmu(r);
+        let newton = r - q / dq;
+        r = if dq > 0.0 && newton > lo && newton < hi { newton } else { 0.5 * (lo + hi) };
+        if hi - lo <= 1e-16 * az {
+            break;
+        }
+    }
+    z.signum() * r
+}
+
+/// Solves the reduced problem from the warm start `x` (overwritten with the solution).
+pub fn solve(p: &Reduced, x: &mut [f64], settings: &SolverSettings, step: usize) -> Result<SolverReport, SolveError> {
+    let m = p.m();
+    // Lipschitz bound of ∇ of the smooth part (Gershgorin) for the proximal-gradient fallback.
+    let lip = (0..m)
+        .map(|i| (0..m).map(|j| p.s[(i, j)].abs()).sum::<f64>())
+        .fold(f64::MIN_POSITIVE, f64::max);
+    let mut energy = p.energy(x);
+    for it in 0..=settings.max_iterations {
+        let g = p.gradient(x);
+        let residual = kkt_violation(&g, x, p.weights, p.law) / p.scale();
+        if residual <= settings.tolerance {
+            return Ok(SolverReport { iterations: it, residual });
+        }
+        if it == settings.max_iterations {
+            return Err(SolveError::NotConverged {
+                what: "velocity (friction) solver",
+                step,
+                iterations: it,
+                residual,
+                tolerance: settings.tolerance,
+            });
+        }
+        let trial = newton_candidate(p, x, &g);
+        let accepted = trial.and_then(|t| {
+            // Backtrack along the segment towards the Newton point until Φ decreases.
+            let mut alpha = 1.0;
+            for _ in 0..30 {
+                let y: Vec<f64> = x.iter().zip(&t).map(|(a, b)| a + alpha * (b - a)).collect();
+                let e = p.energy(&y);
+                if e < energy || (e <= energy && alpha == 1.0) {
+                    return Some((y, e));
+                }
+                alpha *= 0.5;
+            }
+            None
+        });
+        match accepted {
+            Some((y, e)) => {
+                x.copy_from_slice(&y);
+                energy = e;
+            }
+            None => {
+                // Proximal gradient step with step 1/L: monotone decrease of Φ.
+                let c = 1.0 / lip;
+                for i in 0..m {
+                    x[i] = prox(p.law, c * p.weights[i], x[i] - c * g[i]);
+                }
+                energy = p.energy(x);
+            }
+        }
+    }
+    unreachable!()
+}
+
+/// One semismooth Newton step: predict stick/slip from the local force z_i = S_ii x_i − g_i,
+/// set stick DOFs to 0, and take a Newton step on the slip equations with the signs fixed.
+fn newton_candidate(p: &Reduced, x: &[f64], g: &[f64]) -> Option<Vec<f64>> {
+    let m = p.m();
+    let mut slip = Vec::new();
+    let mut sign = Vec::new();
+    for i in 0..m {
+        let z = p.s[(i, i)] * x[i] - g[i];
+        if z.abs() > p.weights[i] * p.law.mu(0.0) {
+            slip.push(i);
+            sign.push(z.signum());
+        }
+    }
+    let mut y = vec![0.0; m];
+    for &i in &slip {
+        y[i] = x[i];
+    }
+    if slip.is_empty() {
+        return Some(y);
+    }
+    // Residual of the slip equations at y (stick DOFs zeroed), and the Jacobian
+    // S_FF + diag(ω μ'(r)); for Tresca μ' = 0 and this is the exact solve.
+    let mut jac = p.s.clone();
+    let mut rhs = Vec::with_capacity(slip.len());
+    for (k, &i) in slip.iter().enumerate() {
+        let r = (sign[k] * y[i]).max(0.0);
+        let si: f64 = slip.iter().map(|&j| p.s[(i, j)] * y[j]).sum();
+        rhs.push(-(si - p.b[i] + p.weights[i] * p.law.mu(r) * sign[k]));
+        jac[(i, i)] += p.weights[i] * p.law.dmu(r);
+    }
+    let delta = solve_principal(&jac, &slip, &rhs)?;
+    for (k, &i) in slip.iter().enumerate() {
+        y[i] += delta[k];
+    }
+    Some(y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic pseudo-random numbers (xorshift) so failures reproduce.
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> f64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    fn random_spd(rng: &mut Rng, m: usize, shift: f64) -> DMatrix<f64> {
+        let a = DMatrix::from_fn(m, m, |_, _| rng.next() - 0.5);
+        &a * a.transpose() + DMatrix::identity(m, m) * shift
+    }
+
+    /// Checks the stick/slip conditions directly (independent of the solver's own residual).
+    fn assert_kkt(p: &Reduced, x: &[f64], tol: f64) {
+        let g = p.gradient(x);
+        let scale = p.b.iter().fold(1e-300f64, |s, v| s.max(v.abs()));
+        for i in 0..x.len() {
+            let w = p.weights[i];
+            if x[i] == 0.0 {
+                assert!(g[i].abs() <= w * p.law.mu(0.0) + tol * scale, "stick violated at {i}");
+            } else {
+                let force = -g[i];
+                assert!((force - w * p.law.mu(x[i].abs()) * x[i].signum()).abs() <= tol * scale, "slip violated at {i}");
+                // The reaction −g balances friction, which opposes the slip velocity.
+                assert!(force * x[i].signum() >= -tol * scale);
+            }
+        }
+    }
+
+    #[test]
+    fn tresca_random_problems_satisfy_kkt() {
+        let mut rng = Rng(0x9E3779B97F4A7C15);
+        for trial in 0..200 {
+            let m = 1 + (trial % 17);
+            let shift = 0.1 + rng.next();
+            let s = random_spd(&mut rng, m, shift);
+            let b: Vec<f64> = (0..m).map(|_| 4.0 * (rng.next() - 0.5)).collect();
+            let weights: Vec<f64> = (0..m).map(|_| 0.05 + rng.next()).collect();
+            let law = FrictionLaw::Tresca { g: rng.next() * 2.0 };
+            let p = Reduced { s: &s, b: &b, weights: &weights, law: &law };
+            let mut x = vec![0.0; m];
+            let rep = solve(&p, &mut x, &SolverSettings::default(), 0).unwrap();
+            assert!(rep.residual <= 1e-10);
+            assert_kkt(&p, &x, 1e-9);
+            // Minimality: Φ does not decrease under random perturbations (convex case).
+            let e = p.energy(&x);
+            for _ in 0..20 {
+                let y: Vec<f64> = x.iter().map(|v| v + 1e-3 * (rng.next() - 0.5)).collect();
+                assert!(p.energy(&y) >= e - 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn nonconvex_laws_under_smallness_satisfy_kkt() {
+        let mut rng = Rng(42);
+        let laws = [
+            FrictionLaw::SlipWeakening { mu0: 1.2, mu1: 0.4, alpha: 3.0 },
+            FrictionLaw::PiecewiseLinear { points: vec![[0.0, 1.0], [0.3, 0.5], [1.0, 0.6]] },
+        ];
+        for trial in 0..200 {
+            let law = &laws[trial % 2];
+            let m = 1 + (trial % 13);
+            let weights: Vec<f64> = (0..m).map(|_| 0.05 + 0.5 * rng.next()).collect();
+            // Make S − diag(ω c2) ≻ 0: shift by max ω · c2 plus a margin.
+            let c2 = law.relaxed_monotonicity();
+            let wmax = weights.iter().cloned().fold(0.0, f64::max);
+            let s = random_spd(&mut rng, m, wmax * c2 + 0.05);
+            let b: Vec<f64> = (0..m).map(|_| 3.0 * (rng.next() - 0.5)).collect();
+            let p = Reduced { s: &s, b: &b, weights: &weights, law };
+            let mut x: Vec<f64> = (0..m).map(|_| rng.next() - 0.5).collect();
+            let rep = solve(&p, &mut x, &SolverSettings::default(), 0).unwrap();
+            assert!(rep.residual <= 1e-10, "{rep:?}");
+            assert_kkt(&p, &x, 1e-9);
+        }
+    }
+
+    #[test]
+    fn adversarial_degenerate_cases() {
+        // Forces exactly at the friction bound, zero weights, and a huge bound.
+        let s = DMatrix::from_row_slice(2, 2, &[2.0, -1.0, -1.0, 2.0]);
+        for (b, w, g) in [
+            (vec![1.0, -1.0], vec![1.0, 1.0], 1.0),
+            (vec![1.0, 0.5], vec![0.0, 0.0], 5.0),
+            (vec![1e3, -1e3], vec![1.0, 1.0], 1e4),
+            (vec![0.0, 0.0], vec![1.0, 1.0], 0.0),
+        ] {
+            let law = FrictionLaw::Tresca { g };
+            let p = Reduced { s: &s, b: &b, weights: &w, law: &law };
+            let mut x = vec![0.3, -0.7];
+            let rep = solve(&p, &mut x, &SolverSettings::default(), 0).unwrap();
+            assert!(rep.residual <= 1e-10);
+            assert_kkt(&p, &x, 1e-9);
+        }
+    }
+
+    #[test]
+    fn prox_solves_its_equation() {
+        let law = FrictionLaw::SlipWeakening { mu0: 1.2, mu1: 0.4, alpha: 3.0 };
+        for &z in &[-3.0, -0.5, 0.1, 0.2, 2.0] {
+            let c = 0.2; // c·c2 = 0.48 < 1
+            let x = prox(&law, c, z);
+            if x == 0.0 {
+                assert!(z.abs() <= c * 1.2);
+            } else {
+                assert!((x.abs() + c * law.mu(x.abs()) - z.abs()).abs() < 1e-13);
+                assert_eq!(x.signum(), z.signum());
+            }
+        }
+    }
+}

@@ -1,0 +1,56 @@
+//! The solvers of Problem 3.1: the velocity hemivariational inequality (3.13) reduced to the
+//! Γ3 tangential DOFs, the damage variational inequality (3.10) as a box-constrained QP, the
+//! smallness condition (2.31), and the time loop that couples them.
+
+pub mod damage;
+pub mod friction_reduced;
+pub mod smallness;
+pub mod stepper;
+pub mod velocity;
+
+/// Iterations and the relative optimality (KKT) residual a sub-problem solver reached.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct SolverReport {
+    pub iterations: usize,
+    pub residual: f64,
+}
+
+/// Settings shared by the sub-problem solvers.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct SolverSettings {
+    /// Relative optimality residual to reach (default 1e-10).
+    pub tolerance: f64,
+    /// Iteration limit of each sub-problem solver.
+    pub max_iterations: usize,
+}
+
+impl Default for SolverSettings {
+    fn default() -> Self {
+        SolverSettings {
+            tolerance: 1e-10,
+            max_iterations: 100,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SolveError {
+    #[error("{what} did not converge at step {step}: {iterations} iterations, residual {residual:.3e} > tolerance {tolerance:.1e}")]
+    NotConverged {
+        what: &'static str,
+        step: usize,
+        iterations: usize,
+        residual: f64,
+        tolerance: f64,
+    },
+    #[error("factorisation of the {what} matrix failed: {source}")]
+    Factor {
+        what: &'static str,
+        #[source]
+        source: crate::linalg::cholesky::FactorError,
+    },
+    #[error("the smallness condition (2.31) fails for this scene: {0}")]
+    Smallness(String),
+    #[error("non-finite value in the {0} at step {1}")]
+    NonFinite(&'static str, usize),
+}

@@ -1,0 +1,212 @@
+//! The velocity step (3.13): w_n minimises
+//!   E(w) = ½ (A ε(w), ε(w)) + (B_{n−1}, ε(w)) − (f_n, w) + Σ_i ω_i j(w_τ(x_i))
+//! over the free DOFs. With K the matrix of (A ε(·), ε(·)) and f the load (external minus
+//! the explicit elastic term), split interior (I) / contact-tangential (C) DOFs:
+//!   [K_II K_IC; K_CI K_CC] [w_I; x] = [f_I; f_C − ∂J(x)].
+//! Eliminating w_I = K_II⁻¹ (f_I − K_IC x) leaves the small non-smooth problem of
+//! [`super::friction_reduced`] with S = K_CC − K_CI K_II⁻¹ K_IC and b = f_C − K_CI K_II⁻¹ f_I.
+//!
+//! K_II is factored once per job. Per step: one solve for y = K_II⁻¹ f_I; if every contact
+//! node sticks (|b_i| ≤ ω_i μ(0), checked exactly) then x = 0 and w_I = y: done. Otherwise
+//! the Schur complement is formed (once, lazily, by blocked solves), the reduced problem is
+//! solved, and one more solve recovers w_I.
+
+use super::friction_reduced::{self, kkt_violation, Reduced};
+use super::{SolveError, SolverReport, SolverSettings};
+use crate::fem::DofMap;
+use crate::linalg::{Cholesky, Csr};
+use crate::problem::FrictionLaw;
+use nalgebra::DMatrix;
+
+/// Schur complements are formed in blocks of this many right-hand sides, bounding the dense
+/// scratch to n_I × 32 values while keeping the supernodal solves BLAS-3.
+const SCHUR_BLOCK: usize = 32;
+
+pub struct VelocityStep {
+    /// The operator on all free DOFs (for residuals), interior first, contact last.
+    k: Csr,
+    n_i: usize,
+    k_ii: Cholesky,
+    /// Contact rows, interior columns.
+    k_ci: Csr,
+    weights: Vec<f64>,
+    law: FrictionLaw,
+    schur: Option<DMatrix<f64>>,
+    /// Tangential velocities on Γ3 (the warm start of the next step).
+    x: Vec<f64>,
+    /// Reaction on the contact DOFs, −(S x − b): the discrete friction force at each node.
+    reaction: Vec<f64>,
+    y: Vec<f64>,
+    r: Vec<f64>,
+}
+
+impl VelocityStep {
+    /// Factors K_II of the free-DOF operator `k` (numbered as in `dofs`).
+    pub fn new(k: Csr, dofs: &DofMap, law: FrictionLaw) -> Result<Self, SolveError> {
+        let n_i = dofs.n_interior;
+        let n = dofs.n_free();
+        let k_ii = Cholesky::new(k.block(0..n_i, 0..n_i).lower_csc().as_ref())
+            .map_err(|source| SolveError::Factor { what: "velocity", source })?;
+        let k_ci = k.block(n_i..n, 0..n_i);
+        let m = dofs.n_contact();
+        Ok(VelocityStep {
+            k,
+            n_i,
+            k_ii,
+            k_ci,
+            weights: dofs.contact.iter().map(|c| c.weight).collect(),
+            law,
+            schur: None,
+            x: vec![0.0; m],
+            reaction: vec![0.0; m],
+            y: vec![0.0; n_i],
+            r: vec![0.0; n],
+        })
+    }
+
+    pub fn n_contact(&self) -> usize {
+        self.weights.len()
+    }
+
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// Tangential velocity of each Γ3 DOF after the last solve.
+    pub fn contact_velocity(&self) -> &[f64] {
+        &self.x
+    }
+
+    /// Discrete friction force −(S x − b) of each Γ3 DOF after the last solve (integrated over
+    /// the node's share ω_i of Γ3; divide by ω_i for a traction density).
+    pub fn contact_force(&self) -> &[f64] {
+        &self.reaction
+    }
+
+    /// Set the warm start (e.g. when resuming from a checkpoint).
+    pub fn set_contact_velocity(&mut self, x: &[f64]) {
+        self.x.copy_from_slice(x);
+    }
+
+    /// Nonzeros of the factor of K_II and its dimension.
+    pub fn factor_size(&self) -> (usize, usize) {
+        (self.k_ii.n(), self.k_ii.nnz_l())
+    }
+
+    /// One forward + backward substitution with the K_II factor, in place (for benchmarks).
+    pub fn substitute(&mut self, v: &mut [f64]) {
+        self.k_ii.solve_in_place(v);
+    }
+
+    /// S = K_CC − K_CI K_II⁻¹ K_IC, computed on first use.
+    pub fn schur(&mut self) -> &DMatrix<f64> {
+        if self.schur.is_none() {
+            self.schur = Some(schur_complement(&self.k, &self.k_ii, &self.k_ci, self.n_i));
+        }
+        self.schur.as_ref().unwrap()
+    }
+
+    /// Solves (3.13) for the free-DOF load `f`, writing the free-DOF velocity into `w`.
+    /// The reported residual is the relative KKT residual of the FULL problem, computed from
+    /// K w − f (not from the reduced quantities).
+    pub fn solve(&mut self, f: &[f64], w: &mut [f64], settings: &SolverSettings, step: usize) -> Result<SolverReport, SolveError> {
+        let n_i = self.n_i;
+        let m = self.n_contact();
+        self.y.copy_from_slice(&f[..n_i]);
+        self.k_ii.solve_in_place(&mut self.y);
+        let mut iterations = 0;
+        if m > 0 {
+            let mut b = f[n_i..].to_vec();
+            let mut kci_y = vec![0.0; m];
+            self.k_ci.mul_vec(&self.y, &mut kci_y);
+            b.iter_mut().zip(&kci_y).for_each(|(b, v)| *b -= v);
+            let mu0 = self.law.mu(0.0);
+            let all_stick = b.iter().zip(&self.weights).all(|(b, w)| b.abs() <= w * mu0);
+            if all_stick {
+                self.x.iter_mut().for_each(|v| *v = 0.0);
+                w[..n_i].copy_from_slice(&self.y);
+            } else {
+                let mut x = std::mem::take(&mut self.x);
+                let law = self.law.clone();
+                let weights = std::mem::take(&mut self.weights);
+                let s = self.schur();
+                let p = Reduced { s, b: &b, weights: &weights, law: &law };
+                let rep = friction_reduced::solve(&p, &mut x, settings, step);
+                self.weights = weights;
+                iterations = rep?.iterations;
+                // w_I = K_II⁻¹ (f_I − K_IC x).
+                let wi = &mut w[..n_i];
+                wi.copy_from_slice(&f[..n_i]);
+                let mut kic_x = vec![0.0; n_i];
+                self.k_ci.tmul_vec_add(&x, &mut kic_x);
+                wi.iter_mut().zip(&kic_x).for_each(|(a, v)| *a -= v);
+                self.k_ii.solve_in_place(wi);
+                self.x = x;
+            }
+            w[n_i..].copy_from_slice(&self.x);
+        } else {
+            w.copy_from_slice(&self.y);
+        }
+        // Full-system optimality: r = K w − f; interior rows must vanish, contact rows must
+        // satisfy the stick/slip conditions with g = r_C.
+        self.k.mul_vec(w, &mut self.r);
+        for (r, f) in self.r.iter_mut().zip(f) {
+            *r -= f;
+        }
+        let interior = self.r[..n_i].iter().fold(0.0f64, |s, v| s.max(v.abs()));
+        let contact = kkt_violation(&self.r[n_i..], &self.x, &self.weights, &self.law);
+        for (q, r) in self.reaction.iter_mut().zip(&self.r[n_i..]) {
+            *q = -r;
+        }
+        let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
+        let residual = interior.max(contact) / scale;
+        if !residual.is_finite() {
+            return Err(SolveError::NonFinite("velocity", step));
+        }
+        if residual > settings.tolerance {
+            return Err(SolveError::NotConverged {
+                what: "velocity step",
+                step,
+                iterations,
+                residual,
+                tolerance: settings.tolerance,
+            });
+        }
+        Ok(SolverReport { iterations, residual })
+    }
+}
+
+/// S = K_CC − K_CI K_II⁻¹ K_IC by blocked solves with the K_II factor.
+pub fn schur_complement(k: &Csr, k_ii: &Cholesky, k_ci: &Csr, n_i: usize) -> DMatrix<f64> {
+    let m = k.nrows - n_i;
+    let mut s = DMatrix::zeros(m, m);
+    for i in 0..m {
+        for j in 0..m {
+            s[(i, j)] = k.get(n_i + i, n_i + j);
+        }
+    }
+    let mut start = 0;
+    while start < m {
+        let cols = SCHUR_BLOCK.min(m - start);
+        // Z = K_II⁻¹ K_IC[:, start..start+cols]; column c of K_IC is row c of K_CI.
+        let mut z = vec![0.0; n_i * cols];
+        for c in 0..cols {
+            let row = start + c;
+            for p in k_ci.indptr[row]..k_ci.indptr[row + 1] {
+                z[c * n_i + k_ci.indices[p]] = k_ci.values[p];
+            }
+        }
+        k_ii.solve_block_in_place(&mut z, cols);
+        let mut col = vec![0.0; m];
+        for c in 0..cols {
+            k_ci.mul_vec(&z[c * n_i..(c + 1) * n_i], &mut col);
+            for i in 0..m {
+                s[(i, start + c)] -= col[i];
+            }
+        }
+        start += cols;
+    }
+    // Symmetrise against rounding so the dense Cholesky sees an exactly symmetric matrix.
+    let st = s.transpose();
+    (s + st) * 0.5
+}
