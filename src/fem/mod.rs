@@ -6,6 +6,7 @@ pub mod dofs;
 pub mod element;
 pub mod loads;
 pub mod norms;
+pub mod prolongation;
 
 pub use dofs::{DofMap, Slot};
 pub use element::Geometry;

@@ -11,9 +11,10 @@
 //! for non-convex j, so its stationary point is unique and is the minimiser.
 //!
 //! Method: a semismooth Newton / active-set iteration (stick/slip prediction from the local
-//! force, Newton step on the slip equations), globalised by requiring decrease of Φ, with a
-//! proximal-gradient step as the fallback that always decreases Φ. For Tresca the Newton
-//! step is exact once the stick/slip partition is right, so it terminates finitely.
+//! force, Newton step on the slip equations), globalised by comparing Φ at the Newton point
+//! with Φ after a proximal-gradient step (which always decreases Φ) and keeping the better:
+//! global convergence from the gradient step, fast local convergence from Newton. For Tresca
+//! the Newton step is exact once the stick/slip partition is right, so it terminates finitely.
 
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::linalg::dense::solve_principal;
@@ -118,7 +119,6 @@ pub fn solve(p: &Reduced, x: &mut [f64], settings: &SolverSettings, step: usize)
     let lip = (0..m)
         .map(|i| (0..m).map(|j| p.s[(i, j)].abs()).sum::<f64>())
         .fold(f64::MIN_POSITIVE, f64::max);
-    let mut energy = p.energy(x);
     for it in 0..=settings.max_iterations {
         let g = p.gradient(x);
         let residual = kkt_violation(&g, x, p.weights, p.law) / p.scale();
@@ -134,34 +134,27 @@ pub fn solve(p: &Reduced, x: &mut [f64], settings: &SolverSettings, step: usize)
                 tolerance: settings.tolerance,
             });
         }
-        let trial = newton_candidate(p, x, &g);
-        let accepted = trial.and_then(|t| {
-            // Backtrack along the segment towards the Newton point until Φ decreases.
+        // Candidates: the proximal-gradient step (guaranteed decrease, hence global
+        // convergence) and the semismooth Newton point, possibly shortened. The one with the
+        // lowest Φ is taken, so Newton's fast local convergence is kept and a poor Newton
+        // step can never stall the iteration.
+        let c = 1.0 / lip;
+        let mut best: Vec<f64> = (0..m).map(|i| prox(p.law, c * p.weights[i], x[i] - c * g[i])).collect();
+        let mut best_energy = p.energy(&best);
+        if let Some(t) = newton_candidate(p, x, &g) {
             let mut alpha = 1.0;
-            for _ in 0..30 {
+            for _ in 0..4 {
                 let y: Vec<f64> = x.iter().zip(&t).map(|(a, b)| a + alpha * (b - a)).collect();
                 let e = p.energy(&y);
-                if e < energy || (e <= energy && alpha == 1.0) {
-                    return Some((y, e));
+                if e < best_energy {
+                    best = y;
+                    best_energy = e;
+                    break;
                 }
                 alpha *= 0.5;
             }
-            None
-        });
-        match accepted {
-            Some((y, e)) => {
-                x.copy_from_slice(&y);
-                energy = e;
-            }
-            None => {
-                // Proximal gradient step with step 1/L: monotone decrease of Φ.
-                let c = 1.0 / lip;
-                for i in 0..m {
-                    x[i] = prox(p.law, c * p.weights[i], x[i] - c * g[i]);
-                }
-                energy = p.energy(x);
-            }
         }
+        x.copy_from_slice(&best);
     }
     unreachable!()
 }

@@ -28,7 +28,7 @@ impl Default for SolverSettings {
     fn default() -> Self {
         SolverSettings {
             tolerance: 1e-10,
-            max_iterations: 100,
+            max_iterations: 500,
         }
     }
 }

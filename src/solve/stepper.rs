@@ -123,8 +123,12 @@ impl Simulation {
         let mut velocity = VelocityStep::new(k, &dofs, problem.friction.clone())?;
         let smallness = smallness::check(&problem, &mesh, &geo, &dofs, &mut velocity)?;
         if !smallness.holds && problem.smallness == SmallnessPolicy::Refuse {
+            let discrete = match smallness.discrete_margin {
+                Some(m) if m > 0.0 => format!("each discrete velocity step is still strongly convex (margin {m:.4}), so \"smallness\": \"warn\" computes its unique solution"),
+                _ => "the discrete velocity step is not strongly convex either: its stationary point may not be unique".to_string(),
+            };
             return Err(SolveError::Smallness(format!(
-                "c2τ·cτ² = {:.4} ≥ m_A = {:.4} (c2τ = {:.4}, cτ = {:.4}); the velocity problem may have several solutions. Set \"smallness\": \"warn\" to run anyway.",
+                "c2τ·cτ² = {:.4} ≥ m_A = {:.4} (c2τ = {:.4}, cτ = {:.4}); {discrete}. Set \"smallness\": \"warn\" to run anyway.",
                 smallness.lhs,
                 smallness.m_a,
                 smallness.c2,

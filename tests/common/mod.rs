@@ -1,0 +1,41 @@
+//! Shared helpers of the whole-run tests: scenes from presets with edits, and runs.
+#![allow(dead_code)]
+
+use contact_sim::problem::Problem;
+use contact_sim::scene::{self, presets, Overrides};
+use contact_sim::solve::stepper::{Simulation, StepReport};
+use contact_sim::solve::SolverSettings;
+use serde_json::Value;
+
+/// A preset at resolution h = 1/nh, k = 1/nk, with JSON edits (pointer, value) applied.
+pub fn problem(preset: &str, nh: usize, nk: usize, edits: &[(&str, Value)]) -> Problem {
+    let mut doc = presets::get(preset).expect("preset");
+    for (ptr, v) in edits {
+        *doc.pointer_mut(ptr).unwrap_or_else(|| panic!("no {ptr} in {preset}")) = v.clone();
+    }
+    let o = Overrides {
+        h: Some(Value::String(format!("1/{nh}"))),
+        k: Some(Value::String(format!("1/{nk}"))),
+        t_end: None,
+    };
+    scene::apply_overrides(&mut doc, &o);
+    scene::validate(&doc).unwrap_or_else(|e| panic!("{preset}: {e}"))
+}
+
+/// Runs to the end, calling `check` after every step.
+pub fn run_checked(p: Problem, mut check: impl FnMut(&Simulation, &StepReport)) -> Simulation {
+    let mut sim = Simulation::new(p, SolverSettings::default()).expect("set-up");
+    while !sim.finished() {
+        let r = sim.step().expect("step");
+        check(&sim, &r);
+    }
+    sim
+}
+
+pub fn run(p: Problem) -> Simulation {
+    run_checked(p, |_, _| {})
+}
+
+pub fn rel(a: f64, b: f64) -> f64 {
+    (a - b).abs() / b.abs()
+}

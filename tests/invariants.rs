@@ -1,0 +1,142 @@
+//! Invariants of whole runs on the paper's scenes and on scenes that make Γ3 slip (with the
+//! paper's g = 20 every contact node sticks, so the non-smooth solver is never exercised):
+//! 0 ≤ ζ ≤ 1; zero normal velocity on Γ3; the discrete friction law at every Γ3 node
+//! (stick: |σ_τ| ≤ μ(0); slip: σ_τ = μ(|w_τ|) w_τ/|w_τ|, the friction force on the body
+//! opposing the slip); sub-problem residuals at tolerance.
+
+mod common;
+use common::*;
+use contact_sim::problem::{BoundaryKind, Problem};
+use contact_sim::solve::stepper::Simulation;
+use contact_sim::solve::SolverSettings;
+use serde_json::json;
+
+struct Outcome {
+    steps_with_slip: usize,
+    max_velocity_iterations: usize,
+}
+
+fn check_run(p: Problem) -> Outcome {
+    let tol = SolverSettings::default().tolerance;
+    let contact_parts: Vec<usize> = p
+        .boundary
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| matches!(b.kind, BoundaryKind::Contact))
+        .map(|(i, _)| i)
+        .collect();
+    let law = p.friction.clone();
+    let mut out = Outcome { steps_with_slip: 0, max_velocity_iterations: 0 };
+    run_checked(p, |sim: &Simulation, r| {
+        assert!(r.velocity.residual <= tol && r.damage.is_none_or(|d| d.residual <= tol));
+        assert!(sim.state.zeta.iter().all(|z| (0.0..=1.0).contains(z)), "ζ out of [0, 1] at step {}", r.n);
+        // Normal velocity on Γ3: every node of a contact edge, normal of that edge.
+        for e in sim.mesh.boundary_edges.iter().filter(|e| e.part.is_some_and(|p| contact_parts.contains(&p))) {
+            for &i in &e.nodes {
+                let wn = sim.w[2 * i] * e.normal[0] + sim.w[2 * i + 1] * e.normal[1];
+                assert_eq!(wn, 0.0, "normal velocity at node {i}, step {}", r.n);
+            }
+        }
+        let contact = sim.contact_state();
+        // Tractions of these scenes are O(1); the floor covers frictionless (μ ≡ 0) runs.
+        let scale = contact.iter().fold(law.mu(0.0).max(1.0), |s, c| s.max(c.friction_traction.abs()));
+        for c in &contact {
+            if c.slipping {
+                let expect = law.mu(c.slip_velocity.abs()) * c.slip_velocity.signum();
+                assert!(
+                    (c.friction_traction - expect).abs() <= 1e-8 * scale,
+                    "slip law at node {}: {} vs {expect}",
+                    c.node,
+                    c.friction_traction
+                );
+            } else {
+                assert!(c.friction_traction.abs() <= law.mu(0.0) + 1e-8 * scale, "stick bound at node {}", c.node);
+            }
+        }
+        out.steps_with_slip += (r.slip_nodes > 0) as usize;
+        out.max_velocity_iterations = out.max_velocity_iterations.max(r.velocity.iterations);
+    });
+    out
+}
+
+#[test]
+fn paper_experiments_stick_everywhere_and_keep_invariants() {
+    for preset in ["paper-exp1", "paper-exp2", "paper-exp3", "paper-convergence"] {
+        let o = check_run(problem(preset, 8, 16, &[]));
+        assert_eq!(o.steps_with_slip, 0, "{preset}: g = 20 should stick everywhere");
+    }
+}
+
+#[test]
+fn tresca_with_low_bound_slips_and_satisfies_the_friction_law() {
+    let o = check_run(problem("paper-exp3", 8, 16, &[("/friction", json!({"law": "tresca", "g": 1}))]));
+    assert!(o.steps_with_slip > 0 && o.max_velocity_iterations > 0);
+    let o = check_run(problem("paper-convergence", 16, 16, &[("/friction", json!({"law": "tresca", "g": 1}))]));
+    assert!(o.steps_with_slip > 0);
+}
+
+#[test]
+fn slip_weakening_is_solved_as_a_true_hvi() {
+    let law = json!({"law": "slip_weakening", "mu0": 1.2, "mu1": 0.4, "alpha": 3});
+    let mild = json!({"law": "slip_weakening", "mu0": 1.2, "mu1": 0.4, "alpha": 2});
+    // On the 2 × 1 body of experiment 3, α = 3 (c2τ = 2.4) is beyond the smallness
+    // condition: (2.31) fails (cτ ≈ 1.55: c2τ·cτ² ≈ 5.8 > m_A = 4) and so does the discrete
+    // strong convexity of the velocity step, so the scene is refused by default.
+    let p = problem("paper-exp3", 8, 16, &[("/friction", law.clone())]);
+    let err = Simulation::new(p, SolverSettings::default()).err().expect("refused by (2.31)");
+    assert!(err.to_string().contains("2.31") && err.to_string().contains("not strongly convex"), "{err}");
+    // α = 2 (c2τ = 1.6) on experiment 3 and α = 3 on the unit square satisfy (2.31).
+    for (preset, law, c2) in [("paper-exp3", &mild, 1.6), ("paper-convergence", &law, 2.4)] {
+        let p = problem(preset, 8, 16, &[("/friction", law.clone())]);
+        let sim = Simulation::new(p.clone(), SolverSettings::default()).unwrap();
+        assert!((sim.smallness.c2 - c2).abs() < 1e-12);
+        assert!(sim.smallness.holds && sim.smallness.discrete_margin.unwrap() > 0.0, "{preset}: {:?}", sim.smallness);
+        let o = check_run(p);
+        assert!(o.steps_with_slip > 0, "{preset}");
+    }
+}
+
+#[test]
+fn piecewise_linear_friction_slips() {
+    // Slope −1 then +0.1: c2τ = 1, within (2.31) for experiment 3 (cτ² ≈ 2.4 < 4).
+    let law = json!({"law": "piecewise_linear", "points": [[0, 1.0], [0.5, 0.5], [1, 0.55]]});
+    let p = problem("paper-exp3", 8, 16, &[("/friction", law)]);
+    let sim = Simulation::new(p.clone(), SolverSettings::default()).unwrap();
+    assert!(sim.smallness.holds && sim.smallness.c2 == 1.0);
+    let o = check_run(p);
+    assert!(o.steps_with_slip > 0);
+}
+
+#[test]
+fn von_mises_elasticity_and_full_stick_limits() {
+    let vm = json!({"type": "von_mises", "eta_b": 8, "sigma_y": 0.05});
+    check_run(problem("paper-exp2", 8, 8, &[("/material/elasticity", vm)]));
+    // g = 0: frictionless (every Γ3 node slides freely); g = 1e4: full stick.
+    let o = check_run(problem("paper-exp3", 8, 8, &[("/friction", json!({"law": "tresca", "g": 0}))]));
+    assert!(o.steps_with_slip > 0);
+    let o = check_run(problem("paper-exp3", 8, 8, &[("/friction", json!({"law": "tresca", "g": 1e4}))]));
+    assert_eq!(o.steps_with_slip, 0);
+}
+
+#[test]
+fn smallness_violation_is_refused_or_warned() {
+    let law = json!({"law": "slip_weakening", "mu0": 50, "mu1": 0, "alpha": 100});
+    let p = problem("paper-exp3", 8, 8, &[("/friction", law.clone())]);
+    let err = Simulation::new(p, SolverSettings::default()).err().expect("refused");
+    assert!(err.to_string().contains("smallness"), "{err}");
+    let p = problem("paper-exp3", 8, 8, &[("/friction", law), ("/smallness", json!("warn"))]);
+    let sim = Simulation::new(p, SolverSettings::default()).expect("warn runs");
+    assert!(!sim.smallness.holds);
+}
+
+#[test]
+fn no_damage_block_means_no_damage_solve() {
+    let mut doc_edits = Vec::new();
+    doc_edits.push(("/friction", json!({"law": "tresca", "g": 20})));
+    let mut p = problem("paper-exp3", 8, 8, &doc_edits);
+    p.damage = None;
+    run_checked(p, |sim, r| {
+        assert!(r.damage.is_none());
+        assert!(sim.state.zeta.iter().all(|&z| z == 1.0));
+    });
+}
