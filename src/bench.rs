@@ -73,14 +73,25 @@ pub fn run(levels: &[usize], repeat: usize) -> Result<BenchReport, Box<dyn std::
         }
         out.push(best.expect("repeat ≥ 1"));
     }
-    Ok(BenchReport { preset, repeat, levels: out })
+    Ok(BenchReport {
+        preset,
+        repeat,
+        levels: out,
+    })
 }
 
 fn one(preset: &str, level: usize) -> Result<BenchLevel, Box<dyn std::error::Error>> {
     let start = Instant::now();
     let mut doc = presets::get(preset).ok_or("unknown preset")?;
     let frac = serde_json::Value::String(format!("1/{level}"));
-    scene::apply_overrides(&mut doc, &Overrides { h: Some(frac.clone()), k: Some(frac), t_end: None });
+    scene::apply_overrides(
+        &mut doc,
+        &Overrides {
+            h: Some(frac.clone()),
+            k: Some(frac),
+            t_end: None,
+        },
+    );
     let problem = scene::validate(&doc)?;
     let mut sim = Simulation::new(problem, SolverSettings::default())?;
     let setup_s = start.elapsed().as_secs_f64();

@@ -19,3 +19,4 @@ pub mod problem;
 pub mod run;
 pub mod scene;
 pub mod solve;
+pub mod study;

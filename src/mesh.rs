@@ -50,7 +50,12 @@ impl Mesh {
         let mut triangles = Vec::with_capacity(nx * ny * per_cell);
         for j in 0..ny {
             for i in 0..nx {
-                let (a, b, c, d) = (grid(i, j), grid(i + 1, j), grid(i + 1, j + 1), grid(i, j + 1));
+                let (a, b, c, d) = (
+                    grid(i, j),
+                    grid(i + 1, j),
+                    grid(i + 1, j + 1),
+                    grid(i, j + 1),
+                );
                 match pattern {
                     MeshPattern::Diagonal => {
                         triangles.push([a, b, c]);
@@ -166,7 +171,11 @@ mod tests {
             b: [1.0, 0.0],
         };
         m.tag_boundary(&[seg]);
-        let tagged: Vec<_> = m.boundary_edges.iter().filter(|e| e.part == Some(0)).collect();
+        let tagged: Vec<_> = m
+            .boundary_edges
+            .iter()
+            .filter(|e| e.part == Some(0))
+            .collect();
         assert_eq!(tagged.len(), 2);
         assert!(tagged.iter().all(|e| e.normal == [0.0, -1.0]));
     }

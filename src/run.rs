@@ -36,3 +36,13 @@ pub fn run(
     }
     Ok(Summary::new(&sim, reports, start.elapsed().as_secs_f64()))
 }
+
+/// Runs `problem` to t = T and returns the simulation in its final state (no callback, no
+/// summary): what convergence studies need.
+pub fn run_to_end(problem: Problem, settings: SolverSettings) -> Result<Simulation, RunError> {
+    let mut sim = Simulation::new(problem, settings)?;
+    while !sim.finished() {
+        sim.step()?;
+    }
+    Ok(sim)
+}

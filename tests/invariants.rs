@@ -26,12 +26,24 @@ fn check_run(p: Problem) -> Outcome {
         .map(|(i, _)| i)
         .collect();
     let law = p.friction.clone();
-    let mut out = Outcome { steps_with_slip: 0, max_velocity_iterations: 0 };
+    let mut out = Outcome {
+        steps_with_slip: 0,
+        max_velocity_iterations: 0,
+    };
     run_checked(p, |sim: &Simulation, r| {
         assert!(r.velocity.residual <= tol && r.damage.is_none_or(|d| d.residual <= tol));
-        assert!(sim.state.zeta.iter().all(|z| (0.0..=1.0).contains(z)), "ζ out of [0, 1] at step {}", r.n);
+        assert!(
+            sim.state.zeta.iter().all(|z| (0.0..=1.0).contains(z)),
+            "ζ out of [0, 1] at step {}",
+            r.n
+        );
         // Normal velocity on Γ3: every node of a contact edge, normal of that edge.
-        for e in sim.mesh.boundary_edges.iter().filter(|e| e.part.is_some_and(|p| contact_parts.contains(&p))) {
+        for e in sim
+            .mesh
+            .boundary_edges
+            .iter()
+            .filter(|e| e.part.is_some_and(|p| contact_parts.contains(&p)))
+        {
             for &i in &e.nodes {
                 let wn = sim.w[2 * i] * e.normal[0] + sim.w[2 * i + 1] * e.normal[1];
                 assert_eq!(wn, 0.0, "normal velocity at node {i}, step {}", r.n);
@@ -39,7 +51,9 @@ fn check_run(p: Problem) -> Outcome {
         }
         let contact = sim.contact_state();
         // Tractions of these scenes are O(1); the floor covers frictionless (μ ≡ 0) runs.
-        let scale = contact.iter().fold(law.mu(0.0).max(1.0), |s, c| s.max(c.friction_traction.abs()));
+        let scale = contact.iter().fold(law.mu(0.0).max(1.0), |s, c| {
+            s.max(c.friction_traction.abs())
+        });
         for c in &contact {
             if c.slipping {
                 let expect = law.mu(c.slip_velocity.abs()) * c.slip_velocity.signum();
@@ -50,7 +64,11 @@ fn check_run(p: Problem) -> Outcome {
                     c.friction_traction
                 );
             } else {
-                assert!(c.friction_traction.abs() <= law.mu(0.0) + 1e-8 * scale, "stick bound at node {}", c.node);
+                assert!(
+                    c.friction_traction.abs() <= law.mu(0.0) + 1e-8 * scale,
+                    "stick bound at node {}",
+                    c.node
+                );
             }
         }
         out.steps_with_slip += (r.slip_nodes > 0) as usize;
@@ -61,17 +79,35 @@ fn check_run(p: Problem) -> Outcome {
 
 #[test]
 fn paper_experiments_stick_everywhere_and_keep_invariants() {
-    for preset in ["paper-exp1", "paper-exp2", "paper-exp3", "paper-convergence"] {
+    for preset in [
+        "paper-exp1",
+        "paper-exp2",
+        "paper-exp3",
+        "paper-convergence",
+    ] {
         let o = check_run(problem(preset, 8, 16, &[]));
-        assert_eq!(o.steps_with_slip, 0, "{preset}: g = 20 should stick everywhere");
+        assert_eq!(
+            o.steps_with_slip, 0,
+            "{preset}: g = 20 should stick everywhere"
+        );
     }
 }
 
 #[test]
 fn tresca_with_low_bound_slips_and_satisfies_the_friction_law() {
-    let o = check_run(problem("paper-exp3", 8, 16, &[("/friction", json!({"law": "tresca", "g": 1}))]));
+    let o = check_run(problem(
+        "paper-exp3",
+        8,
+        16,
+        &[("/friction", json!({"law": "tresca", "g": 1}))],
+    ));
     assert!(o.steps_with_slip > 0 && o.max_velocity_iterations > 0);
-    let o = check_run(problem("paper-convergence", 16, 16, &[("/friction", json!({"law": "tresca", "g": 1}))]));
+    let o = check_run(problem(
+        "paper-convergence",
+        16,
+        16,
+        &[("/friction", json!({"law": "tresca", "g": 1}))],
+    ));
     assert!(o.steps_with_slip > 0);
 }
 
@@ -83,14 +119,23 @@ fn slip_weakening_is_solved_as_a_true_hvi() {
     // condition: (2.31) fails (cτ ≈ 1.55: c2τ·cτ² ≈ 5.8 > m_A = 4) and so does the discrete
     // strong convexity of the velocity step, so the scene is refused by default.
     let p = problem("paper-exp3", 8, 16, &[("/friction", law.clone())]);
-    let err = Simulation::new(p, SolverSettings::default()).err().expect("refused by (2.31)");
-    assert!(err.to_string().contains("2.31") && err.to_string().contains("not strongly convex"), "{err}");
+    let err = Simulation::new(p, SolverSettings::default())
+        .err()
+        .expect("refused by (2.31)");
+    assert!(
+        err.to_string().contains("2.31") && err.to_string().contains("not strongly convex"),
+        "{err}"
+    );
     // α = 2 (c2τ = 1.6) on experiment 3 and α = 3 on the unit square satisfy (2.31).
     for (preset, law, c2) in [("paper-exp3", &mild, 1.6), ("paper-convergence", &law, 2.4)] {
         let p = problem(preset, 8, 16, &[("/friction", law.clone())]);
         let sim = Simulation::new(p.clone(), SolverSettings::default()).unwrap();
         assert!((sim.smallness.c2 - c2).abs() < 1e-12);
-        assert!(sim.smallness.holds && sim.smallness.discrete_margin.unwrap() > 0.0, "{preset}: {:?}", sim.smallness);
+        assert!(
+            sim.smallness.holds && sim.smallness.discrete_margin.unwrap() > 0.0,
+            "{preset}: {:?}",
+            sim.smallness
+        );
         let o = check_run(p);
         assert!(o.steps_with_slip > 0, "{preset}");
     }
@@ -112,9 +157,19 @@ fn von_mises_elasticity_and_full_stick_limits() {
     let vm = json!({"type": "von_mises", "eta_b": 8, "sigma_y": 0.05});
     check_run(problem("paper-exp2", 8, 8, &[("/material/elasticity", vm)]));
     // g = 0: frictionless (every Γ3 node slides freely); g = 1e4: full stick.
-    let o = check_run(problem("paper-exp3", 8, 8, &[("/friction", json!({"law": "tresca", "g": 0}))]));
+    let o = check_run(problem(
+        "paper-exp3",
+        8,
+        8,
+        &[("/friction", json!({"law": "tresca", "g": 0}))],
+    ));
     assert!(o.steps_with_slip > 0);
-    let o = check_run(problem("paper-exp3", 8, 8, &[("/friction", json!({"law": "tresca", "g": 1e4}))]));
+    let o = check_run(problem(
+        "paper-exp3",
+        8,
+        8,
+        &[("/friction", json!({"law": "tresca", "g": 1e4}))],
+    ));
     assert_eq!(o.steps_with_slip, 0);
 }
 
@@ -122,9 +177,16 @@ fn von_mises_elasticity_and_full_stick_limits() {
 fn smallness_violation_is_refused_or_warned() {
     let law = json!({"law": "slip_weakening", "mu0": 50, "mu1": 0, "alpha": 100});
     let p = problem("paper-exp3", 8, 8, &[("/friction", law.clone())]);
-    let err = Simulation::new(p, SolverSettings::default()).err().expect("refused");
+    let err = Simulation::new(p, SolverSettings::default())
+        .err()
+        .expect("refused");
     assert!(err.to_string().contains("smallness"), "{err}");
-    let p = problem("paper-exp3", 8, 8, &[("/friction", law), ("/smallness", json!("warn"))]);
+    let p = problem(
+        "paper-exp3",
+        8,
+        8,
+        &[("/friction", law), ("/smallness", json!("warn"))],
+    );
     let sim = Simulation::new(p, SolverSettings::default()).expect("warn runs");
     assert!(!sim.smallness.holds);
 }

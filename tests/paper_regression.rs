@@ -46,10 +46,17 @@ fn paper_convergence_h32_matches_independent_implementation() {
 #[test]
 fn k_one_half_makes_the_final_velocity_vanish() {
     let mut w_v = Vec::new();
-    run_checked(problem("paper-convergence", 8, 2, &[]), |_, r| w_v.push(r.w_v));
+    run_checked(problem("paper-convergence", 8, 2, &[]), |_, r| {
+        w_v.push(r.w_v)
+    });
     assert_eq!(w_v.len(), 2);
     assert!(w_v[0] > 0.01);
-    assert!(w_v[1] < 1e-12 * w_v[0], "w_2 = {} vs w_1 = {}", w_v[1], w_v[0]);
+    assert!(
+        w_v[1] < 1e-12 * w_v[0],
+        "w_2 = {} vs w_1 = {}",
+        w_v[1],
+        w_v[0]
+    );
 }
 
 /// Experiment 1 has no contact: each velocity step is the linear system K w = f_n − B-term.
@@ -76,7 +83,11 @@ fn experiment_1_matches_a_direct_linear_solve() {
         let b: Vec<_> = (0..mesh.triangles.len())
             .map(|e| {
                 let zbar = mesh.triangles[e].iter().map(|&i| z_prev[i]).sum::<f64>() / 3.0;
-                elastic_stress(&sim.problem.material.elasticity, &geo.strain(&mesh, e, &u_prev), zbar)
+                elastic_stress(
+                    &sim.problem.material.elasticity,
+                    &geo.strain(&mesh, e, &u_prev),
+                    zbar,
+                )
             })
             .collect();
         let mut f = vec![0.0; 2 * mesh.n_nodes()];
@@ -92,7 +103,11 @@ fn experiment_1_matches_a_direct_linear_solve() {
                 Slot::Free(i) => w[i],
                 Slot::Fixed => 0.0,
             };
-            assert!((sim.w[g] - expect).abs() <= 1e-11 * scale, "step {}: dof {g}", sim.state.step);
+            assert!(
+                (sim.w[g] - expect).abs() <= 1e-11 * scale,
+                "step {}: dof {g}",
+                sim.state.step
+            );
         }
     }
     // The body sags under f0 = (0, −0.2): the free end moves down.

@@ -17,11 +17,15 @@ pub fn viscous_stiffness(mesh: &Mesh, geo: &Geometry, dofs: &DofMap, eta: f64, x
         let (g, area) = (&geo.grads[e], geo.area[e]);
         for a in 0..3 {
             for c in 0..2 {
-                let Slot::Free(i) = dofs.slot[2 * tri[a] + c] else { continue };
+                let Slot::Free(i) = dofs.slot[2 * tri[a] + c] else {
+                    continue;
+                };
                 for b in 0..3 {
                     let gab = g[a][0] * g[b][0] + g[a][1] * g[b][1];
                     for d in 0..2 {
-                        let Slot::Free(j) = dofs.slot[2 * tri[b] + d] else { continue };
+                        let Slot::Free(j) = dofs.slot[2 * tri[b] + d] else {
+                            continue;
+                        };
                         let delta = if c == d { gab } else { 0.0 };
                         let v = area * (eta * (delta + g[a][d] * g[b][c]) + xi * g[a][c] * g[b][d]);
                         t.push((i, j, v));
@@ -35,7 +39,9 @@ pub fn viscous_stiffness(mesh: &Mesh, geo: &Geometry, dofs: &DofMap, eta: f64, x
 
 /// Consistent P1 mass matrix M_ab = ∫ ψ_a ψ_b = |T|/12 (1 + δ_ab).
 pub fn mass(mesh: &Mesh, geo: &Geometry) -> Csr {
-    scalar_matrix(mesh, |e, a, b| geo.area[e] / 12.0 * if a == b { 2.0 } else { 1.0 })
+    scalar_matrix(mesh, |e, a, b| {
+        geo.area[e] / 12.0 * if a == b { 2.0 } else { 1.0 }
+    })
 }
 
 /// P1 stiffness (Laplacian) K_ab = ∫ ∇ψ_a·∇ψ_b.
@@ -75,10 +81,14 @@ mod tests {
     use crate::problem::MeshPattern;
 
     fn meshes() -> Vec<Mesh> {
-        [MeshPattern::Diagonal, MeshPattern::AntiDiagonal, MeshPattern::Cross]
-            .into_iter()
-            .map(|p| Mesh::rectangle(2.0, 1.0, 6, 3, p))
-            .collect()
+        [
+            MeshPattern::Diagonal,
+            MeshPattern::AntiDiagonal,
+            MeshPattern::Cross,
+        ]
+        .into_iter()
+        .map(|p| Mesh::rectangle(2.0, 1.0, 6, 3, p))
+        .collect()
     }
 
     #[test]
@@ -88,17 +98,18 @@ mod tests {
             let dofs = DofMap::all_free(&mesh);
             let k = viscous_stiffness(&mesh, &geo, &dofs, 2.0, 3.0);
             let n = dofs.n_free();
-            let modes: [Box<dyn Fn([f64; 2]) -> [f64; 2]>; 3] = [
-                Box::new(|_| [1.0, 0.0]),
-                Box::new(|_| [0.0, 1.0]),
-                Box::new(|p| [-p[1], p[0]]),
-            ];
-            for m in &modes {
+            // Translations in x and y, and the infinitesimal rotation (−y, x).
+            let modes: [fn([f64; 2]) -> [f64; 2]; 3] =
+                [|_| [1.0, 0.0], |_| [0.0, 1.0], |p| [-p[1], p[0]]];
+            for m in modes {
                 let v: Vec<f64> = mesh.nodes.iter().flat_map(|&p| m(p)).collect();
                 let mut r = vec![0.0; n];
                 k.mul_vec(&v, &mut r);
                 let scale = k.values.iter().fold(0.0f64, |s, x| s.max(x.abs()));
-                assert!(r.iter().all(|x| x.abs() < 1e-12 * scale), "rigid mode not in kernel");
+                assert!(
+                    r.iter().all(|x| x.abs() < 1e-12 * scale),
+                    "rigid mode not in kernel"
+                );
             }
         }
     }
@@ -120,7 +131,8 @@ mod tests {
             let mut r = vec![0.0; u.len()];
             k.mul_vec(&u, &mut r);
             for (i, p) in mesh.nodes.iter().enumerate() {
-                let interior = p[0] > 1e-12 && p[0] < 2.0 - 1e-12 && p[1] > 1e-12 && p[1] < 1.0 - 1e-12;
+                let interior =
+                    p[0] > 1e-12 && p[0] < 2.0 - 1e-12 && p[1] > 1e-12 && p[1] < 1.0 - 1e-12;
                 if interior {
                     assert!(r[2 * i].abs() < 1e-12 && r[2 * i + 1].abs() < 1e-12);
                 }

@@ -60,15 +60,20 @@ impl DofMap {
             if clamped[i] {
                 continue;
             }
-            let [fx, fy] = normal_fixed[i];
-            for c in 0..2 {
+            let fixed = normal_fixed[i];
+            let on_contact = fixed[0] || fixed[1];
+            for (c, &normal) in fixed.iter().enumerate() {
                 let dof = 2 * i + c;
-                if normal_fixed[i][c] {
+                if normal {
                     continue;
                 }
-                if fx || fy {
+                if on_contact {
                     // Tangential DOF of a contact node (a corner with two normals has none).
-                    contact.push(ContactDof { node: i, dof, weight: weight[i] });
+                    contact.push(ContactDof {
+                        node: i,
+                        dof,
+                        weight: weight[i],
+                    });
                 } else {
                     slot[dof] = Slot::Free(n_interior);
                     n_interior += 1;
@@ -78,7 +83,11 @@ impl DofMap {
         for (k, cd) in contact.iter().enumerate() {
             slot[cd.dof] = Slot::Free(n_interior + k);
         }
-        DofMap { slot, n_interior, contact }
+        DofMap {
+            slot,
+            n_interior,
+            contact,
+        }
     }
 
     /// Every DOF free (for tests of the unconstrained operators).

@@ -17,7 +17,8 @@ impl Geometry {
         let mut grads = Vec::with_capacity(mesh.triangles.len());
         for tri in &mesh.triangles {
             let p = tri.map(|i| mesh.nodes[i]);
-            let two_a = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[2][0] - p[0][0]) * (p[1][1] - p[0][1]);
+            let two_a = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1])
+                - (p[2][0] - p[0][0]) * (p[1][1] - p[0][1]);
             let g = |a: usize| {
                 let (q, r) = (p[(a + 1) % 3], p[(a + 2) % 3]);
                 [(q[1] - r[1]) / two_a, (r[0] - q[0]) / two_a]

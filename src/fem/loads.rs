@@ -43,7 +43,9 @@ pub fn add_tractions(mesh: &Mesh, parts: &[BoundaryPart], t: f64, out: &mut [f64
     // 2-point Gauss on [0, 1]: nodes (1 ∓ 1/√3)/2, weights 1/2.
     let g = 0.5 / 3f64.sqrt();
     for e in &mesh.boundary_edges {
-        let Some(BoundaryKind::Traction(f2)) = e.part.map(|p| &parts[p].kind) else { continue };
+        let Some(BoundaryKind::Traction(f2)) = e.part.map(|p| &parts[p].kind) else {
+            continue;
+        };
         if f2.is_zero() {
             continue;
         }
@@ -114,15 +116,26 @@ mod tests {
         let mesh = Mesh::rectangle(2.0, 1.0, 4, 2, MeshPattern::Diagonal);
         let geo = Geometry::new(&mesh);
         let mut out = vec![0.0; 2 * mesh.n_nodes()];
-        add_body_force(&mesh, &geo, &VectorField::constant([0.0, -0.5]), 0.0, &mut out);
+        add_body_force(
+            &mesh,
+            &geo,
+            &VectorField::constant([0.0, -0.5]),
+            0.0,
+            &mut out,
+        );
         let fy: f64 = out.iter().skip(1).step_by(2).sum();
         assert!((fy + 1.0).abs() < 1e-14);
         // f0_x = x: ∫ x dΩ = 2 and ∫ x·x dΩ = 8/3 (moment, exact for linear data).
-        let fx = VectorField([ScalarField::Expr(Expr::parse("x").unwrap()), ScalarField::Const(0.0)]);
+        let fx = VectorField([
+            ScalarField::Expr(Expr::parse("x").unwrap()),
+            ScalarField::Const(0.0),
+        ]);
         out.iter_mut().for_each(|v| *v = 0.0);
         add_body_force(&mesh, &geo, &fx, 0.0, &mut out);
         let total: f64 = out.iter().step_by(2).sum();
-        let moment: f64 = (0..mesh.n_nodes()).map(|n| out[2 * n] * mesh.nodes[n][0]).sum();
+        let moment: f64 = (0..mesh.n_nodes())
+            .map(|n| out[2 * n] * mesh.nodes[n][0])
+            .sum();
         assert!((total - 2.0).abs() < 1e-13 && (moment - 8.0 / 3.0).abs() < 1e-13);
 
         // Traction f2 = (y, 1) on the right side x = 2: ∫ y dy = 1/2, ∫ 1 = 1.
@@ -132,7 +145,10 @@ mod tests {
                 ScalarField::Expr(Expr::parse("y").unwrap()),
                 ScalarField::Const(1.0),
             ])),
-            segment: Segment { a: [2.0, 0.0], b: [2.0, 1.0] },
+            segment: Segment {
+                a: [2.0, 0.0],
+                b: [2.0, 1.0],
+            },
         }];
         m.tag_boundary(&[parts[0].segment]);
         out.iter_mut().for_each(|v| *v = 0.0);

@@ -15,5 +15,10 @@ pub fn strain_norm(mesh: &Mesh, geo: &Geometry, v: &[f64]) -> f64 {
 /// (zᵀ M z)^½ with the consistent mass matrix M.
 pub fn mass_norm(m: &Csr, z: &[f64], scratch: &mut [f64]) -> f64 {
     m.mul_vec(z, scratch);
-    z.iter().zip(scratch.iter()).map(|(a, b)| a * b).sum::<f64>().max(0.0).sqrt()
+    z.iter()
+        .zip(scratch.iter())
+        .map(|(a, b)| a * b)
+        .sum::<f64>()
+        .max(0.0)
+        .sqrt()
 }

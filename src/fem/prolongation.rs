@@ -9,7 +9,12 @@ use crate::problem::MeshPattern;
 /// (`comps` values per node, interleaved) on `coarse`. Both meshes cover the same rectangle
 /// and the coarse cells are unions of fine cells. The "cross" pattern is not supported
 /// (returns None), nor are non-nested pairs.
-pub fn prolongate(coarse: &Mesh, coarse_values: &[f64], comps: usize, fine: &Mesh) -> Option<Vec<f64>> {
+pub fn prolongate(
+    coarse: &Mesh,
+    coarse_values: &[f64],
+    comps: usize,
+    fine: &Mesh,
+) -> Option<Vec<f64>> {
     if coarse.pattern != fine.pattern || coarse.pattern == MeshPattern::Cross {
         return None;
     }
@@ -26,7 +31,12 @@ pub fn prolongate(coarse: &Mesh, coarse_values: &[f64], comps: usize, fine: &Mes
             let (ci, cj) = ((i / rx).min(coarse.nx - 1), (j / ry).min(coarse.ny - 1));
             let s = (i - ci * rx) as f64 / rx as f64;
             let t = (j - cj * ry) as f64 / ry as f64;
-            let (v00, v10, v11, v01) = (cgrid(ci, cj), cgrid(ci + 1, cj), cgrid(ci + 1, cj + 1), cgrid(ci, cj + 1));
+            let (v00, v10, v11, v01) = (
+                cgrid(ci, cj),
+                cgrid(ci + 1, cj),
+                cgrid(ci + 1, cj + 1),
+                cgrid(ci, cj + 1),
+            );
             // Barycentric weights in the triangle of the cell that contains (s, t).
             let w: [(usize, f64); 3] = match coarse.pattern {
                 MeshPattern::Diagonal if t <= s => [(v00, 1.0 - s), (v10, s - t), (v11, t)],
@@ -35,7 +45,11 @@ pub fn prolongate(coarse: &Mesh, coarse_values: &[f64], comps: usize, fine: &Mes
                 _ => [(v10, 1.0 - t), (v11, s + t - 1.0), (v01, 1.0 - s)],
             };
             for c in 0..comps {
-                out.push(w.iter().map(|&(n, wt)| wt * coarse_values[comps * n + c]).sum());
+                out.push(
+                    w.iter()
+                        .map(|&(n, wt)| wt * coarse_values[comps * n + c])
+                        .sum(),
+                );
             }
         }
     }
@@ -61,7 +75,9 @@ mod tests {
             }
             // A piecewise-linear (non-linear) coarse field: values at coarse nodes are kept and
             // each fine node lies on the coarse triangle's plane (checked via the midpoint rule).
-            let cz: Vec<f64> = (0..coarse.n_nodes()).map(|i| ((i * 37) % 11) as f64).collect();
+            let cz: Vec<f64> = (0..coarse.n_nodes())
+                .map(|i| ((i * 37) % 11) as f64)
+                .collect();
             let fz = prolongate(&coarse, &cz, 1, &fine).unwrap();
             for (n, &p) in coarse.nodes.iter().enumerate() {
                 let f = fine.nodes.iter().position(|&q| q == p).unwrap();
@@ -69,7 +85,9 @@ mod tests {
             }
             // Integral of the field is preserved (it is the same function).
             let integral = |m: &Mesh, v: &[f64]| -> f64 {
-                (0..m.triangles.len()).map(|t| m.area(t) * m.triangles[t].iter().map(|&i| v[i]).sum::<f64>() / 3.0).sum()
+                (0..m.triangles.len())
+                    .map(|t| m.area(t) * m.triangles[t].iter().map(|&i| v[i]).sum::<f64>() / 3.0)
+                    .sum()
             };
             assert!((integral(&coarse, &cz) - integral(&fine, &fz)).abs() < 1e-12);
         }

@@ -54,15 +54,28 @@ mod tests {
         let s = viscous_stress(&Viscosity { eta: 2.0, xi: 3.0 }, &e);
         assert!((s[(0, 0)] - (4.0 * 0.1 + 3.0 * 0.05)).abs() < 1e-15);
         assert!((s[(0, 1)] - 4.0 * 0.02).abs() < 1e-15);
-        let b = elastic_stress(&Elasticity::Linear { mu: 4.0, lambda: 4.0 }, &e, 0.5);
+        let b = elastic_stress(
+            &Elasticity::Linear {
+                mu: 4.0,
+                lambda: 4.0,
+            },
+            &e,
+            0.5,
+        );
         assert!((b[(1, 1)] - 0.5 * (8.0 * -0.05 + 4.0 * 0.05)).abs() < 1e-15);
     }
 
     #[test]
     fn von_mises_elasticity_is_projection_residual() {
-        let b = Elasticity::VonMises { eta_b: 2.0, sigma_y: 1.0 };
+        let b = Elasticity::VonMises {
+            eta_b: 2.0,
+            sigma_y: 1.0,
+        };
         // Purely spherical strain lies in K(ζ): no stress.
-        assert_eq!(elastic_stress(&b, &(Tensor2::identity() * 5.0), 1.0), Tensor2::zeros());
+        assert_eq!(
+            elastic_stress(&b, &(Tensor2::identity() * 5.0), 1.0),
+            Tensor2::zeros()
+        );
         // ε^D = [[1, 1], [1, -1]] has norm 2; with ζσ_Y = 0.5: B = η_B (1 − 0.5/2) ε^D.
         let e = Tensor2::new(1.3, 1.0, 1.0, -0.7);
         let s = elastic_stress(&b, &e, 0.5);

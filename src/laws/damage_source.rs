@@ -17,7 +17,11 @@ mod tests {
 
     #[test]
     fn paper_branches() {
-        let s = DamageSource { a: 2.0, b: 20.0, zeta_star: 0.2 };
+        let s = DamageSource {
+            a: 2.0,
+            b: 20.0,
+            zeta_star: 0.2,
+        };
         let e = Tensor2::new(0.1, 0.0, 0.0, 0.0);
         assert!((phi(&s, &e, 1.0) + 0.2).abs() < 1e-15);
         assert!((phi(&s, &e, 0.5) - (2.0 - 0.2)).abs() < 1e-15);

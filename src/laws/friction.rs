@@ -10,7 +10,9 @@ impl FrictionLaw {
     pub fn mu(&self, r: f64) -> f64 {
         match self {
             FrictionLaw::Tresca { g } => *g,
-            FrictionLaw::SlipWeakening { mu0, mu1, alpha } => mu1 + (mu0 - mu1) * (-alpha * r).exp(),
+            FrictionLaw::SlipWeakening { mu0, mu1, alpha } => {
+                mu1 + (mu0 - mu1) * (-alpha * r).exp()
+            }
             FrictionLaw::PiecewiseLinear { points } => {
                 let (i, t) = locate(points, r);
                 match i {
@@ -25,7 +27,9 @@ impl FrictionLaw {
     pub fn dmu(&self, r: f64) -> f64 {
         match self {
             FrictionLaw::Tresca { .. } => 0.0,
-            FrictionLaw::SlipWeakening { mu0, mu1, alpha } => -alpha * (mu0 - mu1) * (-alpha * r).exp(),
+            FrictionLaw::SlipWeakening { mu0, mu1, alpha } => {
+                -alpha * (mu0 - mu1) * (-alpha * r).exp()
+            }
             FrictionLaw::PiecewiseLinear { points } => match locate(points, r).0 {
                 None => 0.0,
                 Some(i) => (points[i + 1][1] - points[i][1]) / (points[i + 1][0] - points[i][0]),
@@ -98,7 +102,11 @@ mod tests {
     fn laws() -> Vec<FrictionLaw> {
         vec![
             FrictionLaw::Tresca { g: 20.0 },
-            FrictionLaw::SlipWeakening { mu0: 1.2, mu1: 0.4, alpha: 3.0 },
+            FrictionLaw::SlipWeakening {
+                mu0: 1.2,
+                mu1: 0.4,
+                alpha: 3.0,
+            },
             FrictionLaw::PiecewiseLinear {
                 points: vec![[0.0, 1.0], [0.5, 0.6], [1.0, 0.7]],
             },
@@ -110,9 +118,13 @@ mod tests {
         for law in laws() {
             for &r in &[0.0, 0.1, 0.49, 0.5, 0.77, 1.0, 2.5] {
                 let h = 1e-6;
-                let fd = (law.potential(r + h) - law.potential((r - h).max(0.0))) / (r + h - (r - h).max(0.0));
+                let fd = (law.potential(r + h) - law.potential((r - h).max(0.0)))
+                    / (r + h - (r - h).max(0.0));
                 let expect = 0.5 * (law.mu(r + h) + law.mu((r - h).max(0.0)));
-                assert!((fd - expect).abs() < 1e-6, "{law:?} r={r}: {fd} vs {expect}");
+                assert!(
+                    (fd - expect).abs() < 1e-6,
+                    "{law:?} r={r}: {fd} vs {expect}"
+                );
             }
         }
     }

@@ -80,7 +80,10 @@ impl Cholesky {
     }
 
     /// Numeric factorisation of new values on the pattern given to [`Cholesky::new`].
-    pub fn refactor(&mut self, a_lower: SparseColMatRef<'_, usize, f64>) -> Result<(), FactorError> {
+    pub fn refactor(
+        &mut self,
+        a_lower: SparseColMatRef<'_, usize, f64>,
+    ) -> Result<(), FactorError> {
         self.symbolic
             .factorize_numeric_llt::<f64>(
                 &mut self.l_values,
@@ -113,7 +116,8 @@ impl Cholesky {
     pub fn solve_block_in_place(&self, x: &mut [f64], ncols: usize) {
         let n = self.n();
         assert_eq!(x.len(), n * ncols);
-        let mut scratch = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(ncols, Par::Seq));
+        let mut scratch =
+            MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(ncols, Par::Seq));
         let rhs = MatMut::from_column_major_slice_mut(x, n, ncols);
         LltRef::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(
             Conj::No,

@@ -20,7 +20,10 @@ impl Csr {
     pub fn from_triplets(nrows: usize, ncols: usize, t: Vec<(usize, usize, f64)>) -> Csr {
         let mut start = vec![0usize; nrows + 1];
         for &(r, c, _) in &t {
-            assert!(r < nrows && c < ncols, "triplet ({r}, {c}) outside {nrows} × {ncols}");
+            assert!(
+                r < nrows && c < ncols,
+                "triplet ({r}, {c}) outside {nrows} × {ncols}"
+            );
             start[r + 1] += 1;
         }
         for r in 0..nrows {

@@ -17,7 +17,11 @@ impl<'a> MeshJson<'a> {
         MeshJson {
             nodes: &mesh.nodes,
             triangles: &mesh.triangles,
-            boundary_edges: mesh.boundary_edges.iter().map(|e| (e.nodes, e.part)).collect(),
+            boundary_edges: mesh
+                .boundary_edges
+                .iter()
+                .map(|e| (e.nodes, e.part))
+                .collect(),
         }
     }
 }

@@ -95,7 +95,8 @@ impl Summary {
             ..Default::default()
         };
         for s in &steps {
-            stats.velocity_max_iterations = stats.velocity_max_iterations.max(s.velocity.iterations);
+            stats.velocity_max_iterations =
+                stats.velocity_max_iterations.max(s.velocity.iterations);
             stats.velocity_max_residual = stats.velocity_max_residual.max(s.velocity.residual);
             if let Some(d) = s.damage {
                 stats.damage_max_iterations = stats.damage_max_iterations.max(d.iterations);
@@ -128,7 +129,11 @@ impl Summary {
                 factor_n,
                 factor_nnz,
             },
-            time: TimeInfo { t_end: p.t_end, k: p.k(), steps: p.steps },
+            time: TimeInfo {
+                t_end: p.t_end,
+                k: p.k(),
+                steps: p.steps,
+            },
             physics: Physics {
                 damage: p.damage.is_some(),
                 contact,
@@ -144,12 +149,22 @@ impl Summary {
             },
             smallness: sim.smallness.clone(),
             solver: sim.settings,
-            final_: steps.last().map(|s| FinalNorms { t: s.t, w_v: s.w_v, u_v: s.u_v, zeta_l2: s.zeta_l2, zeta_min: s.zeta_min }),
+            final_: steps.last().map(|s| FinalNorms {
+                t: s.t,
+                w_v: s.w_v,
+                u_v: s.u_v,
+                zeta_l2: s.zeta_l2,
+                zeta_min: s.zeta_min,
+            }),
             stats,
             timing: Timing {
                 setup_s: sim.setup_seconds,
                 solve_s,
-                per_step_s: if steps.is_empty() { 0.0 } else { solve_s / steps.len() as f64 },
+                per_step_s: if steps.is_empty() {
+                    0.0
+                } else {
+                    solve_s / steps.len() as f64
+                },
             },
             warnings,
             steps,

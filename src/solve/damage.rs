@@ -52,7 +52,10 @@ impl DamageStep {
             }
         }
         let lower_values = vals.to_vec();
-        let chol = Cholesky::new(lower.as_ref()).map_err(|source| SolveError::Factor { what: "damage", source })?;
+        let chol = Cholesky::new(lower.as_ref()).map_err(|source| SolveError::Factor {
+            what: "damage",
+            source,
+        })?;
         let n = h.nrows;
         Ok(DamageStep {
             diag: h.diagonal(),
@@ -73,7 +76,11 @@ impl DamageStep {
             let vals = self.lower.val_mut();
             for (k, &(r, c)) in self.entries.iter().enumerate() {
                 vals[k] = if active[r] != Bound::Free || active[c] != Bound::Free {
-                    if r == c { 1.0 } else { 0.0 }
+                    if r == c {
+                        1.0
+                    } else {
+                        0.0
+                    }
                 } else {
                     self.lower_values[k]
                 };
@@ -81,7 +88,10 @@ impl DamageStep {
         }
         self.chol
             .refactor(self.lower.as_ref())
-            .map_err(|source| SolveError::Factor { what: "damage", source })?;
+            .map_err(|source| SolveError::Factor {
+                what: "damage",
+                source,
+            })?;
         self.factored.copy_from_slice(active);
         self.refactorizations += 1;
         Ok(())
@@ -89,7 +99,13 @@ impl DamageStep {
 
     /// Solves the QP for the linear term `g`; `zeta` holds the previous ζ on entry (used
     /// only for its size) and ζ_n on exit.
-    pub fn solve(&mut self, g: &[f64], zeta: &mut [f64], settings: &SolverSettings, step: usize) -> Result<SolverReport, SolveError> {
+    pub fn solve(
+        &mut self,
+        g: &[f64],
+        zeta: &mut [f64],
+        settings: &SolverSettings,
+        step: usize,
+    ) -> Result<SolverReport, SolveError> {
         let n = g.len();
         let scale = g.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
         // Hysteresis against rounding at degenerate nodes (bound active with zero multiplier).
@@ -128,8 +144,20 @@ impl DamageStep {
                 next[i] = match active[i] {
                     Bound::Free if zeta[i] < -eps => Bound::Lower,
                     Bound::Free if zeta[i] > 1.0 + eps => Bound::Upper,
-                    Bound::Lower if lambda[i] < -eps * scale => if t > 1.0 { Bound::Upper } else { Bound::Free },
-                    Bound::Upper if lambda[i] > eps * scale => if t < 0.0 { Bound::Lower } else { Bound::Free },
+                    Bound::Lower if lambda[i] < -eps * scale => {
+                        if t > 1.0 {
+                            Bound::Upper
+                        } else {
+                            Bound::Free
+                        }
+                    }
+                    Bound::Upper if lambda[i] > eps * scale => {
+                        if t < 0.0 {
+                            Bound::Lower
+                        } else {
+                            Bound::Free
+                        }
+                    }
                     b => b,
                 };
             }
@@ -151,7 +179,10 @@ impl DamageStep {
                     });
                 }
                 self.active = active;
-                return Ok(SolverReport { iterations: it, residual });
+                return Ok(SolverReport {
+                    iterations: it,
+                    residual,
+                });
             }
             active = next;
         }
@@ -184,7 +215,10 @@ impl DamageStep {
 pub fn kkt_residual(h: &Csr, g: &[f64], zeta: &[f64]) -> f64 {
     let mut hz = vec![0.0; zeta.len()];
     h.mul_vec(zeta, &mut hz);
-    let scale = g.iter().chain(&hz).fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
+    let scale = g
+        .iter()
+        .chain(&hz)
+        .fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
     let mut worst = 0.0f64;
     for i in 0..zeta.len() {
         let l = hz[i] - g[i];
@@ -213,7 +247,11 @@ mod tests {
         let geo = Geometry::new(&mesh);
         let m = assembly::mass(&mesh, &geo);
         let lap = assembly::laplacian(&mesh, &geo);
-        (assembly::combine(1.0 / k, &m, kappa, &lap), m, mesh.n_nodes())
+        (
+            assembly::combine(1.0 / k, &m, kappa, &lap),
+            m,
+            mesh.n_nodes(),
+        )
     }
 
     struct Rng(u64);
@@ -247,7 +285,12 @@ mod tests {
     #[test]
     fn random_and_adversarial_box_qps() {
         let mut rng = Rng(7);
-        for &(n, k, kappa) in &[(8, 1.0 / 128.0, 0.5), (8, 1.0, 1e-4), (12, 1.0 / 4096.0, 100.0), (6, 0.5, 0.5)] {
+        for &(n, k, kappa) in &[
+            (8, 1.0 / 128.0, 0.5),
+            (8, 1.0, 1e-4),
+            (12, 1.0 / 4096.0, 100.0),
+            (6, 0.5, 0.5),
+        ] {
             let (h, m, nn) = h_matrix(n, k, kappa);
             let mut solver = DamageStep::new(h.clone()).unwrap();
             let mut zeta = vec![1.0; nn];
@@ -257,8 +300,13 @@ mod tests {
                 let mut mz = vec![0.0; nn];
                 m.mul_vec(&zeta, &mut mz);
                 let amp = [0.1, 1.0, 10.0, 100.0][trial % 4];
-                let g: Vec<f64> = mz.iter().map(|v| v / k + amp * (rng.next() - 0.5) * 2.0 / (n * n) as f64).collect();
-                let rep = solver.solve(&g, &mut zeta, &SolverSettings::default(), trial).unwrap();
+                let g: Vec<f64> = mz
+                    .iter()
+                    .map(|v| v / k + amp * (rng.next() - 0.5) * 2.0 / (n * n) as f64)
+                    .collect();
+                let rep = solver
+                    .solve(&g, &mut zeta, &SolverSettings::default(), trial)
+                    .unwrap();
                 assert!(rep.residual <= 1e-10);
                 assert_kkt(&h, &g, &zeta);
             }
@@ -268,12 +316,16 @@ mod tests {
     #[test]
     fn unconstrained_solution_is_the_linear_solve() {
         let (h, _, nn) = h_matrix(5, 0.1, 0.5);
-        let zs: Vec<f64> = (0..nn).map(|i| 0.2 + 0.6 * ((i * 7) % 11) as f64 / 11.0).collect();
+        let zs: Vec<f64> = (0..nn)
+            .map(|i| 0.2 + 0.6 * ((i * 7) % 11) as f64 / 11.0)
+            .collect();
         let mut g = vec![0.0; nn];
         h.mul_vec(&zs, &mut g);
         let mut solver = DamageStep::new(h).unwrap();
         let mut z = vec![0.0; nn];
-        let rep = solver.solve(&g, &mut z, &SolverSettings::default(), 0).unwrap();
+        let rep = solver
+            .solve(&g, &mut z, &SolverSettings::default(), 0)
+            .unwrap();
         assert_eq!(rep.iterations, 1);
         for (a, b) in z.iter().zip(&zs) {
             assert!((a - b).abs() < 1e-12);

@@ -46,7 +46,9 @@ impl Reduced<'_> {
     pub fn energy(&self, x: &[f64]) -> f64 {
         let g = self.gradient(x);
         (0..self.m())
-            .map(|i| 0.5 * x[i] * (g[i] - self.b[i]) + self.weights[i] * self.law.potential(x[i].abs()))
+            .map(|i| {
+                0.5 * x[i] * (g[i] - self.b[i]) + self.weights[i] * self.law.potential(x[i].abs())
+            })
             .sum()
     }
 
@@ -104,7 +106,11 @@ pub fn prox(law: &FrictionLaw, c: f64, z: f64) -> f64 {
         }
         let dq = 1.0 + c * law.dmu(r);
         let newton = r - q / dq;
-        r = if dq > 0.0 && newton > lo && newton < hi { newton } else { 0.5 * (lo + hi) };
+        r = if dq > 0.0 && newton > lo && newton < hi {
+            newton
+        } else {
+            0.5 * (lo + hi)
+        };
         if hi - lo <= 1e-16 * az {
             break;
         }
@@ -113,7 +119,12 @@ pub fn prox(law: &FrictionLaw, c: f64, z: f64) -> f64 {
 }
 
 /// Solves the reduced problem from the warm start `x` (overwritten with the solution).
-pub fn solve(p: &Reduced, x: &mut [f64], settings: &SolverSettings, step: usize) -> Result<SolverReport, SolveError> {
+pub fn solve(
+    p: &Reduced,
+    x: &mut [f64],
+    settings: &SolverSettings,
+    step: usize,
+) -> Result<SolverReport, SolveError> {
     let m = p.m();
     // Lipschitz bound of ∇ of the smooth part (Gershgorin) for the proximal-gradient fallback.
     let lip = (0..m)
@@ -123,7 +134,10 @@ pub fn solve(p: &Reduced, x: &mut [f64], settings: &SolverSettings, step: usize)
         let g = p.gradient(x);
         let residual = kkt_violation(&g, x, p.weights, p.law) / p.scale();
         if residual <= settings.tolerance {
-            return Ok(SolverReport { iterations: it, residual });
+            return Ok(SolverReport {
+                iterations: it,
+                residual,
+            });
         }
         if it == settings.max_iterations {
             return Err(SolveError::NotConverged {
@@ -139,7 +153,9 @@ pub fn solve(p: &Reduced, x: &mut [f64], settings: &SolverSettings, step: usize)
         // lowest Φ is taken, so Newton's fast local convergence is kept and a poor Newton
         // step can never stall the iteration.
         let c = 1.0 / lip;
-        let mut best: Vec<f64> = (0..m).map(|i| prox(p.law, c * p.weights[i], x[i] - c * g[i])).collect();
+        let mut best: Vec<f64> = (0..m)
+            .map(|i| prox(p.law, c * p.weights[i], x[i] - c * g[i]))
+            .collect();
         let mut best_energy = p.energy(&best);
         if let Some(t) = newton_candidate(p, x, &g) {
             let mut alpha = 1.0;
@@ -223,10 +239,16 @@ mod tests {
         for i in 0..x.len() {
             let w = p.weights[i];
             if x[i] == 0.0 {
-                assert!(g[i].abs() <= w * p.law.mu(0.0) + tol * scale, "stick violated at {i}");
+                assert!(
+                    g[i].abs() <= w * p.law.mu(0.0) + tol * scale,
+                    "stick violated at {i}"
+                );
             } else {
                 let force = -g[i];
-                assert!((force - w * p.law.mu(x[i].abs()) * x[i].signum()).abs() <= tol * scale, "slip violated at {i}");
+                assert!(
+                    (force - w * p.law.mu(x[i].abs()) * x[i].signum()).abs() <= tol * scale,
+                    "slip violated at {i}"
+                );
                 // The reaction −g balances friction, which opposes the slip velocity.
                 assert!(force * x[i].signum() >= -tol * scale);
             }
@@ -242,8 +264,15 @@ mod tests {
             let s = random_spd(&mut rng, m, shift);
             let b: Vec<f64> = (0..m).map(|_| 4.0 * (rng.next() - 0.5)).collect();
             let weights: Vec<f64> = (0..m).map(|_| 0.05 + rng.next()).collect();
-            let law = FrictionLaw::Tresca { g: rng.next() * 2.0 };
-            let p = Reduced { s: &s, b: &b, weights: &weights, law: &law };
+            let law = FrictionLaw::Tresca {
+                g: rng.next() * 2.0,
+            };
+            let p = Reduced {
+                s: &s,
+                b: &b,
+                weights: &weights,
+                law: &law,
+            };
             let mut x = vec![0.0; m];
             let rep = solve(&p, &mut x, &SolverSettings::default(), 0).unwrap();
             assert!(rep.residual <= 1e-10);
@@ -261,8 +290,14 @@ mod tests {
     fn nonconvex_laws_under_smallness_satisfy_kkt() {
         let mut rng = Rng(42);
         let laws = [
-            FrictionLaw::SlipWeakening { mu0: 1.2, mu1: 0.4, alpha: 3.0 },
-            FrictionLaw::PiecewiseLinear { points: vec![[0.0, 1.0], [0.3, 0.5], [1.0, 0.6]] },
+            FrictionLaw::SlipWeakening {
+                mu0: 1.2,
+                mu1: 0.4,
+                alpha: 3.0,
+            },
+            FrictionLaw::PiecewiseLinear {
+                points: vec![[0.0, 1.0], [0.3, 0.5], [1.0, 0.6]],
+            },
         ];
         for trial in 0..200 {
             let law = &laws[trial % 2];
@@ -273,7 +308,12 @@ mod tests {
             let wmax = weights.iter().cloned().fold(0.0, f64::max);
             let s = random_spd(&mut rng, m, wmax * c2 + 0.05);
             let b: Vec<f64> = (0..m).map(|_| 3.0 * (rng.next() - 0.5)).collect();
-            let p = Reduced { s: &s, b: &b, weights: &weights, law };
+            let p = Reduced {
+                s: &s,
+                b: &b,
+                weights: &weights,
+                law,
+            };
             let mut x: Vec<f64> = (0..m).map(|_| rng.next() - 0.5).collect();
             let rep = solve(&p, &mut x, &SolverSettings::default(), 0).unwrap();
             assert!(rep.residual <= 1e-10, "{rep:?}");
@@ -292,7 +332,12 @@ mod tests {
             (vec![0.0, 0.0], vec![1.0, 1.0], 0.0),
         ] {
             let law = FrictionLaw::Tresca { g };
-            let p = Reduced { s: &s, b: &b, weights: &w, law: &law };
+            let p = Reduced {
+                s: &s,
+                b: &b,
+                weights: &w,
+                law: &law,
+            };
             let mut x = vec![0.3, -0.7];
             let rep = solve(&p, &mut x, &SolverSettings::default(), 0).unwrap();
             assert!(rep.residual <= 1e-10);
@@ -302,7 +347,11 @@ mod tests {
 
     #[test]
     fn prox_solves_its_equation() {
-        let law = FrictionLaw::SlipWeakening { mu0: 1.2, mu1: 0.4, alpha: 3.0 };
+        let law = FrictionLaw::SlipWeakening {
+            mu0: 1.2,
+            mu1: 0.4,
+            alpha: 3.0,
+        };
         for &z in &[-3.0, -0.5, 0.1, 0.2, 2.0] {
             let c = 0.2; // c·c2 = 0.48 < 1
             let x = prox(&law, c, z);

@@ -33,21 +33,50 @@ pub struct SmallnessReport {
 }
 
 /// Evaluates both forms; forms the Schur complements only for non-convex laws.
-pub fn check(problem: &Problem, mesh: &Mesh, geo: &Geometry, dofs: &DofMap, velocity: &mut VelocityStep) -> Result<SmallnessReport, SolveError> {
+pub fn check(
+    problem: &Problem,
+    mesh: &Mesh,
+    geo: &Geometry,
+    dofs: &DofMap,
+    velocity: &mut VelocityStep,
+) -> Result<SmallnessReport, SolveError> {
     let m_a = 2.0 * problem.material.viscosity.eta;
-    let c2 = if dofs.n_contact() > 0 { problem.friction.relaxed_monotonicity() } else { 0.0 };
+    let c2 = if dofs.n_contact() > 0 {
+        problem.friction.relaxed_monotonicity()
+    } else {
+        0.0
+    };
     if c2 == 0.0 {
-        return Ok(SmallnessReport { c2, m_a, c_tau: None, lhs: 0.0, holds: true, discrete_margin: None });
+        return Ok(SmallnessReport {
+            c2,
+            m_a,
+            c_tau: None,
+            lhs: 0.0,
+            holds: true,
+            discrete_margin: None,
+        });
     }
     let d: Vec<f64> = velocity.weights().iter().map(|w| 1.0 / w.sqrt()).collect();
     let gram = assembly::viscous_stiffness(mesh, geo, dofs, 0.5, 0.0);
     let n_i = dofs.n_interior;
     let n = dofs.n_free();
-    let g_ii = Cholesky::new(gram.block(0..n_i, 0..n_i).lower_csc().as_ref())
-        .map_err(|source| SolveError::Factor { what: "strain Gram", source })?;
+    let g_ii =
+        Cholesky::new(gram.block(0..n_i, 0..n_i).lower_csc().as_ref()).map_err(|source| {
+            SolveError::Factor {
+                what: "strain Gram",
+                source,
+            }
+        })?;
     let s_g = schur_complement(&gram, &g_ii, &gram.block(n_i..n, 0..n_i), n_i);
     let c_tau = (1.0 / min_eig_scaled(&s_g, &d)).sqrt();
     let lhs = c2 * c_tau * c_tau;
     let discrete = min_eig_scaled(velocity.schur(), &d) - c2;
-    Ok(SmallnessReport { c2, m_a, c_tau: Some(c_tau), lhs, holds: lhs < m_a, discrete_margin: Some(discrete) })
+    Ok(SmallnessReport {
+        c2,
+        m_a,
+        c_tau: Some(c_tau),
+        lhs,
+        holds: lhs < m_a,
+        discrete_margin: Some(discrete),
+    })
 }

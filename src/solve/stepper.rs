@@ -1,6 +1,7 @@
 //! Problem 3.1's time loop. For n = 1..N, from (u_{n−1}, ζ_{n−1}) only:
 //! 1. velocity (3.13) → w_n;     2. u_n = u_{n−1} + k w_n (3.12);
 //! 3. damage (3.10) → ζ_n;       4. σ_n = A ε(w_n) + B_{n−1} (3.8), only when stored.
+//!
 //! Steps 1 and 3 are independent and run on two threads for meshes large enough to pay for
 //! it. Physics absent from the scene is not computed: no damage block → ζ ≡ 1 and no damage
 //! solve; no Γ3 → a single linear solve per step.
@@ -138,19 +139,37 @@ impl Simulation {
         let mass = assembly::mass(&mesh, &geo);
         let nn = mesh.n_nodes();
         let zeta: Vec<f64> = match &problem.damage {
-            Some(d) => mesh.nodes.iter().map(|p| d.zeta0.eval(p[0], p[1], 0.0)).collect(),
+            Some(d) => mesh
+                .nodes
+                .iter()
+                .map(|p| d.zeta0.eval(p[0], p[1], 0.0))
+                .collect(),
             None => vec![1.0; nn],
         };
         let damage = match &problem.damage {
             Some(d) => {
-                let h = assembly::combine(1.0 / problem.k(), &mass, d.kappa, &assembly::laplacian(&mesh, &geo));
+                let h = assembly::combine(
+                    1.0 / problem.k(),
+                    &mass,
+                    d.kappa,
+                    &assembly::laplacian(&mesh, &geo),
+                );
                 let mut solver = DamageStep::new(h)?;
                 solver.set_active_from(&zeta);
-                Some(DamagePart { solver, g: vec![0.0; nn], f: vec![0.0; nn], next: zeta.clone() })
+                Some(DamagePart {
+                    solver,
+                    g: vec![0.0; nn],
+                    f: vec![0.0; nn],
+                    next: zeta.clone(),
+                })
             }
             None => None,
         };
-        let u: Vec<f64> = mesh.nodes.iter().flat_map(|p| problem.u0.eval(p[0], p[1], 0.0)).collect();
+        let u: Vec<f64> = mesh
+            .nodes
+            .iter()
+            .flat_map(|p| problem.u0.eval(p[0], p[1], 0.0))
+            .collect();
         let nt = mesh.triangles.len();
         let n_free = dofs.n_free();
         Ok(Simulation {
@@ -206,7 +225,23 @@ impl Simulation {
 
         let parallel = self.damage.is_some() && self.mesh.n_nodes() >= PARALLEL_MIN_NODES;
         let (vel, dam) = {
-            let Simulation { problem, mesh, geo, dofs, settings, state, velocity, damage, eps, b, load, load_free, w_free, mass, .. } = self;
+            let Simulation {
+                problem,
+                mesh,
+                geo,
+                dofs,
+                settings,
+                state,
+                velocity,
+                damage,
+                eps,
+                b,
+                load,
+                load_free,
+                w_free,
+                mass,
+                ..
+            } = self;
             let mut velocity_job = || -> Result<SolverReport, SolveError> {
                 load.iter_mut().for_each(|v| *v = 0.0);
                 loads::add_body_force(mesh, geo, &problem.body_force, t, load);
@@ -216,14 +251,25 @@ impl Simulation {
                 velocity.solve(load_free, w_free, settings, n)
             };
             let damage_job = |d: &mut DamagePart| -> Result<SolverReport, SolveError> {
-                let dm = problem.damage.as_ref().expect("damage part implies damage data");
+                let dm = problem
+                    .damage
+                    .as_ref()
+                    .expect("damage part implies damage data");
                 let src = dm.source;
-                loads::damage_source(mesh, geo, &state.zeta, |e, z| phi(&src, &eps[e], z), &mut d.f);
+                loads::damage_source(
+                    mesh,
+                    geo,
+                    &state.zeta,
+                    |e, z| phi(&src, &eps[e], z),
+                    &mut d.f,
+                );
                 mass.mul_vec(&state.zeta, &mut d.g);
                 for (g, f) in d.g.iter_mut().zip(&d.f) {
                     *g = *g / k + f;
                 }
-                let DamagePart { solver, g, next, .. } = d;
+                let DamagePart {
+                    solver, g, next, ..
+                } = d;
                 solver.solve(g, next, settings, n)
             };
             match damage.as_mut() {
@@ -261,10 +307,20 @@ impl Simulation {
             w_v: w2.sqrt(),
             u_v: u2.sqrt(),
             zeta_l2: norms::mass_norm(&self.mass, &self.state.zeta, &mut scratch),
-            zeta_min: self.state.zeta.iter().cloned().fold(f64::INFINITY, f64::min),
+            zeta_min: self
+                .state
+                .zeta
+                .iter()
+                .cloned()
+                .fold(f64::INFINITY, f64::min),
             velocity: velocity_report,
             damage: damage_report,
-            slip_nodes: self.velocity.contact_velocity().iter().filter(|x| **x != 0.0).count(),
+            slip_nodes: self
+                .velocity
+                .contact_velocity()
+                .iter()
+                .filter(|x| **x != 0.0)
+                .count(),
         };
         if !(report.w_v.is_finite() && report.u_v.is_finite() && report.zeta_l2.is_finite()) {
             return Err(SolveError::NonFinite("solution", n));
@@ -279,7 +335,12 @@ impl Simulation {
         let need_sigma = sel.sigma || sel.von_mises;
         let sigma: Vec<Tensor2<f64>> = if need_sigma {
             (0..self.mesh.triangles.len())
-                .map(|e| viscous_stress(&self.problem.material.viscosity, &self.geo.strain(&self.mesh, e, &self.w)) + self.b[e])
+                .map(|e| {
+                    viscous_stress(
+                        &self.problem.material.viscosity,
+                        &self.geo.strain(&self.mesh, e, &self.w),
+                    ) + self.b[e]
+                })
                 .collect()
         } else {
             Vec::new()
@@ -290,7 +351,12 @@ impl Simulation {
             u: sel.u.then(|| self.state.u.clone()),
             w: sel.w.then(|| self.w.clone()),
             zeta: sel.zeta.then(|| self.state.zeta.clone()),
-            sigma: sel.sigma.then(|| sigma.iter().map(|s| [s[(0, 0)], s[(1, 1)], s[(0, 1)]]).collect()),
+            sigma: sel.sigma.then(|| {
+                sigma
+                    .iter()
+                    .map(|s| [s[(0, 0)], s[(1, 1)], s[(0, 1)]])
+                    .collect()
+            }),
             von_mises: sel.von_mises.then(|| sigma.iter().map(von_mises).collect()),
             contact: sel.contact.then(|| self.contact_state()),
         }
@@ -330,6 +396,8 @@ impl Simulation {
 
     /// Damage refactorisations so far (0 without damage).
     pub fn damage_refactorizations(&self) -> usize {
-        self.damage.as_ref().map_or(0, |d| d.solver.refactorizations)
+        self.damage
+            .as_ref()
+            .map_or(0, |d| d.solver.refactorizations)
     }
 }

@@ -45,8 +45,13 @@ impl VelocityStep {
     pub fn new(k: Csr, dofs: &DofMap, law: FrictionLaw) -> Result<Self, SolveError> {
         let n_i = dofs.n_interior;
         let n = dofs.n_free();
-        let k_ii = Cholesky::new(k.block(0..n_i, 0..n_i).lower_csc().as_ref())
-            .map_err(|source| SolveError::Factor { what: "velocity", source })?;
+        let k_ii =
+            Cholesky::new(k.block(0..n_i, 0..n_i).lower_csc().as_ref()).map_err(|source| {
+                SolveError::Factor {
+                    what: "velocity",
+                    source,
+                }
+            })?;
         let k_ci = k.block(n_i..n, 0..n_i);
         let m = dofs.n_contact();
         Ok(VelocityStep {
@@ -109,7 +114,13 @@ impl VelocityStep {
     /// Solves (3.13) for the free-DOF load `f`, writing the free-DOF velocity into `w`.
     /// The reported residual is the relative KKT residual of the FULL problem, computed from
     /// K w − f (not from the reduced quantities).
-    pub fn solve(&mut self, f: &[f64], w: &mut [f64], settings: &SolverSettings, step: usize) -> Result<SolverReport, SolveError> {
+    pub fn solve(
+        &mut self,
+        f: &[f64],
+        w: &mut [f64],
+        settings: &SolverSettings,
+        step: usize,
+    ) -> Result<SolverReport, SolveError> {
         let n_i = self.n_i;
         let m = self.n_contact();
         self.y.copy_from_slice(&f[..n_i]);
@@ -130,7 +141,12 @@ impl VelocityStep {
                 let law = self.law.clone();
                 let weights = std::mem::take(&mut self.weights);
                 let s = self.schur();
-                let p = Reduced { s, b: &b, weights: &weights, law: &law };
+                let p = Reduced {
+                    s,
+                    b: &b,
+                    weights: &weights,
+                    law: &law,
+                };
                 let rep = friction_reduced::solve(&p, &mut x, settings, step);
                 self.weights = weights;
                 iterations = rep?.iterations;
@@ -172,7 +188,10 @@ impl VelocityStep {
                 tolerance: settings.tolerance,
             });
         }
-        Ok(SolverReport { iterations, residual })
+        Ok(SolverReport {
+            iterations,
+            residual,
+        })
     }
 }
 

@@ -11,7 +11,8 @@ use serde_json::Value;
 pub fn problem(preset: &str, nh: usize, nk: usize, edits: &[(&str, Value)]) -> Problem {
     let mut doc = presets::get(preset).expect("preset");
     for (ptr, v) in edits {
-        *doc.pointer_mut(ptr).unwrap_or_else(|| panic!("no {ptr} in {preset}")) = v.clone();
+        *doc.pointer_mut(ptr)
+            .unwrap_or_else(|| panic!("no {ptr} in {preset}")) = v.clone();
     }
     let o = Overrides {
         h: Some(Value::String(format!("1/{nh}"))),

@@ -1,0 +1,113 @@
+//! The command-line contract: `run` prints the summary JSON with the documented keys and
+//! writes summary.json, mesh.json and the selected fields with --out; bad input exits with 2
+//! and names the offending field.
+
+use serde_json::Value;
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_contact-sim"))
+}
+
+#[test]
+fn run_preset_prints_summary_and_writes_fields() {
+    let dir = std::env::temp_dir().join(format!("contact-sim-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = bin()
+        .args([
+            "run",
+            "--preset",
+            "paper-exp2",
+            "--h",
+            "1/4",
+            "--k",
+            "1/8",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let s: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(s["mesh"]["nodes"], 9 * 5);
+    assert_eq!(s["mesh"]["triangles"], 2 * 8 * 4);
+    assert_eq!(s["time"]["steps"], 8);
+    for key in ["t", "w_V", "u_V", "zeta_L2", "zeta_min"] {
+        assert!(s["final"][key].is_f64(), "final.{key}");
+    }
+    let steps = s["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 8);
+    for st in steps {
+        assert!(
+            st["velocity"]["iterations"].is_u64()
+                && st["velocity"]["residual"].as_f64().unwrap() <= 1e-10
+        );
+        assert!(
+            st["damage"]["iterations"].is_u64()
+                && st["damage"]["residual"].as_f64().unwrap() <= 1e-10
+        );
+    }
+    assert!(s["timing"]["setup_s"].is_f64() && s["timing"]["solve_s"].is_f64());
+    assert_eq!(s["final"]["t"], 1.0);
+    // Files: summary, mesh, one field document per step (every = 1).
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["final"], s["final"]);
+    let mesh: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("mesh.json")).unwrap()).unwrap();
+    assert_eq!(mesh["nodes"].as_array().unwrap().len(), 45);
+    let last: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("fields/step_00008.json")).unwrap())
+            .unwrap();
+    assert_eq!(last["zeta"].as_array().unwrap().len(), 45);
+    assert_eq!(last["u"].as_array().unwrap().len(), 90);
+    assert_eq!(last["sigma"].as_array().unwrap().len(), 64);
+    // Γ3 = [0, 1] × {0} at h = 1/4: nodes x = 0.25, 0.5, 0.75, 1 (x = 0 is clamped).
+    let contact = last["contact"].as_array().unwrap();
+    assert_eq!(contact.len(), 4);
+    assert!(contact.iter().all(|c| c["slipping"] == false));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn invalid_scene_exits_2_with_pointer() {
+    let dir = std::env::temp_dir().join(format!("contact-sim-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("bad.json");
+    let mut doc: Value = serde_json::from_slice(
+        &bin()
+            .args(["preset", "paper-exp1"])
+            .output()
+            .unwrap()
+            .stdout,
+    )
+    .unwrap();
+    doc["material"]["viscosity"]["eta"] = Value::from(-1.0);
+    std::fs::write(&path, doc.to_string()).unwrap();
+    let out = bin().arg("run").arg(&path).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/material/viscosity/eta"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn presets_are_listed_and_round_trip() {
+    let out = bin().arg("presets").output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    for name in [
+        "paper-exp1",
+        "paper-exp2",
+        "paper-exp3",
+        "paper-convergence",
+    ] {
+        assert!(text.contains(name));
+        let doc = bin().args(["preset", name]).output().unwrap();
+        let v: Value = serde_json::from_slice(&doc.stdout).unwrap();
+        assert!(contact_sim::scene::validate(&v).is_ok(), "{name}");
+    }
+}
