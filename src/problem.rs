@@ -1,9 +1,8 @@
 //! The validated, typed problem: what the numerics consumes.
 //!
-//! A [`crate::scene::Scene`] (user JSON) is turned into a [`Problem`] by
-//! [`crate::scene::Scene::validate`]; every value here has already been checked (positive
-//! moduli, boundary segments on the rectangle, non-overlapping parts, ...), so the numerics
-//! never re-validates. Units are whatever the user's are, consistently (the paper's data is
+//! A scene (user JSON) is turned into a [`Problem`] by [`crate::scene::validate`]; every
+//! value here has already been checked (positive moduli, boundary segments on the rectangle,
+//! non-overlapping parts, ...), so the numerics never re-validates. Units are whatever the user's are, consistently (the paper's data is
 //! dimensionless).
 
 use crate::scene::expr::Expr;
@@ -150,7 +149,7 @@ pub struct DamageSource {
     pub zeta_star: f64,
 }
 
-/// The damage equation (2.2): ζ̇ − κΔζ + ∂I_[0,1](ζ) ∋ φ(ε(u), ζ).
+/// The damage equation (2.2): ζ̇ − κΔζ + ∂I_\[0,1\](ζ) ∋ φ(ε(u), ζ).
 #[derive(Debug, Clone)]
 pub struct Damage {
     pub kappa: f64,

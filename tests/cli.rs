@@ -111,3 +111,15 @@ fn presets_are_listed_and_round_trip() {
         assert!(contact_sim::scene::validate(&v).is_ok(), "{name}");
     }
 }
+
+/// The example scene in README.md stays valid.
+#[test]
+fn readme_example_scene_validates() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+    let start = readme.find("```json\n").expect("json block") + 8;
+    let end = start + readme[start..].find("```").unwrap();
+    let doc: Value = serde_json::from_str(&readme[start..end]).unwrap();
+    let p = contact_sim::scene::validate(&doc).unwrap();
+    assert_eq!((p.cells_per_unit, p.steps, p.boundary.len()), (32, 32, 4));
+}

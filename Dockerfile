@@ -1,0 +1,17 @@
+# Build with the Rust toolchain image, run on slim Debian as a non-root user.
+FROM rust:1.95-bookworm AS build
+WORKDIR /src
+COPY Cargo.toml Cargo.lock ./
+COPY src ./src
+COPY api ./api
+COPY benches ./benches
+RUN cargo build --release --locked --bin contact-sim
+
+FROM debian:bookworm-slim
+RUN useradd --system --uid 10001 --create-home --home-dir /home/contact contact \
+    && mkdir -p /data && chown contact:contact /data
+COPY --from=build /src/target/release/contact-sim /usr/local/bin/contact-sim
+USER contact
+WORKDIR /data
+ENTRYPOINT ["contact-sim"]
+CMD ["run", "--preset", "paper-exp3", "--out", "/data/paper-exp3"]
