@@ -18,5 +18,6 @@ pub mod output;
 pub mod problem;
 pub mod run;
 pub mod scene;
+pub mod service;
 pub mod solve;
 pub mod study;

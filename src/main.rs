@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 use contact_sim::scene::{self, presets, Overrides};
+use contact_sim::service::{self, Config};
 use contact_sim::solve::SolverSettings;
 use contact_sim::{bench, run};
 use serde_json::Value;
@@ -16,12 +17,38 @@ use std::process::ExitCode;
     about = "Quasistatic frictional contact of a viscoelastic body with damage (Han, Jureczka & Ochal 2020)"
 )]
 struct Cli {
+    /// Without a subcommand: `serve` with its defaults.
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the HTTP job service (the default).
+    Serve {
+        #[arg(long, default_value = "127.0.0.1:8080")]
+        addr: String,
+        #[arg(long = "data-dir", default_value = "./data")]
+        data_dir: PathBuf,
+        /// Worker threads (default: number of cores).
+        #[arg(long)]
+        workers: Option<usize>,
+        /// Maximum queued jobs before POST /jobs answers 503.
+        #[arg(long = "queue-capacity", default_value_t = 1000)]
+        queue_capacity: usize,
+        /// Per-job limit on mesh nodes.
+        #[arg(long = "max-nodes", default_value_t = 300_000)]
+        max_nodes: usize,
+        /// Per-job limit on time steps.
+        #[arg(long = "max-steps", default_value_t = 100_000)]
+        max_steps: usize,
+        /// Per-job limit on stored result bytes.
+        #[arg(long = "max-stored-bytes", default_value_t = 2 << 30)]
+        max_stored_bytes: u64,
+        /// Request body limit in bytes.
+        #[arg(long = "max-body-bytes", default_value_t = 1 << 20)]
+        max_body_bytes: usize,
+    },
     /// Run a scene (a JSON file or a preset) and print the summary JSON.
     Run {
         /// Scene file (JSON); omit when using --preset.
@@ -69,7 +96,40 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    match Cli::parse().command {
+    let command = Cli::parse().command.unwrap_or(Command::Serve {
+        addr: "127.0.0.1:8080".into(),
+        data_dir: PathBuf::from("./data"),
+        workers: None,
+        queue_capacity: 1000,
+        max_nodes: 300_000,
+        max_steps: 100_000,
+        max_stored_bytes: 2 << 30,
+        max_body_bytes: 1 << 20,
+    });
+    match command {
+        Command::Serve {
+            addr,
+            data_dir,
+            workers,
+            queue_capacity,
+            max_nodes,
+            max_steps,
+            max_stored_bytes,
+            max_body_bytes,
+        } => {
+            let defaults = Config::default();
+            let config = Config {
+                data_dir,
+                workers: workers.unwrap_or(defaults.workers),
+                queue_capacity,
+                max_nodes,
+                max_steps,
+                max_stored_bytes,
+                max_body_bytes,
+                ..defaults
+            };
+            cmd_serve(&addr, config)
+        }
         Command::Run {
             scene,
             preset,
@@ -126,6 +186,43 @@ fn main() -> ExitCode {
             Err(e) => fail(1, &e.to_string()),
         },
     }
+}
+
+fn cmd_serve(addr: &str, config: Config) -> ExitCode {
+    // The async runtime only does I/O; the numerics runs on the worker pool's own threads.
+    let rt = match tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => return fail(1, &format!("cannot start the async runtime: {e}")),
+    };
+    rt.block_on(async {
+        let state = match service::app::start(config.clone()) {
+            Ok(s) => s,
+            Err(e) => return fail(1, &e),
+        };
+        let listener = match tokio::net::TcpListener::bind(addr).await {
+            Ok(l) => l,
+            Err(e) => return fail(1, &format!("cannot listen on {addr}: {e}")),
+        };
+        eprintln!(
+            "contact-sim {} listening on http://{} (data in {}, {} workers)",
+            env!("CARGO_PKG_VERSION"),
+            listener.local_addr().map(|a| a.to_string()).unwrap_or_default(),
+            config.data_dir.display(),
+            config.workers
+        );
+        let shutdown = async {
+            let _ = tokio::signal::ctrl_c().await;
+            eprintln!("contact-sim: shutting down (running jobs are checkpointed and resume at the next start)");
+        };
+        match service::app::serve(listener, state, shutdown).await {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => fail(1, &e.to_string()),
+        }
+    })
 }
 
 fn load_scene(path: Option<&Path>, preset: Option<&str>) -> Result<Value, String> {

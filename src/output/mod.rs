@@ -2,6 +2,8 @@
 //! timings, smallness estimate) and the per-step fields.
 
 pub mod fields;
+pub mod stored;
 pub mod summary;
+pub mod vtk;
 
 pub use summary::Summary;

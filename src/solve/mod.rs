@@ -9,7 +9,7 @@ pub mod stepper;
 pub mod velocity;
 
 /// Iterations and the relative optimality (KKT) residual a sub-problem solver reached.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SolverReport {
     pub iterations: usize,
     pub residual: f64,

@@ -35,7 +35,7 @@ pub struct State {
 }
 
 /// What one time step did.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepReport {
     pub n: usize,
     pub t: f64,

@@ -1,0 +1,135 @@
+//! The router and the server: `app(state)` returns the Router (tests call it on an ephemeral
+//! port), `serve` runs it with the worker pool until shutdown.
+
+use super::error::ApiError;
+use super::jobs::Runtime;
+use super::routes::{jobs, misc, results};
+use super::store::results::ResultFiles;
+use super::store::sqlite::SqliteStore;
+use super::store::Store;
+use super::Config;
+use axum::extract::DefaultBodyLimit;
+use axum::http::StatusCode;
+use axum::routing::{get, post};
+use axum::Router;
+use std::sync::Arc;
+
+/// Shared state of the handlers.
+#[derive(Clone)]
+pub struct AppState {
+    pub rt: Arc<Runtime>,
+    /// Turns true when the server starts shutting down (ends open event streams).
+    pub closing: tokio::sync::watch::Receiver<bool>,
+    closing_tx: Arc<tokio::sync::watch::Sender<bool>>,
+}
+
+impl AppState {
+    pub fn store(&self) -> &Arc<dyn Store> {
+        &self.rt.store
+    }
+}
+
+pub fn app(state: AppState) -> Router {
+    let limit = state.rt.config.max_body_bytes;
+    Router::new()
+        .route("/jobs", post(jobs::submit).get(jobs::list))
+        .route("/jobs/{id}", get(jobs::get_job).delete(jobs::delete_job))
+        .route("/jobs/{id}/cancel", post(jobs::cancel))
+        .route("/jobs/{id}/events", get(jobs::events))
+        .route("/jobs/{id}/summary", get(results::summary))
+        .route("/jobs/{id}/mesh", get(results::mesh))
+        .route("/jobs/{id}/fields", get(results::fields))
+        .route("/jobs/{id}/fields/{file}", get(results::vtu))
+        .route("/jobs/{id}/result.pvd", get(results::pvd))
+        .route("/jobs/{id}/archive.tar", get(results::archive))
+        .route("/presets", get(misc::presets))
+        .route("/presets/{name}", get(misc::preset))
+        .route("/healthz", get(misc::healthz))
+        .route("/metrics", get(misc::metrics))
+        .route("/openapi.yaml", get(misc::openapi))
+        .fallback(|| async { ApiError::not_found("no such route; see GET /openapi.yaml") })
+        .method_not_allowed_fallback(|| async {
+            ApiError::new(
+                StatusCode::METHOD_NOT_ALLOWED,
+                "method not allowed",
+                "see GET /openapi.yaml for the methods of each route",
+            )
+        })
+        .layer(DefaultBodyLimit::max(limit))
+        .with_state(state)
+}
+
+/// Opens the store in `config.data_dir` and starts the worker pool. Leases held by this
+/// node's previous run are released, so its interrupted jobs resume at once.
+pub fn start(config: Config) -> Result<AppState, String> {
+    std::fs::create_dir_all(&config.data_dir)
+        .map_err(|e| format!("cannot create {}: {e}", config.data_dir.display()))?;
+    let store =
+        SqliteStore::open(&config.data_dir.join("jobs.sqlite3")).map_err(|e| e.to_string())?;
+    store
+        .release_worker_leases(&format!("{}-", config.node))
+        .map_err(|e| e.to_string())?;
+    let results = ResultFiles::new(&config.data_dir).map_err(|e| e.to_string())?;
+    let rt = Runtime::start(Arc::new(store), Arc::new(results), config);
+    let (tx, rx) = tokio::sync::watch::channel(false);
+    Ok(AppState {
+        rt,
+        closing: rx,
+        closing_tx: Arc::new(tx),
+    })
+}
+
+/// Serves until `shutdown` resolves, then stops the workers (running jobs are checkpointed
+/// and resume at the next start).
+pub async fn serve(
+    listener: tokio::net::TcpListener,
+    state: AppState,
+    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
+    let rt = state.rt.clone();
+    let closing = state.closing_tx.clone();
+    let signal = async move {
+        shutdown.await;
+        let _ = closing.send(true);
+    };
+    let r = axum::serve(listener, app(state))
+        .with_graceful_shutdown(signal)
+        .await;
+    tokio::task::spawn_blocking(move || rt.shutdown())
+        .await
+        .ok();
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    /// api/openapi.yaml documents exactly the routes of `app()`.
+    #[test]
+    fn openapi_lists_every_route() {
+        let src = include_str!("app.rs");
+        let routes: Vec<&str> = src
+            .split(".route(\"")
+            .skip(1)
+            .map(|s| s.split('"').next().unwrap())
+            .collect();
+        assert!(routes.len() >= 14);
+        let spec = super::super::routes::misc::OPENAPI;
+        let documented: Vec<&str> = spec
+            .lines()
+            .filter(|l| l.starts_with("  /") && l.ends_with(':'))
+            .map(|l| l.trim().trim_end_matches(':'))
+            .collect();
+        for r in &routes {
+            assert!(
+                documented.contains(r),
+                "route {r} missing from api/openapi.yaml"
+            );
+        }
+        for d in &documented {
+            assert!(
+                routes.contains(d),
+                "api/openapi.yaml documents {d}, which the router lacks"
+            );
+        }
+    }
+}

@@ -1,0 +1,44 @@
+//! The HTTP job service on top of the numerical library: routes ([`app`]), job execution on
+//! a worker pool off the async runtime ([`jobs`]), and the durable store ([`store`]).
+
+pub mod app;
+pub mod error;
+pub mod jobs;
+pub mod routes;
+pub mod store;
+pub mod stream;
+
+use std::path::PathBuf;
+
+/// Service settings (CLI flags of `contact-sim serve`).
+#[derive(Debug, Clone)]
+pub struct Config {
+    pub data_dir: PathBuf,
+    /// Worker threads (jobs run in parallel, each sequentially).
+    pub workers: usize,
+    /// Prefix of this node's worker names (leases of a previous run are released at start).
+    pub node: String,
+    /// Maximum number of queued jobs; beyond it POST /jobs answers 503.
+    pub queue_capacity: usize,
+    /// Per-job limits, enforced at validation.
+    pub max_nodes: usize,
+    pub max_steps: usize,
+    pub max_stored_bytes: u64,
+    /// Request body limit in bytes.
+    pub max_body_bytes: usize,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            data_dir: PathBuf::from("./data"),
+            workers: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            node: "local".into(),
+            queue_capacity: 1000,
+            max_nodes: 300_000,
+            max_steps: 100_000,
+            max_stored_bytes: 2 << 30,
+            max_body_bytes: 1 << 20,
+        }
+    }
+}

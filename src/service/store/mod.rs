@@ -1,0 +1,184 @@
+//! The durable job store behind a narrow interface: enqueue, claim with a lease, heartbeat,
+//! progress, checkpoint, finish, fetch. The embedded default is SQLite in the data directory
+//! ([`sqlite::SqliteStore`]); results (summary, stored steps) are files written atomically
+//! ([`results::ResultFiles`]). A shared PostgreSQL backend can implement the same trait.
+//!
+//! All methods are blocking (call them from worker threads or `spawn_blocking`).
+
+pub mod results;
+pub mod sqlite;
+
+use serde::{Deserialize, Serialize};
+use uuid::Uuid;
+
+/// Job lifecycle: queued → running → succeeded | failed | cancelled
+/// (queued → cancelled directly when cancelled before it ran).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JobStatus {
+    Queued,
+    Running,
+    Succeeded,
+    Failed,
+    Cancelled,
+}
+
+impl JobStatus {
+    pub const ALL: [JobStatus; 5] = [
+        JobStatus::Queued,
+        JobStatus::Running,
+        JobStatus::Succeeded,
+        JobStatus::Failed,
+        JobStatus::Cancelled,
+    ];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobStatus::Queued => "queued",
+            JobStatus::Running => "running",
+            JobStatus::Succeeded => "succeeded",
+            JobStatus::Failed => "failed",
+            JobStatus::Cancelled => "cancelled",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<JobStatus> {
+        JobStatus::ALL.into_iter().find(|x| x.as_str() == s)
+    }
+
+    pub fn is_finished(self) -> bool {
+        matches!(
+            self,
+            JobStatus::Succeeded | JobStatus::Failed | JobStatus::Cancelled
+        )
+    }
+}
+
+/// Progress of a running job (persisted at every checkpoint and on finish, kept in memory
+/// between).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Progress {
+    pub step: usize,
+    pub steps: usize,
+    /// Worst of the two sub-problem residuals at the last step.
+    pub last_residual: Option<f64>,
+}
+
+/// A job as stored.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JobRecord {
+    pub id: Uuid,
+    pub status: JobStatus,
+    /// The submitted scene after preset expansion and overrides (what was validated).
+    pub scene: serde_json::Value,
+    /// Hex SHA-256 of the canonical scene JSON plus crate version and solver settings.
+    pub scene_hash: String,
+    pub idempotency_key: Option<String>,
+    /// Hex SHA-256 of the request body the idempotency key was first used with.
+    pub request_hash: Option<String>,
+    /// Unix times in seconds (fractional).
+    pub created_at: f64,
+    pub started_at: Option<f64>,
+    pub finished_at: Option<f64>,
+    pub progress: Progress,
+    /// RFC 9457 problem+json object for failed jobs.
+    pub error: Option<serde_json::Value>,
+    pub cancel_requested: bool,
+    pub attempt: u32,
+    pub worker: Option<String>,
+    pub lease_until: Option<f64>,
+    pub last_checkpoint_step: Option<usize>,
+}
+
+/// What `enqueue` needs.
+#[derive(Debug, Clone)]
+pub struct NewJob {
+    pub scene: serde_json::Value,
+    pub scene_hash: String,
+    pub steps: usize,
+    pub idempotency_key: Option<String>,
+    pub request_hash: Option<String>,
+}
+
+/// Outcome of `enqueue` with an idempotency key.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Enqueued {
+    /// A new job.
+    New(JobRecord),
+    /// The key was used before with the same request: that job.
+    Existing(JobRecord),
+    /// The key was used before with a different request body.
+    KeyConflict(JobRecord),
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    #[error("database error: {0}")]
+    Db(String),
+    #[error("I/O error: {0}")]
+    Io(#[from] std::io::Error),
+    #[error("corrupt record: {0}")]
+    Corrupt(String),
+}
+
+/// A page of jobs, newest first.
+#[derive(Debug, Clone)]
+pub struct Page {
+    pub jobs: Vec<JobRecord>,
+    /// Opaque cursor for the next page, None on the last page.
+    pub next: Option<String>,
+}
+
+pub trait Store: Send + Sync + 'static {
+    /// Adds a queued job (or returns the existing one for a known idempotency key).
+    fn enqueue(&self, job: NewJob) -> Result<Enqueued, StoreError>;
+    fn get(&self, id: Uuid) -> Result<Option<JobRecord>, StoreError>;
+    /// Newest first; optional status filter; `cursor` from a previous page.
+    fn list(
+        &self,
+        status: Option<JobStatus>,
+        cursor: Option<&str>,
+        limit: usize,
+    ) -> Result<Page, StoreError>;
+    /// Claims the oldest queued job, or a running job whose lease expired (a dead worker's:
+    /// its attempt counter is incremented), for `worker` until now + `lease_s`.
+    /// Jobs at `max_attempts` are failed instead of claimed (dead letter).
+    fn claim(
+        &self,
+        worker: &str,
+        lease_s: f64,
+        max_attempts: u32,
+    ) -> Result<Option<JobRecord>, StoreError>;
+    /// Extends the lease; false if the job is no longer this worker's (or was cancelled).
+    fn heartbeat(&self, id: Uuid, worker: &str, lease_s: f64) -> Result<bool, StoreError>;
+    fn set_progress(&self, id: Uuid, progress: Progress) -> Result<(), StoreError>;
+    /// Saves the state after `step` (opaque bytes, see `output::stored`), atomically with
+    /// the step number.
+    fn checkpoint(&self, id: Uuid, step: usize, state: &[u8]) -> Result<(), StoreError>;
+    fn load_checkpoint(&self, id: Uuid) -> Result<Option<(usize, Vec<u8>)>, StoreError>;
+    /// Final status (succeeded, failed with `error`, or cancelled); clears the lease.
+    fn finish(
+        &self,
+        id: Uuid,
+        status: JobStatus,
+        error: Option<serde_json::Value>,
+    ) -> Result<(), StoreError>;
+    /// Marks cancellation: a queued job becomes cancelled at once; a running job gets
+    /// `cancel_requested` (its worker stops within one step). Returns the updated record.
+    fn request_cancel(&self, id: Uuid) -> Result<Option<JobRecord>, StoreError>;
+    /// Removes a finished job's record; false if absent or not finished.
+    fn delete(&self, id: Uuid) -> Result<bool, StoreError>;
+    /// Number of jobs per status.
+    fn counts(&self) -> Result<Vec<(JobStatus, usize)>, StoreError>;
+    /// Latest finished job with this scene hash that succeeded (repeat requests answered
+    /// from the store).
+    fn find_succeeded_by_hash(&self, scene_hash: &str) -> Result<Option<JobRecord>, StoreError>;
+}
+
+/// Current Unix time in seconds.
+pub fn now() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0)
+}

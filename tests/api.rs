@@ -1,0 +1,564 @@
+//! The job service over real HTTP on an ephemeral port: the whole lifecycle (submit, SSE,
+//! summary, fields JSON, VTU, PVD, archive, metrics, delete), errors as problem+json,
+//! idempotency, cancellation, and restart on the same data directory with resumption from a
+//! checkpoint.
+
+use contact_sim::service::{app, Config};
+use serde_json::{json, Value};
+use std::collections::HashMap;
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+struct Server {
+    addr: SocketAddr,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Server {
+    fn start(data_dir: &Path, workers: usize) -> Server {
+        let config = Config {
+            data_dir: data_dir.to_path_buf(),
+            workers,
+            max_nodes: 20_000,
+            ..Config::default()
+        };
+        let (addr_tx, addr_rx) = std::sync::mpsc::channel();
+        let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+        let thread = std::thread::spawn(move || {
+            let rt = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(2)
+                .enable_all()
+                .build()
+                .unwrap();
+            rt.block_on(async move {
+                let state = app::start(config).expect("start");
+                let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+                addr_tx.send(listener.local_addr().unwrap()).unwrap();
+                app::serve(listener, state, async move {
+                    let _ = stop_rx.await;
+                })
+                .await
+                .unwrap();
+            });
+        });
+        let addr = addr_rx
+            .recv_timeout(Duration::from_secs(30))
+            .expect("server started");
+        Server {
+            addr,
+            stop: Some(stop_tx),
+            thread: Some(thread),
+        }
+    }
+
+    fn stop(mut self) {
+        self.stop.take().unwrap().send(()).ok();
+        self.thread.take().unwrap().join().unwrap();
+    }
+}
+
+struct Resp {
+    status: u16,
+    headers: HashMap<String, String>,
+    body: Vec<u8>,
+}
+
+impl Resp {
+    fn json(&self) -> Value {
+        serde_json::from_slice(&self.body)
+            .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&self.body)))
+    }
+    fn header(&self, name: &str) -> Option<&str> {
+        self.headers.get(name).map(String::as_str)
+    }
+}
+
+/// A minimal HTTP/1.1 client (Connection: close; chunked bodies decoded).
+fn http(addr: SocketAddr, method: &str, path: &str, headers: &[(&str, &str)], body: &[u8]) -> Resp {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+    let mut req = format!(
+        "{method} {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\nContent-Length: {}\r\n",
+        body.len()
+    );
+    for (k, v) in headers {
+        req += &format!("{k}: {v}\r\n");
+    }
+    req += "\r\n";
+    s.write_all(req.as_bytes()).unwrap();
+    s.write_all(body).unwrap();
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).unwrap();
+    let split = raw
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .expect("header end");
+    let head = String::from_utf8_lossy(&raw[..split]).to_string();
+    let mut lines = head.split("\r\n");
+    let status: u16 = lines
+        .next()
+        .unwrap()
+        .split(' ')
+        .nth(1)
+        .unwrap()
+        .parse()
+        .unwrap();
+    let headers: HashMap<String, String> = lines
+        .filter_map(|l| l.split_once(':'))
+        .map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim().to_string()))
+        .collect();
+    let mut body = raw[split + 4..].to_vec();
+    if headers
+        .get("transfer-encoding")
+        .is_some_and(|t| t.contains("chunked"))
+    {
+        let mut out = Vec::new();
+        let mut rest = &body[..];
+        loop {
+            let eol = rest
+                .windows(2)
+                .position(|w| w == b"\r\n")
+                .expect("chunk size line");
+            let size = usize::from_str_radix(std::str::from_utf8(&rest[..eol]).unwrap().trim(), 16)
+                .unwrap();
+            rest = &rest[eol + 2..];
+            if size == 0 {
+                break;
+            }
+            out.extend_from_slice(&rest[..size]);
+            rest = &rest[size + 2..];
+        }
+        body = out;
+    }
+    Resp {
+        status,
+        headers,
+        body,
+    }
+}
+
+fn get(addr: SocketAddr, path: &str) -> Resp {
+    http(addr, "GET", path, &[], b"")
+}
+
+fn post_json(addr: SocketAddr, path: &str, body: &Value) -> Resp {
+    http(
+        addr,
+        "POST",
+        path,
+        &[("Content-Type", "application/json")],
+        body.to_string().as_bytes(),
+    )
+}
+
+fn assert_problem(r: &Resp, status: u16) -> Value {
+    assert_eq!(r.status, status, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(r.header("content-type"), Some("application/problem+json"));
+    let p = r.json();
+    assert_eq!(p["status"], status);
+    assert!(p["title"].is_string() && p["detail"].is_string());
+    p
+}
+
+fn wait_status(addr: SocketAddr, id: &str, want: &[&str], timeout: Duration) -> Value {
+    let t = Instant::now();
+    loop {
+        let j = get(addr, &format!("/jobs/{id}")).json();
+        if want.contains(&j["status"].as_str().unwrap()) {
+            return j;
+        }
+        assert!(t.elapsed() < timeout, "job {id} stuck in {}", j["status"]);
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("contact-sim-api-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// A scene that takes a while: paper-convergence at h = 1/16 with many small steps.
+fn long_scene(steps: usize) -> Value {
+    let mut s: Value = serde_json::from_str(
+        &serde_json::to_string(&contact_sim::scene::presets::get("paper-convergence").unwrap())
+            .unwrap(),
+    )
+    .unwrap();
+    s["mesh"]["h"] = json!("1/16");
+    s["time"] = json!({"t_end": 1, "N": steps});
+    s["output"]["every"] = json!(steps / 4);
+    s
+}
+
+#[test]
+fn whole_lifecycle_over_http() {
+    let dir = temp_dir("life");
+    let srv = Server::start(&dir, 2);
+    let a = srv.addr;
+    assert_eq!(get(a, "/healthz").status, 200);
+    assert!(
+        String::from_utf8_lossy(&get(a, "/openapi.yaml").body).contains("/jobs/{id}/result.pvd")
+    );
+    assert_eq!(
+        get(a, "/presets").json()["presets"]
+            .as_array()
+            .unwrap()
+            .len(),
+        4
+    );
+
+    let r = post_json(
+        a,
+        "/jobs",
+        &json!({"preset": "paper-exp2", "overrides": {"h": "1/8", "k": "1/8"}}),
+    );
+    assert_eq!(r.status, 202, "{}", String::from_utf8_lossy(&r.body));
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    assert_eq!(r.header("location"), Some(format!("/jobs/{id}").as_str()));
+
+    // Follow the event stream to the end: it closes after the final status.
+    let ev = String::from_utf8(get(a, &format!("/jobs/{id}/events")).body).unwrap();
+    assert!(
+        ev.contains("event: status") && ev.contains("\"succeeded\""),
+        "{ev}"
+    );
+
+    let job = get(a, &format!("/jobs/{id}"));
+    assert_eq!(job.json()["status"], "succeeded");
+    assert!(job.header("retry-after").is_none());
+    let etag = job.header("etag").unwrap().to_string();
+    assert_eq!(
+        http(
+            a,
+            "GET",
+            &format!("/jobs/{id}"),
+            &[("If-None-Match", &etag)],
+            b""
+        )
+        .status,
+        304
+    );
+
+    let summary = get(a, &format!("/jobs/{id}/summary")).json();
+    assert_eq!(summary["time"]["steps"], 8);
+    assert_eq!(summary["steps"].as_array().unwrap().len(), 8);
+    assert!(summary["final"]["w_V"].as_f64().unwrap() > 0.0);
+    let nodes = summary["mesh"]["nodes"].as_u64().unwrap() as usize;
+    let triangles = summary["mesh"]["triangles"].as_u64().unwrap() as usize;
+
+    for step in ["3", "8", "last"] {
+        let f = get(
+            a,
+            &format!("/jobs/{id}/fields?step={step}&fields=u,zeta,sigma"),
+        );
+        assert_eq!(f.status, 200, "{}", String::from_utf8_lossy(&f.body));
+        let f = f.json();
+        assert_eq!(f["u"].as_array().unwrap().len(), 2 * nodes);
+        assert_eq!(f["zeta"].as_array().unwrap().len(), nodes);
+        assert_eq!(f["sigma"].as_array().unwrap().len(), triangles);
+        assert!(f["w"].is_null());
+    }
+    let with_mesh = get(a, &format!("/jobs/{id}/fields?step=last&mesh=1")).json();
+    assert_eq!(with_mesh["mesh"]["nodes"].as_array().unwrap().len(), nodes);
+    assert_problem(&get(a, &format!("/jobs/{id}/fields?step=99")), 404);
+    assert_problem(&get(a, &format!("/jobs/{id}/fields?fields=pressure")), 400);
+
+    // VTU: counts match the mesh, arrays have the right lengths.
+    let vtu = String::from_utf8(get(a, &format!("/jobs/{id}/fields/8.vtu")).body).unwrap();
+    assert!(
+        vtu.contains(&format!("NumberOfPoints=\"{nodes}\""))
+            && vtu.contains(&format!("NumberOfCells=\"{triangles}\""))
+    );
+    check_vtu_arrays(&vtu, nodes, triangles);
+    let pvd = String::from_utf8(get(a, &format!("/jobs/{id}/result.pvd")).body).unwrap();
+    assert_eq!(pvd.matches("<DataSet").count(), 8);
+    assert!(pvd.contains(&format!("/jobs/{id}/fields/8.vtu")));
+    let tar = get(a, &format!("/jobs/{id}/archive.tar")).body;
+    let names = tar_names(&tar);
+    assert!(
+        names.contains(&"summary.json".to_string()) && names.contains(&"result.pvd".to_string())
+    );
+    assert_eq!(names.iter().filter(|n| n.ends_with(".vtu")).count(), 8);
+
+    let metrics = String::from_utf8(get(a, "/metrics").body).unwrap();
+    assert!(
+        metrics.contains("contact_sim_jobs{status=\"succeeded\"} 1"),
+        "{metrics}"
+    );
+    assert!(metrics.contains("contact_sim_steps_total 8"));
+
+    // An identical request is answered from the store.
+    let again = post_json(
+        a,
+        "/jobs",
+        &json!({"preset": "paper-exp2", "overrides": {"h": "1/8", "k": "1/8"}}),
+    );
+    assert_eq!(again.status, 200);
+    assert_eq!(again.json()["id"], id.as_str());
+
+    let list = get(a, "/jobs?status=succeeded").json();
+    assert_eq!(list["jobs"].as_array().unwrap().len(), 1);
+    assert_eq!(
+        http(a, "DELETE", &format!("/jobs/{id}"), &[], b"").status,
+        204
+    );
+    assert_problem(&get(a, &format!("/jobs/{id}")), 404);
+    srv.stop();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Decodes every DataArray (base64, UInt64 byte-count header) and checks its length.
+fn check_vtu_arrays(vtu: &str, nodes: usize, cells: usize) {
+    use base64::Engine;
+    let mut seen = 0;
+    for part in vtu.split("<DataArray").skip(1) {
+        let (attrs, rest) = part.split_once('>').unwrap();
+        let data = rest.split("</DataArray>").next().unwrap().trim();
+        let attr = |k: &str| {
+            attrs
+                .split(&format!("{k}=\""))
+                .nth(1)
+                .map(|s| s.split('"').next().unwrap().to_string())
+        };
+        let name = attr("Name").unwrap_or_default();
+        let comps: usize = attr("NumberOfComponents").map_or(1, |c| c.parse().unwrap());
+        let width = match attr("type").unwrap().as_str() {
+            "Float64" | "Int64" | "UInt64" => 8,
+            "UInt8" => 1,
+            t => panic!("type {t}"),
+        };
+        let bytes = base64::engine::general_purpose::STANDARD
+            .decode(data)
+            .unwrap();
+        let len = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+        assert_eq!(len, bytes.len() - 8, "{name}");
+        let count = len / width / comps;
+        let expect = match name.as_str() {
+            "Points" | "u" | "w" | "zeta" => nodes,
+            "connectivity" => 3 * cells,
+            "offsets" | "types" | "sigma" | "von_mises" => cells,
+            "TimeValue" | "Step" => 1,
+            n => panic!("unexpected array {n}"),
+        };
+        assert_eq!(count, expect, "{name}");
+        seen += 1;
+    }
+    assert!(seen >= 8, "only {seen} arrays");
+}
+
+fn tar_names(tar: &[u8]) -> Vec<String> {
+    let mut names = Vec::new();
+    let mut off = 0;
+    while off + 512 <= tar.len() && tar[off] != 0 {
+        let h = &tar[off..off + 512];
+        let name = String::from_utf8_lossy(&h[..100])
+            .trim_end_matches('\0')
+            .to_string();
+        let size = usize::from_str_radix(std::str::from_utf8(&h[124..135]).unwrap(), 8).unwrap();
+        names.push(name);
+        off += 512 + size.div_ceil(512) * 512;
+    }
+    names
+}
+
+#[test]
+fn bad_input_gets_problem_json_naming_the_field() {
+    let dir = temp_dir("errors");
+    let srv = Server::start(&dir, 1);
+    let a = srv.addr;
+    let r = http(
+        a,
+        "POST",
+        "/jobs",
+        &[("Content-Type", "application/json")],
+        b"{\"mesh\": ",
+    );
+    assert!(assert_problem(&r, 400)["detail"]
+        .as_str()
+        .unwrap()
+        .contains("malformed JSON"));
+    let r = http(a, "POST", "/jobs", &[("Content-Type", "text/plain")], b"{}");
+    assert_problem(&r, 415);
+
+    let mut scene = contact_sim::scene::presets::get("paper-exp1").unwrap();
+    scene["material"]["viscosity"]["eta"] = json!("soft");
+    scene["boundary"][1]["to"] = json!([0, 0.5]);
+    let p = assert_problem(&post_json(a, "/jobs", &scene), 422);
+    let pointers: Vec<&str> = p["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["pointer"].as_str().unwrap())
+        .collect();
+    assert!(
+        pointers.contains(&"/material/viscosity/eta"),
+        "{pointers:?}"
+    );
+    assert!(
+        pointers.iter().any(|p| p.starts_with("/boundary/")),
+        "{pointers:?}"
+    );
+
+    let p = assert_problem(
+        &post_json(a, "/jobs", &json!({"preset": "paper-exp9"})),
+        422,
+    );
+    assert_eq!(p["errors"][0]["pointer"], "/preset");
+    let p = assert_problem(
+        &post_json(
+            a,
+            "/jobs",
+            &json!({"preset": "paper-exp1", "overrides": {"h": "1/512"}}),
+        ),
+        422,
+    );
+    assert_eq!(p["errors"][0]["pointer"], "/overrides/h");
+    let p = assert_problem(
+        &post_json(
+            a,
+            "/jobs",
+            &json!({"preset": "paper-exp1", "overrides": {"k": "1/0"}}),
+        ),
+        422,
+    );
+    assert_eq!(p["errors"][0]["pointer"], "/overrides/k");
+    let big = vec![b' '; 2 << 20];
+    assert_eq!(
+        http(
+            a,
+            "POST",
+            "/jobs",
+            &[("Content-Type", "application/json")],
+            &big
+        )
+        .status,
+        413
+    );
+
+    assert_problem(&get(a, "/jobs/00000000-0000-0000-0000-000000000000"), 404);
+    assert_problem(&get(a, "/jobs/../../etc/passwd"), 404);
+    assert_problem(&get(a, "/jobs/not-a-uuid/summary"), 404);
+    assert_problem(&get(a, "/jobs?status=done"), 400);
+    assert_problem(&get(a, "/nowhere"), 404);
+    srv.stop();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn idempotency_cancellation_and_unfinished_results() {
+    let dir = temp_dir("cancel");
+    let srv = Server::start(&dir, 1);
+    let a = srv.addr;
+    let body = json!({"preset": "paper-exp1", "overrides": {"h": "1/4", "k": "1/4"}}).to_string();
+    let h = [
+        ("Content-Type", "application/json"),
+        ("Idempotency-Key", "k-1"),
+    ];
+    let first = http(a, "POST", "/jobs", &h, body.as_bytes());
+    assert_eq!(first.status, 202);
+    let second = http(a, "POST", "/jobs", &h, body.as_bytes());
+    assert_eq!(second.json()["id"], first.json()["id"]);
+    let other = json!({"preset": "paper-exp1", "overrides": {"h": "1/2"}}).to_string();
+    assert_problem(&http(a, "POST", "/jobs", &h, other.as_bytes()), 422);
+
+    // A long job: results are refused while it runs; cancel stops it within a step.
+    let r = post_json(a, "/jobs", &long_scene(50_000));
+    assert_eq!(r.status, 202);
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let running = wait_status(a, &id, &["running"], Duration::from_secs(60));
+    assert!(running["links"]["cancel"].is_string());
+    let polled = get(a, &format!("/jobs/{id}"));
+    assert_eq!(polled.header("retry-after"), Some("1"));
+    assert_problem(&get(a, &format!("/jobs/{id}/fields?step=last")), 409);
+    assert_problem(&get(a, &format!("/jobs/{id}/summary")), 409);
+    assert_problem(&http(a, "DELETE", &format!("/jobs/{id}"), &[], b""), 409);
+    assert_eq!(
+        http(a, "POST", &format!("/jobs/{id}/cancel"), &[], b"").status,
+        202
+    );
+    let done = wait_status(a, &id, &["cancelled"], Duration::from_secs(10));
+    assert!(done["progress"]["step"].as_u64().unwrap() < 50_000);
+    let ev = String::from_utf8(get(a, &format!("/jobs/{id}/events")).body).unwrap();
+    assert!(ev.contains("\"cancelled\""));
+    srv.stop();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn restart_keeps_results_and_resumes_running_jobs_from_checkpoints() {
+    let dir = temp_dir("restart");
+    let srv = Server::start(&dir, 1);
+    let a = srv.addr;
+    let quick = post_json(
+        a,
+        "/jobs",
+        &json!({"preset": "paper-exp3", "overrides": {"h": "1/4", "k": "1/4"}}),
+    )
+    .json();
+    let quick_id = quick["id"].as_str().unwrap().to_string();
+    wait_status(a, &quick_id, &["succeeded"], Duration::from_secs(60));
+    let quick_summary = get(a, &format!("/jobs/{quick_id}/summary")).body;
+
+    let steps = 20_000;
+    let scene = long_scene(steps);
+    let long = post_json(a, "/jobs", &scene).json();
+    let id = long["id"].as_str().unwrap().to_string();
+    wait_status(a, &id, &["running"], Duration::from_secs(60));
+    // Let it pass at least one checkpoint (about once a second), then stop the server.
+    std::thread::sleep(Duration::from_millis(2500));
+    let at_stop = get(a, &format!("/jobs/{id}")).json();
+    assert_eq!(
+        at_stop["status"], "running",
+        "the job must still be running when the server stops"
+    );
+    srv.stop();
+
+    let srv = Server::start(&dir, 1);
+    let a = srv.addr;
+    assert_eq!(
+        get(a, &format!("/jobs/{quick_id}/summary")).body,
+        quick_summary
+    );
+    let before = get(a, &format!("/jobs/{id}")).json();
+    assert!(
+        before["progress"]["step"].as_u64().unwrap() > 0,
+        "no checkpoint before the stop: {before}"
+    );
+    let done = wait_status(a, &id, &["succeeded", "failed"], Duration::from_secs(300));
+    assert_eq!(done["status"], "succeeded", "{done}");
+    // Claimed a second time after the restart, and resumed rather than restarted.
+    assert_eq!(done["attempt"], 2, "{done}");
+    let summary = get(a, &format!("/jobs/{id}/summary")).json();
+    assert_eq!(summary["steps"].as_array().unwrap().len(), steps);
+    // The second server computed only the steps after the checkpoint.
+    let metrics = String::from_utf8(get(a, "/metrics").body).unwrap();
+    let computed: usize = metrics
+        .lines()
+        .find_map(|l| l.strip_prefix("contact_sim_steps_total "))
+        .unwrap()
+        .parse()
+        .unwrap();
+    let resumed_at = before["progress"]["step"].as_u64().unwrap() as usize;
+    assert_eq!(
+        computed,
+        steps - resumed_at,
+        "resumed from step {resumed_at}"
+    );
+
+    // Same result as an uninterrupted run.
+    let p = contact_sim::scene::validate(&scene).unwrap();
+    let sim = contact_sim::run::run_to_end(p, Default::default()).unwrap();
+    let last = &summary["final"];
+    let w_v = contact_sim::fem::norms::strain_norm(&sim.mesh, &sim.geo, &sim.w);
+    assert!(
+        (last["w_V"].as_f64().unwrap() - w_v).abs() <= 1e-9 * w_v,
+        "{} vs {w_v}",
+        last["w_V"]
+    );
+    srv.stop();
+    std::fs::remove_dir_all(&dir).ok();
+}
