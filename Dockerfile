@@ -14,4 +14,6 @@ COPY --from=build /src/target/release/contact-sim /usr/local/bin/contact-sim
 USER contact
 WORKDIR /data
 ENTRYPOINT ["contact-sim"]
-CMD ["run", "--preset", "paper-exp3", "--out", "/data/paper-exp3"]
+EXPOSE 8080
+VOLUME ["/data"]
+CMD ["serve", "--addr", "0.0.0.0:8080", "--data-dir", "/data"]

@@ -70,12 +70,18 @@ pub struct ContactNode {
 pub struct StepFields {
     pub n: usize,
     pub t: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub u: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub w: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub zeta: Option<Vec<f64>>,
     /// Per triangle (σ_xx, σ_yy, σ_xy).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub sigma: Option<Vec<[f64; 3]>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub von_mises: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub contact: Option<Vec<ContactNode>>,
 }
 
