@@ -19,12 +19,15 @@ struct Server {
 
 impl Server {
     fn start(data_dir: &Path, workers: usize) -> Server {
-        let config = Config {
+        Server::start_with(Config {
             data_dir: data_dir.to_path_buf(),
             workers,
             max_nodes: 20_000,
             ..Config::default()
-        };
+        })
+    }
+
+    fn start_with(config: Config) -> Server {
         let (addr_tx, addr_rx) = std::sync::mpsc::channel();
         let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
         let thread = std::thread::spawn(move || {
@@ -558,6 +561,41 @@ fn restart_keeps_results_and_resumes_running_jobs_from_checkpoints() {
         (last["w_V"].as_f64().unwrap() - w_v).abs() <= 1e-9 * w_v,
         "{} vs {w_v}",
         last["w_V"]
+    );
+    srv.stop();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn full_queue_answers_503_with_retry_after() {
+    let dir = temp_dir("full");
+    // No workers: nothing leaves the queue.
+    let srv = Server::start_with(Config {
+        data_dir: dir.clone(),
+        workers: 0,
+        queue_capacity: 1,
+        ..Config::default()
+    });
+    let a = srv.addr;
+    assert_eq!(
+        post_json(
+            a,
+            "/jobs",
+            &json!({"preset": "paper-exp1", "overrides": {"h": "1/2"}})
+        )
+        .status,
+        202
+    );
+    let r = post_json(
+        a,
+        "/jobs",
+        &json!({"preset": "paper-exp1", "overrides": {"h": "1/4"}}),
+    );
+    assert_problem(&r, 503);
+    assert_eq!(r.header("retry-after"), Some("5"));
+    assert_problem(
+        &get(a, "/jobs/00000000-0000-0000-0000-000000000001/events"),
+        404,
     );
     srv.stop();
     std::fs::remove_dir_all(&dir).ok();

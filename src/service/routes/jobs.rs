@@ -472,7 +472,9 @@ pub async fn events(
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     let id = parse_id(&id)?;
-    // Subscribe before reading the record so no event between the two is lost.
+    // Unknown ids are refused before a channel is created for them; then subscribe before
+    // reading the record again, so no event between the two is lost.
+    load_job(&state, id).await?;
     let mut rx = state.rt.subscribe(id);
     let rec = load_job(&state, id).await?;
     let first = JobEvent {
