@@ -21,3 +21,5 @@ pub mod scene;
 pub mod service;
 pub mod solve;
 pub mod study;
+#[cfg(test)]
+mod test_rng;

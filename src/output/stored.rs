@@ -420,20 +420,18 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    /// Deterministic xorshift values (finite, varied exponents and signs).
-    struct Rng(u64);
+    use crate::test_rng::Rng;
 
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            self.0
-        }
+    /// Finite values with varied exponents and signs.
+    trait Values {
+        fn f64(&mut self) -> f64;
+        fn f64s(&mut self, n: usize) -> Vec<f64>;
+    }
 
+    impl Values for Rng {
         fn f64(&mut self) -> f64 {
             loop {
-                let v = f64::from_bits(self.next());
+                let v = f64::from_bits(self.next_u64());
                 if v.is_finite() {
                     return v;
                 }

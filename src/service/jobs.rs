@@ -55,6 +55,20 @@ pub struct JobEvent {
     pub eta_s: Option<f64>,
 }
 
+impl JobEvent {
+    /// The event describing a stored record (its persisted progress).
+    pub fn from_record(r: &JobRecord) -> JobEvent {
+        let eta_s = r.status.is_finished().then_some(0.0);
+        JobEvent {
+            status: r.status,
+            step: r.progress.step,
+            steps: r.progress.steps,
+            last_residual: r.progress.last_residual,
+            eta_s,
+        }
+    }
+}
+
 struct Live {
     progress: Progress,
     started: Instant,

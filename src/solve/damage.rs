@@ -254,15 +254,7 @@ mod tests {
         )
     }
 
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
+    use crate::test_rng::Rng;
 
     /// Independent check of the KKT conditions (not via `kkt_residual`).
     fn assert_kkt(h: &Csr, g: &[f64], z: &[f64]) {

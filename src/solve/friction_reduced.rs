@@ -216,16 +216,7 @@ fn newton_candidate(p: &Reduced, x: &[f64], g: &[f64]) -> Option<Vec<f64>> {
 mod tests {
     use super::*;
 
-    /// Deterministic pseudo-random numbers (xorshift) so failures reproduce.
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
+    use crate::test_rng::Rng;
 
     fn random_spd(rng: &mut Rng, m: usize, shift: f64) -> DMatrix<f64> {
         let a = DMatrix::from_fn(m, m, |_, _| rng.next() - 0.5);

@@ -477,13 +477,7 @@ pub async fn events(
     load_job(&state, id).await?;
     let mut rx = state.rt.subscribe(id);
     let rec = load_job(&state, id).await?;
-    let first = JobEvent {
-        status: rec.status,
-        step: rec.progress.step,
-        steps: rec.progress.steps,
-        last_residual: rec.progress.last_residual,
-        eta_s: None,
-    };
+    let first = JobEvent::from_record(&rec);
     let mut closing = state.closing.clone();
     let store = state.store().clone();
     let stream = async_stream(
@@ -512,7 +506,7 @@ pub async fn events(
                         let s = store.clone();
                         if let Ok(Ok(Some(r))) = tokio::task::spawn_blocking(move || s.get(id)).await {
                             if r.status.is_finished() {
-                                let ev = JobEvent { status: r.status, step: r.progress.step, steps: r.progress.steps, last_residual: r.progress.last_residual, eta_s: Some(0.0) };
+                                let ev = JobEvent::from_record(&r);
                                 let _ = tx.send(Ok(to_event(&ev))).await;
                                 return;
                             }
@@ -523,13 +517,7 @@ pub async fn events(
             // Channel closed: the job ended; report its final record.
             let s = store.clone();
             if let Ok(Ok(Some(r))) = tokio::task::spawn_blocking(move || s.get(id)).await {
-                let ev = JobEvent {
-                    status: r.status,
-                    step: r.progress.step,
-                    steps: r.progress.steps,
-                    last_residual: r.progress.last_residual,
-                    eta_s: Some(0.0),
-                };
+                let ev = JobEvent::from_record(&r);
                 let _ = tx.send(Ok(to_event(&ev))).await;
             }
         },
