@@ -506,13 +506,13 @@ fn restart_keeps_results_and_resumes_running_jobs_from_checkpoints() {
     wait_status(a, &quick_id, &["succeeded"], Duration::from_secs(60));
     let quick_summary = get(a, &format!("/jobs/{quick_id}/summary")).body;
 
-    let steps = 20_000;
+    let steps = 30_000;
     let scene = long_scene(steps);
     let long = post_json(a, "/jobs", &scene).json();
     let id = long["id"].as_str().unwrap().to_string();
     wait_status(a, &id, &["running"], Duration::from_secs(60));
-    // Let it pass at least one checkpoint (about once a second), then stop the server.
-    std::thread::sleep(Duration::from_millis(2500));
+    // Let it pass a checkpoint (about once a second), then stop the server mid-run.
+    std::thread::sleep(Duration::from_millis(1500));
     let at_stop = get(a, &format!("/jobs/{id}")).json();
     assert_eq!(
         at_stop["status"], "running",
