@@ -27,6 +27,9 @@ pub struct Reduced<'a> {
     pub b: &'a [f64],
     pub weights: &'a [f64],
     pub law: &'a FrictionLaw,
+    /// Force scale of the relative residual; None: ‖b‖_∞. The velocity step passes the
+    /// scale of its full load so both residuals are relative to the same quantity.
+    pub scale: Option<f64>,
 }
 
 impl Reduced<'_> {
@@ -55,7 +58,7 @@ impl Reduced<'_> {
     /// Scale of the problem's forces, for relative residuals.
     fn scale(&self) -> f64 {
         let b = self.b.iter().fold(0.0f64, |s, v| s.max(v.abs()));
-        b.max(f64::MIN_POSITIVE)
+        self.scale.unwrap_or(b).max(f64::MIN_POSITIVE)
     }
 
     /// Relative KKT residual: max over nodes of the violation of the stick/slip conditions
@@ -157,6 +160,17 @@ pub fn solve(
             .map(|i| prox(p.law, c * p.weights[i], x[i] - c * g[i]))
             .collect();
         let mut best_energy = p.energy(&best);
+        // The prox-gradient point identifies the stick/slip partition as it converges; a
+        // Newton step on that partition finishes exactly where the local prediction fails.
+        let slip: Vec<usize> = (0..m).filter(|&i| best[i] != 0.0).collect();
+        let sign: Vec<f64> = slip.iter().map(|&i| best[i].signum()).collect();
+        if let Some(t) = newton_on_partition(p, &best, &slip, &sign) {
+            let e = p.energy(&t);
+            if e < best_energy {
+                best = t;
+                best_energy = e;
+            }
+        }
         if let Some(t) = newton_candidate(p, x, &g) {
             let mut alpha = 1.0;
             for _ in 0..4 {
@@ -178,25 +192,31 @@ pub fn solve(
 /// One semismooth Newton step: predict stick/slip from the local force z_i = S_ii x_i − g_i,
 /// set stick DOFs to 0, and take a Newton step on the slip equations with the signs fixed.
 fn newton_candidate(p: &Reduced, x: &[f64], g: &[f64]) -> Option<Vec<f64>> {
-    let m = p.m();
     let mut slip = Vec::new();
     let mut sign = Vec::new();
-    for i in 0..m {
+    for i in 0..p.m() {
         let z = p.s[(i, i)] * x[i] - g[i];
         if z.abs() > p.weights[i] * p.law.mu(0.0) {
             slip.push(i);
             sign.push(z.signum());
         }
     }
-    let mut y = vec![0.0; m];
-    for &i in &slip {
+    newton_on_partition(p, x, &slip, &sign)
+}
+
+/// Newton step on the slip equations g_i + ω_i μ(|x_i|) s_i = 0 (i in `slip`, signs `sign`)
+/// from `x`, with every other DOF stuck at 0. For Tresca μ' = 0 and this is the exact
+/// solution for that partition.
+fn newton_on_partition(p: &Reduced, x: &[f64], slip: &[usize], sign: &[f64]) -> Option<Vec<f64>> {
+    let mut y = vec![0.0; p.m()];
+    for &i in slip {
         y[i] = x[i];
     }
     if slip.is_empty() {
         return Some(y);
     }
     // Residual of the slip equations at y (stick DOFs zeroed), and the Jacobian
-    // S_FF + diag(ω μ'(r)); for Tresca μ' = 0 and this is the exact solve.
+    // S_FF + diag(ω μ'(r)).
     let mut jac = p.s.clone();
     let mut rhs = Vec::with_capacity(slip.len());
     for (k, &i) in slip.iter().enumerate() {
@@ -205,7 +225,7 @@ fn newton_candidate(p: &Reduced, x: &[f64], g: &[f64]) -> Option<Vec<f64>> {
         rhs.push(-(si - p.b[i] + p.weights[i] * p.law.mu(r) * sign[k]));
         jac[(i, i)] += p.weights[i] * p.law.dmu(r);
     }
-    let delta = solve_principal(&jac, &slip, &rhs)?;
+    let delta = solve_principal(&jac, slip, &rhs)?;
     for (k, &i) in slip.iter().enumerate() {
         y[i] += delta[k];
     }
@@ -263,6 +283,7 @@ mod tests {
                 b: &b,
                 weights: &weights,
                 law: &law,
+                scale: None,
             };
             let mut x = vec![0.0; m];
             let rep = solve(&p, &mut x, &SolverSettings::default(), 0).unwrap();
@@ -304,6 +325,7 @@ mod tests {
                 b: &b,
                 weights: &weights,
                 law,
+                scale: None,
             };
             let mut x: Vec<f64> = (0..m).map(|_| rng.next() - 0.5).collect();
             let rep = solve(&p, &mut x, &SolverSettings::default(), 0).unwrap();
@@ -328,6 +350,7 @@ mod tests {
                 b: &b,
                 weights: &w,
                 law: &law,
+                scale: None,
             };
             let mut x = vec![0.3, -0.7];
             let rep = solve(&p, &mut x, &SolverSettings::default(), 0).unwrap();

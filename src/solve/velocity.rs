@@ -140,14 +140,22 @@ impl VelocityStep {
                 let mut x = std::mem::take(&mut self.x);
                 let law = self.law.clone();
                 let weights = std::mem::take(&mut self.weights);
+                // Same force scale as the full residual below, and half its tolerance: the
+                // recovery of the interior adds rounding only.
+                let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
+                let inner = SolverSettings {
+                    tolerance: 0.5 * settings.tolerance,
+                    ..*settings
+                };
                 let s = self.schur();
                 let p = Reduced {
                     s,
                     b: &b,
                     weights: &weights,
                     law: &law,
+                    scale: Some(scale),
                 };
-                let rep = friction_reduced::solve(&p, &mut x, settings, step);
+                let rep = friction_reduced::solve(&p, &mut x, &inner, step);
                 self.weights = weights;
                 iterations = rep?.iterations;
                 // w_I = K_II⁻¹ (f_I − K_IC x).
