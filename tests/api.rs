@@ -446,6 +446,10 @@ fn bad_input_gets_problem_json_naming_the_field() {
     assert_problem(&get(a, "/jobs/../../etc/passwd"), 404);
     assert_problem(&get(a, "/jobs/not-a-uuid/summary"), 404);
     assert_problem(&get(a, "/jobs?status=done"), 400);
+    assert!(assert_problem(&get(a, "/jobs?colour=red"), 400)["detail"]
+        .as_str()
+        .unwrap()
+        .contains("colour"));
     assert_problem(&get(a, "/nowhere"), 404);
     srv.stop();
     std::fs::remove_dir_all(&dir).ok();

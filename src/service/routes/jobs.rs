@@ -1,7 +1,7 @@
 //! /jobs: submit (validate, limit, deduplicate, enqueue), list, get (ETag, Retry-After),
 //! cancel, delete, and the Server-Sent Events progress stream.
 
-use super::{blocking, load_job, parse_id, rfc3339};
+use super::{blocking, load_job, only_params, parse_id, rfc3339};
 use crate::scene::{self, presets, Overrides};
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
@@ -336,13 +336,7 @@ pub async fn list(
     State(state): State<AppState>,
     Query(q): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
-    for k in q.keys() {
-        if !["status", "cursor", "limit"].contains(&k.as_str()) {
-            return Err(ApiError::bad_request(format!(
-                "unknown query parameter {k:?} (allowed: status, cursor, limit)"
-            )));
-        }
-    }
+    only_params(&q, &["status", "cursor", "limit"])?;
     let status = match q.get("status") {
         Some(s) => Some(JobStatus::parse(s).ok_or_else(|| {
             ApiError::bad_request(format!(

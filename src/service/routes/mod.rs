@@ -22,6 +22,20 @@ pub async fn load_job(state: &super::app::AppState, id: Uuid) -> Result<JobRecor
         .ok_or_else(|| ApiError::not_found(format!("no job with id {id}")))
 }
 
+/// Refuses query parameters other than `allowed` (a typo must not be silently ignored).
+pub fn only_params(
+    q: &std::collections::HashMap<String, String>,
+    allowed: &[&str],
+) -> Result<(), ApiError> {
+    match q.keys().find(|k| !allowed.contains(&k.as_str())) {
+        Some(k) => Err(ApiError::bad_request(format!(
+            "unknown query parameter {k:?} (allowed: {})",
+            allowed.join(", ")
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// Runs blocking store/file work off the async runtime.
 pub async fn blocking<T: Send + 'static>(
     f: impl FnOnce() -> Result<T, ApiError> + Send + 'static,

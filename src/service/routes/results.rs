@@ -2,7 +2,7 @@
 //! mesh, fields as JSON, VTK (.vtu per step, .pvd collection) and one tar archive. Bodies are
 //! streamed from the blocking pool.
 
-use super::{blocking, load_job, parse_id};
+use super::{blocking, load_job, only_params, parse_id};
 use crate::mesh::Mesh;
 use crate::output::fields::MeshJson;
 use crate::output::stored::decode_step;
@@ -147,13 +147,7 @@ pub async fn fields(
     Path(id): Path<String>,
     Query(q): Query<HashMap<String, String>>,
 ) -> Result<Response, ApiError> {
-    for k in q.keys() {
-        if !["step", "fields", "mesh"].contains(&k.as_str()) {
-            return Err(ApiError::bad_request(format!(
-                "unknown query parameter {k:?} (allowed: step, fields, mesh)"
-            )));
-        }
-    }
+    only_params(&q, &["step", "fields", "mesh"])?;
     let wanted: Vec<String> = match q.get("fields") {
         Some(list) => list
             .split(',')
