@@ -174,9 +174,10 @@ pub async fn fields(
     let rec = succeeded(&state, &id).await?;
     let spec = q.get("step").cloned().unwrap_or_else(|| "last".into());
     let st = state.clone();
+    let job = rec.id;
     let mut f = blocking(move || {
-        let n = pick_step(&stored_steps(&st, rec.id)?, &spec)?;
-        load_step(&st, rec.id, n)
+        let n = pick_step(&stored_steps(&st, job)?, &spec)?;
+        load_step(&st, job, n)
     })
     .await?;
     let keep = |name: &str| wanted.iter().any(|w| w == name);
@@ -198,7 +199,6 @@ pub async fn fields(
     if !keep("contact") {
         f.contact = None
     }
-    let rec = load_job(&state, parse_id(&id)?).await?;
     Ok(blocking_body("application/json", move |w| {
         let mesh = if with_mesh {
             Some(
