@@ -75,14 +75,22 @@ enum Command {
     Presets,
     /// Print a preset as a scene file.
     Preset { name: String },
-    /// Convergence study presets: paper-table-1 (k = 1/128, h = 1/2 … 1/32) and
-    /// paper-table-2 (h = 1/128, k = 1/2 … 1/32), reference h = k = 1/128.
+    /// Convergence studies: study files (JSON, `{"study": {...}}` or the study object) and/or
+    /// presets (paper-table-1, paper-table-2). Studies of one scene share their reference run.
+    /// Prints the result JSON (an array for several studies) or the paper-style tables.
     Study {
+        files: Vec<PathBuf>,
         #[arg(long)]
-        preset: String,
+        preset: Vec<String>,
         /// json (default) or text (the paper's table layout).
         #[arg(long, default_value = "json")]
         format: String,
+        /// Runs computed at once (default: number of cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Also write NAME.json, NAME.txt and NAME.svg (the report plots) per study here.
+        #[arg(long = "report-dir")]
+        report_dir: Option<PathBuf>,
     },
     /// Speed figures: paper-convergence at h = k = 1/16 … 1/128 (and more with --levels).
     Bench {
@@ -176,7 +184,13 @@ fn main() -> ExitCode {
                 ),
             ),
         },
-        Command::Study { preset, format } => cmd_study(&preset, &format),
+        Command::Study {
+            files,
+            preset,
+            format,
+            threads,
+            report_dir,
+        } => cmd_study(&files, &preset, &format, threads, report_dir.as_deref()),
         Command::Bench { levels, repeat } => match bench::run(&levels, repeat.max(1)) {
             Ok(report) => {
                 eprintln!("{}", report.table());
@@ -312,34 +326,105 @@ fn cmd_run(mut doc: Value, overrides: &Overrides, out: Option<&Path>, tol: f64) 
     }
 }
 
-fn cmd_study(preset: &str, format: &str) -> ExitCode {
-    let ladder = [2, 4, 8, 16, 32];
-    let (levels, vary): (Vec<(usize, usize)>, &str) = match preset {
-        "paper-table-1" => (ladder.iter().map(|&n| (n, 128)).collect(), "h"),
-        "paper-table-2" => (ladder.iter().map(|&n| (128, n)).collect(), "k"),
-        _ => {
-            return fail(
-                2,
-                &format!("unknown study preset {preset:?}; known: paper-table-1, paper-table-2"),
-            )
-        }
-    };
-    let doc = presets::get("paper-convergence").expect("preset exists");
-    let base = match scene::validate(&doc) {
-        Ok(p) => p,
-        Err(e) => return fail(1, &e.to_string()),
-    };
-    match contact_sim::study::run_ladder(&base, &levels, (128, 128)) {
-        Ok(result) => {
-            if format == "text" {
-                print!("{}", result.text_table(vary));
-            } else {
-                println!("{}", serde_json::to_string_pretty(&result).expect("JSON"));
-            }
-            ExitCode::SUCCESS
-        }
-        Err(e) => fail(1, &e.to_string()),
+fn cmd_study(
+    files: &[PathBuf],
+    presets: &[String],
+    format: &str,
+    threads: Option<usize>,
+    report_dir: Option<&Path>,
+) -> ExitCode {
+    use contact_sim::study;
+    if format != "json" && format != "text" {
+        return fail(2, &format!("unknown --format {format:?} (json or text)"));
     }
+    if files.is_empty() && presets.is_empty() {
+        return fail(
+            2,
+            "give study files and/or --preset NAME (paper-table-1, paper-table-2)",
+        );
+    }
+    let mut docs: Vec<(String, Value)> = Vec::new();
+    for f in files {
+        let text = match std::fs::read_to_string(f) {
+            Ok(t) => t,
+            Err(e) => return fail(2, &format!("cannot read {}: {e}", f.display())),
+        };
+        match serde_json::from_str::<Value>(&text) {
+            Ok(mut v) => {
+                // Accept the request body form too.
+                if let Some(inner) = v.get_mut("study") {
+                    v = inner.take();
+                }
+                docs.push((f.display().to_string(), v));
+            }
+            Err(e) => return fail(2, &format!("{} is not JSON: {e}", f.display())),
+        }
+    }
+    for p in presets {
+        docs.push((p.clone(), serde_json::json!({ "preset": p })));
+    }
+    let mut plans = Vec::new();
+    for (origin, doc) in &docs {
+        match study::parse(doc, "") {
+            Ok((plan, _)) => plans.push(plan),
+            Err(e) => return fail(2, &format!("{origin}: {e}")),
+        }
+    }
+    let cache = study::ReferenceCache::new(4);
+    let mut exec = study::Execution::default();
+    if let Some(t) = threads {
+        exec.threads = t.max(1);
+    }
+    let mut results = Vec::new();
+    for plan in &plans {
+        match study::run(plan, &cache, exec, &|_, _| ControlFlow::Continue(())) {
+            Ok(r) => results.push(r),
+            Err(e) => return fail(1, &format!("{}: {e}", plan.name)),
+        }
+    }
+    if let Some(dir) = report_dir {
+        let write = || -> std::io::Result<()> {
+            std::fs::create_dir_all(dir)?;
+            for r in &results {
+                let stem: String = r
+                    .name
+                    .chars()
+                    .map(|c| {
+                        if c.is_ascii_alphanumeric() || c == '-' {
+                            c
+                        } else {
+                            '_'
+                        }
+                    })
+                    .collect();
+                let json = serde_json::to_string_pretty(r).expect("JSON");
+                std::fs::write(dir.join(format!("{stem}.json")), json)?;
+                std::fs::write(dir.join(format!("{stem}.txt")), r.text_table())?;
+                let svg = contact_sim::output::report_svg::study_report(r);
+                std::fs::write(dir.join(format!("{stem}.svg")), svg)?;
+            }
+            Ok(())
+        };
+        if let Err(e) = write() {
+            return fail(
+                1,
+                &format!("cannot write the reports to {}: {e}", dir.display()),
+            );
+        }
+    }
+    if format == "text" {
+        for r in &results {
+            println!("{}", r.text_table());
+        }
+    } else if results.len() == 1 {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&results[0]).expect("JSON")
+        );
+    } else {
+        println!("{}", serde_json::to_string_pretty(&results).expect("JSON"));
+    }
+    ExitCode::SUCCESS
 }
 
 fn fail(code: u8, msg: &str) -> ExitCode {

@@ -209,6 +209,9 @@ pub struct Problem {
     /// Initial displacement u_0(x, y).
     pub u0: VectorField,
     pub output: OutputSpec,
+    /// Also run (2h, 2k) (and (4h, 4k)) to estimate the discretisation error
+    /// ([`crate::study::estimate`]).
+    pub error_estimate: bool,
 }
 
 impl Problem {

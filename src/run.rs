@@ -5,6 +5,7 @@ use crate::output::Summary;
 use crate::problem::Problem;
 use crate::solve::stepper::{Simulation, StepReport};
 use crate::solve::{SolveError, SolverSettings};
+use crate::study::estimate::ErrorEstimator;
 use std::ops::ControlFlow;
 use std::time::Instant;
 
@@ -25,16 +26,25 @@ pub fn run(
     mut each: impl FnMut(&Simulation, &StepReport) -> ControlFlow<()>,
 ) -> Result<Summary, RunError> {
     let mut sim = Simulation::new(problem, settings)?;
+    let mut estimator = match sim.problem.error_estimate {
+        true => Some(ErrorEstimator::new(&sim, settings)?),
+        false => None,
+    };
     let start = Instant::now();
     let mut reports = Vec::with_capacity(sim.problem.steps);
     while !sim.finished() {
         let r = sim.step()?;
+        if let Some(e) = estimator.as_mut() {
+            e.after_step(&sim, sim.problem.output.stores(r.n, sim.problem.steps))?;
+        }
         if each(&sim, &r).is_break() {
             return Err(RunError::Cancelled(r.n));
         }
         reports.push(r);
     }
-    Ok(Summary::new(&sim, reports, start.elapsed().as_secs_f64()))
+    let mut summary = Summary::new(&sim, reports, start.elapsed().as_secs_f64());
+    summary.error_estimate = estimator.map(ErrorEstimator::finish);
+    Ok(summary)
 }
 
 /// Runs `problem` to t = T and returns the simulation in its final state (no callback, no

@@ -604,3 +604,129 @@ fn full_queue_answers_503_with_retry_after() {
     srv.stop();
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Study jobs: submit, table as JSON and text, report SVG, no fields, the shared reference,
+/// refusal of non-nested levels; an error estimate on a simulation.
+#[test]
+fn study_jobs_and_error_estimates_over_http() {
+    let dir = temp_dir("study");
+    let server = Server::start(&dir, 2);
+    let a = server.addr;
+    let study = |k: Value| {
+        json!({"study": {"scene": "paper-convergence", "h": ["1/2", "1/4", "1/8"], "k": k,
+                         "reference": {"h": "1/16", "k": "1/16"}}})
+    };
+    let r = post_json(a, "/jobs", &study(json!("1/16")));
+    assert_eq!(r.status, 202, "{}", String::from_utf8_lossy(&r.body));
+    let job = r.json();
+    assert_eq!(job["kind"], "study");
+    let id = job["id"].as_str().unwrap().to_string();
+    let done = wait_status(a, &id, &["succeeded", "failed"], Duration::from_secs(60));
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert_eq!(done["links"]["report"], format!("/jobs/{id}/report.svg"));
+    let s = get(a, &format!("/jobs/{id}/summary")).json();
+    assert_eq!(s["kind"], "study");
+    assert_eq!(s["vary"], "h");
+    let rows = s["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    assert!(rows[0]["order_w"].is_null() && rows[1]["order_w"].is_number());
+    for (row, h) in rows.iter().zip([0.5, 0.25, 0.125]) {
+        assert_eq!(row["h"], h);
+        assert!(row["err_w"].as_f64().unwrap() > 0.0);
+        // The maximum over time nodes is at least the error at T.
+        assert!(row["err_w_max"].as_f64().unwrap() >= row["err_w"].as_f64().unwrap() * 0.999);
+        assert_eq!(row["compared_nodes"], 16);
+        assert!(row["worst_residual"].as_f64().unwrap() <= 1e-10);
+    }
+    assert_eq!(s["reference"]["cached"], false);
+    let text = get(a, &format!("/jobs/{id}/summary?format=text"));
+    assert_eq!(text.status, 200);
+    assert!(text
+        .header("content-type")
+        .unwrap()
+        .starts_with("text/plain"));
+    let text = String::from_utf8(text.body).unwrap();
+    assert!(text.contains("err_zeta") && text.contains("1/8"), "{text}");
+    let svg = get(a, &format!("/jobs/{id}/report.svg"));
+    assert_eq!(svg.header("content-type"), Some("image/svg+xml"));
+    let svg = String::from_utf8(svg.body).unwrap();
+    assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+    assert_eq!(
+        svg.matches("<circle").count(),
+        2 * 3 + 1,
+        "w markers in both panels + legend"
+    );
+    assert_problem(&get(a, &format!("/jobs/{id}/fields")), 404);
+    assert_problem(&get(a, &format!("/jobs/{id}/archive.tar")), 404);
+
+    // A second study of the same scene and reference reuses the reference run.
+    let r = post_json(a, "/jobs", &study(json!(["1/2", "1/4", "1/8"])));
+    assert_eq!(r.status, 202);
+    let id2 = r.json()["id"].as_str().unwrap().to_string();
+    wait_status(a, &id2, &["succeeded"], Duration::from_secs(60));
+    let s2 = get(a, &format!("/jobs/{id2}/summary")).json();
+    assert_eq!(s2["vary"], "hk");
+    assert_eq!(s2["reference"]["cached"], true);
+    assert_eq!(s2["reference"]["w_V"], s["reference"]["w_V"]);
+    // The same study again is answered from the store.
+    let again = post_json(a, "/jobs", &study(json!("1/16")));
+    assert_eq!(
+        (again.status, again.json()["id"].as_str()),
+        (200, Some(id.as_str()))
+    );
+
+    // Non-nested levels and bad entries are refused at the entry.
+    let p = assert_problem(
+        &post_json(a, "/jobs", &study(json!(["1/3", "1/16", "1/16"]))),
+        422,
+    );
+    assert_eq!(p["errors"][0]["pointer"], "/study/k/0", "{p}");
+    let mut bad = study(json!("1/16"));
+    bad["study"]["h"][1] = json!("1/5");
+    let p = assert_problem(&post_json(a, "/jobs", &bad), 422);
+    assert_eq!(p["errors"][0]["pointer"], "/study/h/1", "{p}");
+    assert!(p["errors"][0]["message"]
+        .as_str()
+        .unwrap()
+        .contains("not nested"));
+    let p = assert_problem(
+        &post_json(a, "/jobs", &json!({"study": {"preset": "paper-table-9"}})),
+        422,
+    );
+    assert_eq!(p["errors"][0]["pointer"], "/study/preset");
+
+    // A simulation with an error bar; format=text and report.svg are for studies only.
+    let mut scene = long_scene(16);
+    scene["mesh"]["h"] = json!("1/8");
+    scene["error_estimate"] = json!(true);
+    let r = post_json(a, "/jobs", &scene);
+    assert_eq!(r.status, 202, "{}", String::from_utf8_lossy(&r.body));
+    let sid = r.json()["id"].as_str().unwrap().to_string();
+    wait_status(a, &sid, &["succeeded"], Duration::from_secs(60));
+    let sum = get(a, &format!("/jobs/{sid}/summary")).json();
+    let est = &sum["error_estimate"];
+    assert_eq!(est["coarse_h"], 0.25);
+    assert_eq!(est["check"], true);
+    let fin = &est["final"];
+    assert!(
+        fin["w"].as_f64().unwrap() > 0.0 && fin["zeta"].as_f64().unwrap() > 0.0,
+        "{est}"
+    );
+    assert!(fin["observed_order_w"].is_number(), "{est}");
+    // Stored steps 4, 8, 12, 16 are coarse time nodes: each gets an estimate.
+    let ns: Vec<u64> = est["steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["n"].as_u64().unwrap())
+        .collect();
+    assert_eq!(ns, [4, 8, 12, 16]);
+    assert!(sum["stats"]["steps_near_iteration_limit"].is_number());
+    assert_problem(&get(a, &format!("/jobs/{sid}/summary?format=text")), 400);
+    assert_problem(&get(a, &format!("/jobs/{sid}/report.svg")), 404);
+    scene["mesh"]["h"] = json!("1/7");
+    let p = assert_problem(&post_json(a, "/jobs", &scene), 422);
+    assert_eq!(p["errors"][0]["pointer"], "/error_estimate", "{p}");
+    server.stop();
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -123,3 +123,50 @@ fn readme_example_scene_validates() {
     let p = contact_sim::scene::validate(&doc).unwrap();
     assert_eq!((p.cells_per_unit, p.steps, p.boundary.len()), (32, 32, 4));
 }
+
+#[test]
+fn study_file_prints_the_table_as_json_or_text() {
+    let dir = std::env::temp_dir().join(format!("contact-sim-cli-study-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("study.json");
+    std::fs::write(
+        &file,
+        r#"{"study": {"scene": "paper-convergence", "h": ["1/2", "1/4"], "k": "1/8",
+            "reference": {"h": "1/8", "k": "1/8"}}}"#,
+    )
+    .unwrap();
+    let out = bin().arg("study").arg(&file).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["reference"]["h"], 0.125);
+    assert_eq!(v["rows"].as_array().unwrap().len(), 2);
+    assert!(v["rows"][0]["order_w"].is_null() && v["rows"][1]["order_w"].is_number());
+    let reports = dir.join("reports");
+    let out = bin()
+        .args(["study", "--format", "text", "--report-dir"])
+        .arg(&reports)
+        .arg(&file)
+        .output()
+        .unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("err_w") && text.contains("1/4"), "{text}");
+    let svg = std::fs::read_dir(&reports)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .find(|e| e.path().extension().is_some_and(|x| x == "svg"));
+    assert!(svg.is_some(), "the report directory holds the SVG");
+    std::fs::write(
+        &file,
+        r#"{"scene": "paper-convergence", "h": ["1/3"], "k": "1/8", "reference": {"h": "1/8", "k": "1/8"}}"#,
+    )
+    .unwrap();
+    let out = bin().arg("study").arg(&file).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/h/0") && err.contains("not nested"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

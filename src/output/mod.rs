@@ -2,6 +2,7 @@
 //! timings, smallness estimate) and the per-step fields.
 
 pub mod fields;
+pub mod report_svg;
 pub mod stored;
 pub mod summary;
 pub mod vtk;

@@ -6,6 +6,7 @@ use crate::problem::{FrictionLaw, MeshPattern, Problem};
 use crate::solve::smallness::SmallnessReport;
 use crate::solve::stepper::{Simulation, StepReport};
 use crate::solve::SolverSettings;
+use crate::study::estimate::ErrorEstimate;
 use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize)]
@@ -59,6 +60,8 @@ pub struct SolverStats {
     pub damage_refactorizations: usize,
     /// Steps in which some Γ3 node slipped (the non-smooth solver was exercised).
     pub steps_with_slip: usize,
+    /// Steps in which a sub-problem solver used ≥ 80 % of its iteration limit.
+    pub steps_near_iteration_limit: usize,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -82,6 +85,9 @@ pub struct Summary {
     pub stats: SolverStats,
     pub timing: Timing,
     pub warnings: Vec<String>,
+    /// Estimated discretisation error (scenes with `error_estimate: true`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error_estimate: Option<ErrorEstimate>,
     pub steps: Vec<StepReport>,
 }
 
@@ -103,6 +109,11 @@ impl Summary {
                 stats.damage_max_residual = stats.damage_max_residual.max(d.residual);
             }
             stats.steps_with_slip += (s.slip_nodes > 0) as usize;
+            let near = |r: Option<crate::solve::SolverReport>| {
+                r.is_some_and(|r| sim.settings.near_iteration_limit(r.iterations))
+            };
+            stats.steps_near_iteration_limit +=
+                usize::from(near(Some(s.velocity)) || near(s.damage));
         }
         let mut warnings = Vec::new();
         if !sim.smallness.holds {
@@ -167,6 +178,7 @@ impl Summary {
                 },
             },
             warnings,
+            error_estimate: None,
             steps,
         }
     }

@@ -17,9 +17,12 @@
 //! initial damage in [0, 1]. Validation never panics, whatever the input.
 
 mod boundary;
+mod canonical;
 pub mod expr;
 pub mod presets;
 mod read;
+
+pub use canonical::{canonical, content_hash, hex_sha256};
 
 use std::fmt;
 
@@ -186,6 +189,7 @@ const TOP_FIELDS: &[&str] = &[
     "damage",
     "initial",
     "output",
+    "error_estimate",
 ];
 const DOMAIN_FIELDS: &[&str] = &["width", "height", "rectangle"];
 const RECTANGLE_FIELDS: &[&str] = &["width", "height"];
@@ -341,6 +345,17 @@ fn scene(cx: &mut Cx, doc: &Value) -> Option<Problem> {
         }),
         Some(v) => output(cx, v, "/output"),
     };
+    let error_estimate = match top.get("error_estimate") {
+        None => Some(false),
+        Some(Value::Bool(b)) => Some(*b),
+        Some(v) => {
+            cx.err(
+                "/error_estimate",
+                format!("error_estimate must be true or false, got {}", describe(v)),
+            );
+            None
+        }
+    };
 
     if let Some((width, height)) = dims {
         let t_end = time.map(|(t, _)| t);
@@ -362,14 +377,26 @@ fn scene(cx: &mut Cx, doc: &Value) -> Option<Problem> {
         Some(damage),
         Some(u0),
         Some(output),
+        Some(error_estimate),
     ) = (
-        name, dims, time, mesh, boundary, body_force, material, friction, smallness, damage, u0,
+        name,
+        dims,
+        time,
+        mesh,
+        boundary,
+        body_force,
+        material,
+        friction,
+        smallness,
+        damage,
+        u0,
         output,
+        error_estimate,
     )
     else {
         return None;
     };
-    Some(Problem {
+    let problem = Problem {
         name,
         width,
         height,
@@ -385,7 +412,15 @@ fn scene(cx: &mut Cx, doc: &Value) -> Option<Problem> {
         damage,
         u0,
         output,
-    })
+        error_estimate,
+    };
+    if problem.error_estimate {
+        if let Some(why) = crate::study::estimate::unsupported(&problem) {
+            cx.err("/error_estimate", format!("an error estimate {why}"));
+            return None;
+        }
+    }
+    Some(problem)
 }
 
 fn scene_name(cx: &mut Cx, v: &Value, ptr: &str) -> Option<String> {

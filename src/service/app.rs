@@ -42,6 +42,7 @@ pub fn app(state: AppState) -> Router {
         .route("/jobs/{id}/fields/{file}", get(results::vtu))
         .route("/jobs/{id}/result.pvd", get(results::pvd))
         .route("/jobs/{id}/archive.tar", get(results::archive))
+        .route("/jobs/{id}/report.svg", get(results::report))
         .route("/presets", get(misc::presets))
         .route("/presets/{name}", get(misc::preset))
         .route("/healthz", get(misc::healthz))

@@ -15,8 +15,11 @@ use crate::output::Summary;
 use crate::scene;
 use crate::solve::stepper::{Simulation, StepReport};
 use crate::solve::{SolveError, SolverSettings};
+use crate::study::estimate::{ErrorEstimator, EstimateRow};
+use crate::study::{self, ReferenceCache, StudyError};
 use serde::Serialize;
 use std::collections::HashMap;
+use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
@@ -29,9 +32,22 @@ const LEASE_S: f64 = 30.0;
 /// A job is attempted at most this often (dead-letter after that).
 const MAX_ATTEMPTS: u32 = 3;
 const CHECKPOINT_EVERY: Duration = Duration::from_secs(1);
+/// Reference runs of studies kept in memory (an h = k = 1/128 one holds about 50 MB).
+const REFERENCES_KEPT: usize = 2;
 /// File names inside a job's result directory.
 pub const SUMMARY_FILE: &str = "summary.json";
+/// Studies only: the paper-style table and the report plots.
+pub const TABLE_FILE: &str = "summary.txt";
+pub const REPORT_FILE: &str = "report.svg";
 const REPORTS_FILE: &str = "reports.json";
+/// Error-estimate rows so far (simulations with `error_estimate`), saved with the reports.
+const ESTIMATES_FILE: &str = "estimates.json";
+
+/// A stored job document is a study when it has a top-level `study` object (the scene of a
+/// simulation cannot: `study` is not a scene field).
+pub fn is_study(doc: &serde_json::Value) -> bool {
+    doc.get("study").is_some()
+}
 
 pub fn step_file(n: usize) -> String {
     format!("step_{n:06}.bin")
@@ -89,6 +105,8 @@ pub struct Runtime {
     /// Time steps computed since start (metrics).
     pub steps_done: AtomicU64,
     pub running: AtomicUsize,
+    /// Reference runs shared by studies of the same scene and resolution.
+    pub references: ReferenceCache,
 }
 
 enum Outcome {
@@ -112,6 +130,7 @@ impl Runtime {
             workers: Mutex::new(Vec::new()),
             steps_done: AtomicU64::new(0),
             running: AtomicUsize::new(0),
+            references: ReferenceCache::new(REFERENCES_KEPT),
         });
         let mut handles = Vec::new();
         for i in 0..rt.config.workers {
@@ -213,7 +232,11 @@ impl Runtime {
             },
         );
         self.running.fetch_add(1, Ordering::SeqCst);
-        let outcome = self.execute(&job, worker, &cancel);
+        let outcome = if is_study(&job.scene) {
+            self.execute_study(&job, worker, &cancel)
+        } else {
+            self.execute(&job, worker, &cancel)
+        };
         let final_status = match outcome {
             Ok(Outcome::Succeeded) => Some((JobStatus::Succeeded, None)),
             Ok(Outcome::Cancelled) => Some((JobStatus::Cancelled, None)),
@@ -258,14 +281,22 @@ impl Runtime {
             .map_err(|e| problem_json(500, "stored scene no longer validates", &e.to_string()))?;
         let steps = problem.steps;
         let output = problem.output;
-        let mut sim =
-            Simulation::new(problem, SolverSettings::default()).map_err(|e| solve_problem(&e))?;
+        let settings = SolverSettings::default();
+        let mut sim = Simulation::new(problem, settings).map_err(|e| solve_problem(&e))?;
+        let mut estimator = match sim.problem.error_estimate {
+            true => Some(ErrorEstimator::new(&sim, settings).map_err(|e| solve_problem(&e))?),
+            false => None,
+        };
         let mut reports: Vec<StepReport> = Vec::new();
-        if let Some(resumed) = self
+        if let Some((resumed, rows)) = self
             .resume(id, &mut sim)
             .map_err(|e| problem_json(500, "checkpoint unreadable", &e))?
         {
             reports = resumed;
+            if let Some(e) = estimator.as_mut() {
+                e.catch_up(sim.state.step, rows)
+                    .map_err(|e| solve_problem(&e))?;
+            }
         }
         let solve_start = Instant::now();
         let mut last_checkpoint = Instant::now();
@@ -275,11 +306,15 @@ impl Runtime {
                 return Ok(Outcome::Cancelled);
             }
             if self.shutdown.load(Ordering::SeqCst) {
-                self.checkpoint(id, &sim, &reports)
+                self.checkpoint(id, &sim, &reports, estimator.as_ref())
                     .map_err(|e| problem_json(500, "checkpoint failed", &e.to_string()))?;
                 return Ok(Outcome::Interrupted);
             }
             let r = sim.step().map_err(|e| solve_problem(&e))?;
+            if let Some(e) = estimator.as_mut() {
+                e.after_step(&sim, output.stores(r.n, steps))
+                    .map_err(|e| solve_problem(&e))?;
+            }
             if output.stores(r.n, steps) {
                 self.results
                     .write_atomic(id, &step_file(r.n), &encode_step(&sim.fields()))
@@ -315,7 +350,7 @@ impl Runtime {
             );
             if last_checkpoint.elapsed() >= CHECKPOINT_EVERY && !sim.finished() {
                 last_checkpoint = Instant::now();
-                self.checkpoint(id, &sim, &reports)
+                self.checkpoint(id, &sim, &reports, estimator.as_ref())
                     .map_err(|e| problem_json(500, "checkpoint failed", &e.to_string()))?;
                 match self.store.heartbeat(id, worker, LEASE_S) {
                     Ok(true) => {}
@@ -332,12 +367,103 @@ impl Runtime {
                 }
             }
         }
-        let summary = Summary::new(&sim, reports, solve_start.elapsed().as_secs_f64());
+        let mut summary = Summary::new(&sim, reports, solve_start.elapsed().as_secs_f64());
+        summary.error_estimate = estimator.map(ErrorEstimator::finish);
         let text = serde_json::to_vec_pretty(&summary).expect("summary serialises");
         self.results
             .write_atomic(id, SUMMARY_FILE, &text)
             .map_err(io)?;
         Ok(Outcome::Succeeded)
+    }
+
+    /// A convergence study: no per-step checkpoints (a resumed study starts over; its
+    /// reference may still be cached), progress over all runs' steps, the lease renewed
+    /// about once a second from the computing threads.
+    fn execute_study(
+        &self,
+        job: &JobRecord,
+        worker: &str,
+        cancel: &AtomicBool,
+    ) -> Result<Outcome, serde_json::Value> {
+        let id = job.id;
+        let (plan, _) = study::parse(&job.scene["study"], "/study")
+            .map_err(|e| problem_json(500, "stored study no longer validates", &e.to_string()))?;
+        let last_beat = Mutex::new(Instant::now());
+        let lost_lease = AtomicBool::new(false);
+        let progress = |done: usize, total: usize| {
+            if cancel.load(Ordering::SeqCst) || self.shutdown.load(Ordering::SeqCst) {
+                return ControlFlow::Break(());
+            }
+            self.steps_done.fetch_add(1, Ordering::Relaxed);
+            let p = Progress {
+                step: done,
+                steps: total,
+                last_residual: None,
+            };
+            let eta_s = {
+                let mut live = self.live.lock().unwrap();
+                live.get_mut(&id).and_then(|l| {
+                    l.progress = p;
+                    eta(l)
+                })
+            };
+            self.publish(
+                id,
+                JobEvent {
+                    status: JobStatus::Running,
+                    step: done,
+                    steps: total,
+                    last_residual: None,
+                    eta_s,
+                },
+            );
+            let mut beat = last_beat.lock().unwrap();
+            if beat.elapsed() >= CHECKPOINT_EVERY {
+                *beat = Instant::now();
+                let _ = self.store.set_progress(id, p);
+                if let Ok(false) = self.store.heartbeat(id, worker, LEASE_S) {
+                    lost_lease.store(true, Ordering::SeqCst);
+                    return ControlFlow::Break(());
+                }
+            }
+            ControlFlow::Continue(())
+        };
+        let exec = study::Execution {
+            threads: self.config.study_threads.max(1),
+            ..Default::default()
+        };
+        match study::run(&plan, &self.references, exec, &progress) {
+            Ok(result) => {
+                let io =
+                    |e: std::io::Error| problem_json(500, "cannot write results", &e.to_string());
+                let json = serde_json::to_vec_pretty(&result).expect("study result serialises");
+                self.results
+                    .write_atomic(id, TABLE_FILE, result.text_table().as_bytes())
+                    .map_err(io)?;
+                let svg = crate::output::report_svg::study_report(&result);
+                self.results
+                    .write_atomic(id, REPORT_FILE, svg.as_bytes())
+                    .map_err(io)?;
+                // The summary last: its presence means the result is complete.
+                self.results
+                    .write_atomic(id, SUMMARY_FILE, &json)
+                    .map_err(io)?;
+                Ok(Outcome::Succeeded)
+            }
+            Err(StudyError::Cancelled) => {
+                if cancel.load(Ordering::SeqCst) {
+                    return Ok(Outcome::Cancelled);
+                }
+                let rec = self.store.get(id).ok().flatten();
+                Ok(if rec.is_some_and(|r| r.cancel_requested) {
+                    Outcome::Cancelled
+                } else {
+                    Outcome::Interrupted
+                })
+            }
+            Err(StudyError::Run(crate::run::RunError::Solve(e))) => Err(solve_problem(&e)),
+            Err(e) => Err(problem_json(500, "study failed", &e.to_string())),
+        }
     }
 
     /// Saves the per-step reports, then (u, ζ, step) in the store. A crash between the two
@@ -347,9 +473,14 @@ impl Runtime {
         id: Uuid,
         sim: &Simulation,
         reports: &[StepReport],
+        estimator: Option<&ErrorEstimator>,
     ) -> Result<(), StoreError> {
         let bytes = serde_json::to_vec(reports).expect("reports serialise");
         self.results.write_atomic(id, REPORTS_FILE, &bytes)?;
+        if let Some(e) = estimator {
+            let bytes = serde_json::to_vec(&e.rows).expect("estimates serialise");
+            self.results.write_atomic(id, ESTIMATES_FILE, &bytes)?;
+        }
         self.store
             .checkpoint(id, sim.state.step, &encode_state(&sim.state))?;
         self.store.set_progress(
@@ -362,8 +493,9 @@ impl Runtime {
         )
     }
 
-    /// Restores the last checkpoint, if any; returns the reports up to it.
-    fn resume(&self, id: Uuid, sim: &mut Simulation) -> Result<Option<Vec<StepReport>>, String> {
+    /// Restores the last checkpoint, if any; returns the reports and error-estimate rows up
+    /// to it.
+    fn resume(&self, id: Uuid, sim: &mut Simulation) -> Result<Option<Resumed>, String> {
         let Some((step, bytes)) = self.store.load_checkpoint(id).map_err(|e| e.to_string())? else {
             return Ok(None);
         };
@@ -386,10 +518,22 @@ impl Runtime {
         }
         let mut reports = reports;
         reports.truncate(step);
+        let mut rows: Vec<EstimateRow> = match self
+            .results
+            .read(id, ESTIMATES_FILE)
+            .map_err(|e| e.to_string())?
+        {
+            Some(b) => serde_json::from_slice(&b).map_err(|e| e.to_string())?,
+            None => Vec::new(),
+        };
+        rows.retain(|r| r.n <= step);
         sim.restore(state);
-        Ok(Some(reports))
+        Ok(Some((reports, rows)))
     }
 }
+
+/// Per-step reports and error-estimate rows restored from a checkpoint.
+type Resumed = (Vec<StepReport>, Vec<EstimateRow>);
 
 fn eta(l: &Live) -> Option<f64> {
     let done = l.progress.step.saturating_sub(l.first_step);

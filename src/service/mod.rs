@@ -26,6 +26,8 @@ pub struct Config {
     pub max_stored_bytes: u64,
     /// Request body limit in bytes.
     pub max_body_bytes: usize,
+    /// Runs of one study computed at the same time (its reference and its levels).
+    pub study_threads: usize,
 }
 
 impl Default for Config {
@@ -39,6 +41,7 @@ impl Default for Config {
             max_steps: 100_000,
             max_stored_bytes: 2 << 30,
             max_body_bytes: 1 << 20,
+            study_threads: 2,
         }
     }
 }

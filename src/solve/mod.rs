@@ -24,6 +24,14 @@ pub struct SolverSettings {
     pub max_iterations: usize,
 }
 
+impl SolverSettings {
+    /// True when a solver used at least 80 % of its iteration limit: the step converged, but
+    /// a slightly harder one might not (reported per run as a warning sign).
+    pub fn near_iteration_limit(&self, iterations: usize) -> bool {
+        iterations * 5 >= self.max_iterations * 4
+    }
+}
+
 impl Default for SolverSettings {
     fn default() -> Self {
         SolverSettings {

@@ -7,12 +7,22 @@ use contact_sim::solve::stepper::{Simulation, StepReport};
 use contact_sim::solve::SolverSettings;
 use serde_json::Value;
 
-/// A preset at resolution h = 1/nh, k = 1/nk, with JSON edits (pointer, value) applied.
+/// A preset at resolution h = 1/nh, k = 1/nk, with JSON edits (pointer, value) applied
+/// (a null value removes the field).
 pub fn problem(preset: &str, nh: usize, nk: usize, edits: &[(&str, Value)]) -> Problem {
     let mut doc = presets::get(preset).expect("preset");
     for (ptr, v) in edits {
-        *doc.pointer_mut(ptr)
-            .unwrap_or_else(|| panic!("no {ptr} in {preset}")) = v.clone();
+        let (parent, key) = ptr.rsplit_once('/').expect("a JSON pointer");
+        let obj = doc
+            .pointer_mut(parent)
+            .and_then(Value::as_object_mut)
+            .unwrap_or_else(|| panic!("no object at {parent:?} in {preset}"));
+        // null removes a field; a new key is added.
+        if v.is_null() {
+            obj.remove(key);
+        } else {
+            obj.insert(key.to_string(), v.clone());
+        }
     }
     let o = Overrides {
         h: Some(Value::String(format!("1/{nh}"))),

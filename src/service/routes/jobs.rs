@@ -2,19 +2,19 @@
 //! cancel, delete, and the Server-Sent Events progress stream.
 
 use super::{blocking, load_job, only_params, parse_id, rfc3339};
-use crate::scene::{self, presets, Overrides};
+use crate::scene::{self, canonical, hex_sha256, presets, Overrides};
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
-use crate::service::jobs::JobEvent;
+use crate::service::jobs::{is_study, JobEvent};
 use crate::service::store::{Enqueued, JobRecord, JobStatus, NewJob};
 use crate::solve::SolverSettings;
+use crate::study;
 use axum::body::Bytes;
 use axum::extract::{Path, Query, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
-use serde_json::{json, Map, Value};
-use sha2::{Digest, Sha256};
+use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::convert::Infallible;
 use std::time::Duration;
@@ -36,7 +36,12 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
     if !rec.status.is_finished() {
         links["cancel"] = json!(format!("{base}/cancel"));
     }
-    if rec.status == JobStatus::Succeeded {
+    let study = is_study(&rec.scene);
+    if rec.status == JobStatus::Succeeded && study {
+        links["summary"] = json!(format!("{base}/summary"));
+        links["table"] = json!(format!("{base}/summary?format=text"));
+        links["report"] = json!(format!("{base}/report.svg"));
+    } else if rec.status == JobStatus::Succeeded {
         links["summary"] = json!(format!("{base}/summary"));
         links["fields"] = json!(format!("{base}/fields?step=last"));
         links["mesh"] = json!(format!("{base}/mesh"));
@@ -45,8 +50,14 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
     }
     json!({
         "id": id,
-        "kind": "simulation",
-        "scene": rec.scene.get("name").cloned().unwrap_or(Value::Null),
+        "kind": if study { "study" } else { "simulation" },
+        "scene": if study {
+            rec.scene["study"].get("name").or_else(|| rec.scene["study"]["scene"].get("name"))
+        } else {
+            rec.scene.get("name")
+        }
+        .cloned()
+        .unwrap_or(Value::Null),
         "status": rec.status,
         "progress": {
             "step": progress.step,
@@ -73,30 +84,6 @@ fn json_response(status: StatusCode, body: &Value) -> Response {
         HeaderValue::from_static("application/json"),
     );
     r
-}
-
-/// Keys sorted recursively, so equal scenes hash equally whatever their key order.
-fn canonical(v: &Value) -> Value {
-    match v {
-        Value::Object(m) => {
-            let mut keys: Vec<&String> = m.keys().collect();
-            keys.sort();
-            Value::Object(
-                keys.into_iter()
-                    .map(|k| (k.clone(), canonical(&m[k])))
-                    .collect::<Map<_, _>>(),
-            )
-        }
-        Value::Array(a) => Value::Array(a.iter().map(canonical).collect()),
-        _ => v.clone(),
-    }
-}
-
-fn hex_sha256(bytes: &[u8]) -> String {
-    Sha256::digest(bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
 }
 
 /// Content hash of a result: scene (canonical JSON), crate version, solver settings.
@@ -225,6 +212,34 @@ fn check_limits(
     Ok(())
 }
 
+/// A study's runs against the per-job limits: the reference (its largest run) must fit the
+/// node limit, all runs together the step limit.
+fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), ApiError> {
+    let cfg = &state.rt.config;
+    let (nx, ny) = plan.base.cells();
+    let nodes = (nx + 1) * (ny + 1);
+    if nodes > cfg.max_nodes {
+        return Err(ApiError::invalid_field(
+            "/study/reference/h",
+            format!(
+                "the reference mesh has {nodes} nodes, more than this server's limit of {}",
+                cfg.max_nodes
+            ),
+        ));
+    }
+    let steps = study::total_steps(plan);
+    if steps > cfg.max_steps {
+        return Err(ApiError::invalid_field(
+            "/study/reference/k",
+            format!(
+                "the study's runs take {steps} time steps in all, more than this server's limit of {}",
+                cfg.max_steps
+            ),
+        ));
+    }
+    Ok(())
+}
+
 pub async fn submit(
     State(state): State<AppState>,
     headers: HeaderMap,
@@ -242,19 +257,39 @@ pub async fn submit(
     }
     let doc: Value = serde_json::from_slice(&body)
         .map_err(|e| ApiError::bad_request(format!("malformed JSON: {e}")))?;
-    let (scene_doc, is_preset) = expand(doc)?;
-    let problem = match scene::validate(&scene_doc) {
-        Ok(p) => p,
-        Err(errors) => {
-            let e = ApiError::invalid_scene(&errors);
-            return Err(if is_preset {
-                map_override_pointers(e)
-            } else {
-                e
-            });
+    let (scene_doc, steps) = match doc.get("study") {
+        Some(study) => {
+            if let Some(k) = doc
+                .as_object()
+                .and_then(|o| o.keys().find(|k| *k != "study"))
+            {
+                return Err(ApiError::invalid_field(
+                    &format!("/{k}"),
+                    format!("unknown field {k:?} next to a study (a study request is {{\"study\": {{...}}}})"),
+                ));
+            }
+            let (plan, expanded) =
+                study::parse(study, "/study").map_err(|e| ApiError::invalid_scene(&e))?;
+            check_study_limits(&plan, &state)?;
+            (json!({ "study": expanded }), study::total_steps(&plan))
+        }
+        None => {
+            let (scene_doc, is_preset) = expand(doc)?;
+            let problem = match scene::validate(&scene_doc) {
+                Ok(p) => p,
+                Err(errors) => {
+                    let e = ApiError::invalid_scene(&errors);
+                    return Err(if is_preset {
+                        map_override_pointers(e)
+                    } else {
+                        e
+                    });
+                }
+            };
+            check_limits(&problem, &state, is_preset)?;
+            (scene_doc, problem.steps)
         }
     };
-    check_limits(&problem, &state, is_preset)?;
     let hash = scene_hash(&scene_doc);
     let key = match headers.get("idempotency-key") {
         Some(v) => Some(
@@ -269,7 +304,6 @@ pub async fn submit(
         None => None,
     };
     let request_hash = key.as_ref().map(|_| hex_sha256(&body));
-    let steps = problem.steps;
     let store = state.store().clone();
     let capacity = state.rt.config.queue_capacity;
     let outcome = blocking(move || {

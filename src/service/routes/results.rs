@@ -9,7 +9,9 @@ use crate::output::stored::decode_step;
 use crate::output::vtk::{write_pvd, write_vtu};
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
-use crate::service::jobs::{parse_step_file, step_file, SUMMARY_FILE};
+use crate::service::jobs::{
+    is_study, parse_step_file, step_file, REPORT_FILE, SUMMARY_FILE, TABLE_FILE,
+};
 use crate::service::store::{JobRecord, JobStatus};
 use crate::service::stream::blocking_body;
 use crate::solve::stepper::StepFields;
@@ -42,6 +44,43 @@ async fn succeeded(state: &AppState, id: &str) -> Result<JobRecord, ApiError> {
     let rec = load_job(state, parse_id(id)?).await?;
     require_succeeded(&rec)?;
     Ok(rec)
+}
+
+/// A succeeded simulation (the per-step results of a study are its table, not fields).
+async fn simulation(state: &AppState, id: &str) -> Result<JobRecord, ApiError> {
+    let rec = load_job(state, parse_id(id)?).await?;
+    if is_study(&rec.scene) {
+        return Err(ApiError::not_found(format!(
+            "job {} is a convergence study: it has no fields; see /jobs/{}/summary and /jobs/{}/report.svg",
+            rec.id, rec.id, rec.id
+        )));
+    }
+    require_succeeded(&rec)?;
+    Ok(rec)
+}
+
+/// Reads a result file of a succeeded job on the blocking pool.
+async fn result_file(
+    state: &AppState,
+    rec: &JobRecord,
+    file: &'static str,
+) -> Result<Vec<u8>, ApiError> {
+    let results = state.rt.results.clone();
+    let id = rec.id;
+    blocking(move || {
+        results
+            .read(id, file)
+            .map_err(|e| ApiError::internal(e.to_string()))?
+            .ok_or_else(|| ApiError::internal(format!("{file} missing")))
+    })
+    .await
+}
+
+fn with_type(bytes: Vec<u8>, content_type: &'static str) -> Response {
+    let mut r = bytes.into_response();
+    r.headers_mut()
+        .insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+    r
 }
 
 /// The mesh is not stored: it is regenerated (deterministically) from the stored scene.
@@ -100,32 +139,64 @@ fn load_step(state: &AppState, id: Uuid, n: usize) -> Result<StepFields, ApiErro
     decode_step(&bytes).map_err(|e| ApiError::internal(format!("stored step {n} is corrupt: {e}")))
 }
 
+/// `?format=json` (default) or, for studies, `?format=text` (the paper's table layout).
 pub async fn summary(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    Query(q): Query<HashMap<String, String>>,
+) -> Result<Response, ApiError> {
+    only_params(&q, &["format"])?;
+    let text = match q.get("format").map(String::as_str) {
+        None | Some("json") => false,
+        Some("text") => true,
+        Some(o) => {
+            return Err(ApiError::bad_request(format!(
+                "format must be json or text, not {o:?}"
+            )))
+        }
+    };
+    let rec = succeeded(&state, &id).await?;
+    if text && !is_study(&rec.scene) {
+        return Err(ApiError::bad_request(
+            "format=text is the error table of a study; a simulation's summary is JSON",
+        ));
+    }
+    Ok(if text {
+        with_type(
+            result_file(&state, &rec, TABLE_FILE).await?,
+            "text/plain; charset=utf-8",
+        )
+    } else {
+        with_type(
+            result_file(&state, &rec, SUMMARY_FILE).await?,
+            "application/json",
+        )
+    })
+}
+
+/// `/jobs/{id}/report.svg`: a study's error and work–precision plots.
+pub async fn report(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     let rec = succeeded(&state, &id).await?;
-    let results = state.rt.results.clone();
-    let bytes = blocking(move || {
-        results
-            .read(rec.id, SUMMARY_FILE)
-            .map_err(|e| ApiError::internal(e.to_string()))?
-            .ok_or_else(|| ApiError::internal("summary missing"))
-    })
-    .await?;
-    let mut r = bytes.into_response();
-    r.headers_mut().insert(
-        header::CONTENT_TYPE,
-        HeaderValue::from_static("application/json"),
-    );
-    Ok(r)
+    if !is_study(&rec.scene) {
+        return Err(ApiError::not_found(format!(
+            "job {} is a simulation; reports are drawn for convergence studies (POST /jobs with {{\"study\": ...}}, or a scene with \"error_estimate\": true for an error bar)",
+            rec.id
+        )));
+    }
+    Ok(with_type(
+        result_file(&state, &rec, REPORT_FILE).await?,
+        "image/svg+xml",
+    ))
 }
 
 pub async fn mesh(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
-    let rec = succeeded(&state, &id).await?;
+    let rec = simulation(&state, &id).await?;
     Ok(blocking_body("application/json", move |w| {
         let (mesh, _) = mesh_of(&rec).map_err(|e| std::io::Error::other(e.detail))?;
         serde_json::to_writer(w, &MeshJson::new(&mesh)).map_err(std::io::Error::other)
@@ -171,7 +242,7 @@ pub async fn fields(
             )))
         }
     };
-    let rec = succeeded(&state, &id).await?;
+    let rec = simulation(&state, &id).await?;
     let spec = q.get("step").cloned().unwrap_or_else(|| "last".into());
     let st = state.clone();
     let job = rec.id;
@@ -231,7 +302,7 @@ pub async fn vtu(
             ))
         })?
         .to_string();
-    let rec = succeeded(&state, &id).await?;
+    let rec = simulation(&state, &id).await?;
     let st = state.clone();
     let id = rec.id;
     let (f, rec) = blocking(move || {
@@ -249,7 +320,7 @@ pub async fn pvd(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
-    let rec = succeeded(&state, &id).await?;
+    let rec = simulation(&state, &id).await?;
     let st = state.clone();
     let id = rec.id;
     let steps = blocking(move || stored_steps(&st, id)).await?;
@@ -270,7 +341,7 @@ pub async fn archive(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
-    let rec = succeeded(&state, &id).await?;
+    let rec = simulation(&state, &id).await?;
     let st = state.clone();
     let mut resp = blocking_body("application/x-tar", move |w| {
         let io = |e: ApiError| std::io::Error::other(e.detail);

@@ -1,0 +1,171 @@
+//! One run of a study: a resolution (h, k) of the scene taken to t = T, keeping w and ζ at
+//! the time nodes the study compares, and the solver figures of the run.
+
+use crate::mesh::Mesh;
+use crate::problem::Problem;
+use crate::run::RunError;
+use crate::solve::stepper::Simulation;
+use crate::solve::SolverSettings;
+use serde::Serialize;
+use std::collections::BTreeSet;
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+/// What to run and which step indices n (t_n = n k) to keep.
+pub struct Work {
+    pub problem: Problem,
+    pub keep: BTreeSet<usize>,
+}
+
+impl Work {
+    /// Relative cost used to schedule the largest runs first: nodes × steps.
+    pub fn cost(&self) -> usize {
+        let (nx, ny) = self.problem.cells();
+        (nx + 1) * (ny + 1) * self.problem.steps
+    }
+}
+
+/// w_n (interleaved x, y per node) and ζ_n at one kept step.
+pub struct Snapshot {
+    pub step: usize,
+    pub w: Vec<f64>,
+    pub zeta: Vec<f64>,
+}
+
+/// Mean and maximum iterations of a sub-problem solver over a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Iterations {
+    pub mean: f64,
+    pub max: usize,
+}
+
+/// Solver-side figures of one run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct RunStats {
+    pub velocity_iterations: Iterations,
+    /// None when the scene has no damage (no damage solve).
+    pub damage_iterations: Option<Iterations>,
+    /// Worst relative KKT residual of either sub-problem over all steps.
+    pub worst_residual: f64,
+    /// Steps in which a sub-problem solver came within 20 % of its iteration limit.
+    pub steps_near_iteration_limit: usize,
+}
+
+pub struct LevelRun {
+    pub mesh: Mesh,
+    pub unknowns: usize,
+    pub steps: usize,
+    /// Wall time of the whole run, set-up (assembly, factorisation) included.
+    pub seconds: f64,
+    pub stats: RunStats,
+    /// In increasing step order.
+    pub snapshots: Vec<Snapshot>,
+}
+
+impl LevelRun {
+    pub fn snapshot_steps(&self) -> BTreeSet<usize> {
+        self.snapshots.iter().map(|s| s.step).collect()
+    }
+
+    pub fn at(&self, step: usize) -> Option<&Snapshot> {
+        self.snapshots
+            .binary_search_by_key(&step, |s| s.step)
+            .ok()
+            .map(|i| &self.snapshots[i])
+    }
+}
+
+/// Runs `work` to t = T; `tick` is called after every step (`Break` cancels).
+pub fn run_level(
+    work: &Work,
+    settings: SolverSettings,
+    tick: &(dyn Fn() -> ControlFlow<()> + Sync),
+) -> Result<LevelRun, super::StudyError> {
+    let start = Instant::now();
+    let mut sim = Simulation::new(work.problem.clone(), settings).map_err(RunError::from)?;
+    let mut acc = StatsAccumulator::new(settings);
+    let mut snapshots = Vec::with_capacity(work.keep.len());
+    while !sim.finished() {
+        let r = sim.step().map_err(RunError::from)?;
+        acc.add(&r);
+        if work.keep.contains(&r.n) {
+            snapshots.push(Snapshot {
+                step: r.n,
+                w: sim.w.clone(),
+                zeta: sim.state.zeta.clone(),
+            });
+        }
+        if tick().is_break() {
+            return Err(super::StudyError::Cancelled);
+        }
+    }
+    Ok(LevelRun {
+        unknowns: sim.dofs.n_free(),
+        steps: work.problem.steps,
+        seconds: start.elapsed().as_secs_f64(),
+        stats: acc.finish(),
+        snapshots,
+        mesh: sim.mesh,
+    })
+}
+
+/// Folds per-step solver reports into [`RunStats`].
+pub struct StatsAccumulator {
+    settings: SolverSettings,
+    steps: usize,
+    velocity_sum: usize,
+    velocity_max: usize,
+    damage_sum: usize,
+    damage_max: usize,
+    damage_steps: usize,
+    worst_residual: f64,
+    near_limit: usize,
+}
+
+impl StatsAccumulator {
+    pub fn new(settings: SolverSettings) -> Self {
+        StatsAccumulator {
+            settings,
+            steps: 0,
+            velocity_sum: 0,
+            velocity_max: 0,
+            damage_sum: 0,
+            damage_max: 0,
+            damage_steps: 0,
+            worst_residual: 0.0,
+            near_limit: 0,
+        }
+    }
+
+    pub fn add(&mut self, r: &crate::solve::stepper::StepReport) {
+        self.steps += 1;
+        self.velocity_sum += r.velocity.iterations;
+        self.velocity_max = self.velocity_max.max(r.velocity.iterations);
+        self.worst_residual = self.worst_residual.max(r.velocity.residual);
+        let mut near = self.settings.near_iteration_limit(r.velocity.iterations);
+        if let Some(d) = r.damage {
+            self.damage_steps += 1;
+            self.damage_sum += d.iterations;
+            self.damage_max = self.damage_max.max(d.iterations);
+            self.worst_residual = self.worst_residual.max(d.residual);
+            near |= self.settings.near_iteration_limit(d.iterations);
+        }
+        self.near_limit += usize::from(near);
+    }
+
+    pub fn finish(&self) -> RunStats {
+        let mean = |sum: usize, n: usize| if n == 0 { 0.0 } else { sum as f64 / n as f64 };
+        RunStats {
+            velocity_iterations: Iterations {
+                mean: mean(self.velocity_sum, self.steps),
+                max: self.velocity_max,
+            },
+            damage_iterations: (self.damage_steps > 0).then(|| Iterations {
+                mean: mean(self.damage_sum, self.damage_steps),
+                max: self.damage_max,
+            }),
+            worst_residual: self.worst_residual,
+            steps_near_iteration_limit: self.near_limit,
+        }
+    }
+}
