@@ -375,13 +375,10 @@ fn cmd_study(
     if let Some(t) = threads {
         exec.threads = t.max(1);
     }
-    let mut results = Vec::new();
-    for plan in &plans {
-        match study::run(plan, &cache, exec, &|_, _| ControlFlow::Continue(())) {
-            Ok(r) => results.push(r),
-            Err(e) => return fail(1, &format!("{}: {e}", plan.name)),
-        }
-    }
+    let results = match study::run_many(&plans, &cache, exec, &|_, _| ControlFlow::Continue(())) {
+        Ok(r) => r,
+        Err(e) => return fail(1, &e.to_string()),
+    };
     if let Some(dir) = report_dir {
         let write = || -> std::io::Result<()> {
             std::fs::create_dir_all(dir)?;

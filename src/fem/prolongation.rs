@@ -56,6 +56,43 @@ pub fn prolongate(
     Some(out)
 }
 
+/// For every triangle of `fine`, the triangle of `coarse` containing it (nested meshes of
+/// the same diagonal pattern, as for [`prolongate`]). On a fine triangle T, the interpolant
+/// of a coarse P1 field is the coarse field itself, so ε(I v)|_T = ε(v)|_parent(T): strain
+/// errors need no interpolation at all.
+pub fn parent_triangles(coarse: &Mesh, fine: &Mesh) -> Option<Vec<u32>> {
+    if coarse.pattern != fine.pattern || coarse.pattern == MeshPattern::Cross {
+        return None;
+    }
+    if fine.nx % coarse.nx != 0 || fine.ny % coarse.ny != 0 {
+        return None;
+    }
+    let (rx, ry) = (fine.nx / coarse.nx, fine.ny / coarse.ny);
+    // Centroids of a cell's two triangles, in thirds of the cell (see Mesh::rectangle).
+    let centroids: [[usize; 2]; 2] = match fine.pattern {
+        MeshPattern::Diagonal => [[2, 1], [1, 2]],
+        _ => [[1, 1], [2, 2]],
+    };
+    let mut parents = Vec::with_capacity(fine.triangles.len());
+    for j in 0..fine.ny {
+        for i in 0..fine.nx {
+            let (ci, cj) = (i / rx, j / ry);
+            for c in centroids {
+                // Position in the coarse cell, in units of 1/(3 r): integers, so no ties.
+                let s = 3 * (i - ci * rx) + c[0];
+                let t = 3 * (j - cj * ry) + c[1];
+                let (sx, ty) = (s * ry, t * rx);
+                let second = match coarse.pattern {
+                    MeshPattern::Diagonal => ty > sx,
+                    _ => sx + ty > 3 * rx * ry,
+                };
+                parents.push((2 * (cj * coarse.nx + ci) + usize::from(second)) as u32);
+            }
+        }
+    }
+    Some(parents)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -91,6 +128,45 @@ mod tests {
             };
             assert!((integral(&coarse, &cz) - integral(&fine, &fz)).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn parents_contain_their_children_and_carry_the_strain() {
+        use crate::fem::Geometry;
+        for pattern in [MeshPattern::Diagonal, MeshPattern::AntiDiagonal] {
+            let coarse = Mesh::rectangle(2.0, 1.0, 4, 2, pattern);
+            let fine = Mesh::rectangle(2.0, 1.0, 12, 6, pattern);
+            let parents = parent_triangles(&coarse, &fine).unwrap();
+            assert_eq!(parents.len(), fine.triangles.len());
+            for (t, &p) in parents.iter().enumerate() {
+                let c = fine.triangles[t].iter().fold([0.0; 2], |a, &n| {
+                    [a[0] + fine.nodes[n][0] / 3.0, a[1] + fine.nodes[n][1] / 3.0]
+                });
+                let q = coarse.triangles[p as usize].map(|n| coarse.nodes[n]);
+                let cross = |a: [f64; 2], b: [f64; 2]| {
+                    (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+                };
+                let sides = [cross(q[0], q[1]), cross(q[1], q[2]), cross(q[2], q[0])];
+                assert!(
+                    sides.iter().all(|&x| x > 0.0),
+                    "{pattern:?}: triangle {t} not in {p}"
+                );
+            }
+            // ε of the interpolant on a fine triangle = ε of the coarse field on its parent.
+            let cv: Vec<f64> = (0..2 * coarse.n_nodes())
+                .map(|i| ((i * 7) % 5) as f64)
+                .collect();
+            let fv = prolongate(&coarse, &cv, 2, &fine).unwrap();
+            let (gc, gf) = (Geometry::new(&coarse), Geometry::new(&fine));
+            for (t, &p) in parents.iter().enumerate() {
+                let d = gf.strain(&fine, t, &fv) - gc.strain(&coarse, p as usize, &cv);
+                assert!(d.norm() < 1e-12, "{pattern:?} {t}: {d}");
+            }
+        }
+        let a = Mesh::rectangle(1.0, 1.0, 3, 3, MeshPattern::Diagonal);
+        assert!(
+            parent_triangles(&a, &Mesh::rectangle(1.0, 1.0, 4, 4, MeshPattern::Diagonal)).is_none()
+        );
     }
 
     #[test]

@@ -15,6 +15,7 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::SparseColMatRef;
 use faer::{Conj, MatMut, Par, Side};
+use std::sync::Arc;
 
 #[derive(Debug, thiserror::Error)]
 pub enum FactorError {
@@ -25,12 +26,31 @@ pub enum FactorError {
 }
 
 /// A factorised SPD matrix A = P Lᵀ L Pᵀ (faer's convention), n × n.
+///
+/// Clones share the symbolic analysis and the factor values (runs of one study on one mesh
+/// factor their velocity operator once); each clone has its own scratch, and `refactor` on
+/// a shared factor copies the values first (copy on write).
 pub struct Cholesky {
-    symbolic: SymbolicCholesky<usize>,
-    l_values: Vec<f64>,
+    symbolic: Arc<SymbolicCholesky<usize>>,
+    l_values: Arc<Vec<f64>>,
     factor_scratch: MemBuffer,
     /// Scratch for single right-hand-side solves.
     solve_scratch: MemBuffer,
+}
+
+impl Clone for Cholesky {
+    fn clone(&self) -> Self {
+        Cholesky {
+            symbolic: self.symbolic.clone(),
+            l_values: self.l_values.clone(),
+            factor_scratch: factor_scratch(&self.symbolic),
+            solve_scratch: MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, Par::Seq)),
+        }
+    }
+}
+
+fn factor_scratch(symbolic: &SymbolicCholesky<usize>) -> MemBuffer {
+    MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()))
 }
 
 impl std::fmt::Debug for Cholesky {
@@ -56,14 +76,11 @@ impl Cholesky {
             params,
         )
         .map_err(FactorError::Symbolic)?;
-        let factor_scratch = MemBuffer::new(
-            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
-        );
         let solve_scratch = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
         let mut this = Cholesky {
-            l_values: vec![0.0; symbolic.len_val()],
-            symbolic,
-            factor_scratch,
+            l_values: Arc::new(vec![0.0; symbolic.len_val()]),
+            factor_scratch: factor_scratch(&symbolic),
+            symbolic: Arc::new(symbolic),
             solve_scratch,
         };
         this.refactor(a_lower)?;
@@ -86,7 +103,7 @@ impl Cholesky {
     ) -> Result<(), FactorError> {
         self.symbolic
             .factorize_numeric_llt::<f64>(
-                &mut self.l_values,
+                Arc::make_mut(&mut self.l_values).as_mut_slice(),
                 a_lower,
                 Side::Lower,
                 LltRegularization::default(),
@@ -167,6 +184,27 @@ mod tests {
         chol.solve_block_in_place(&mut blk, 2);
         for i in 0..50 {
             assert!((blk[i] - xs[i]).abs() < 1e-12 && (blk[50 + i] - xs[i]).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn clones_share_the_factor_until_one_refactors() {
+        let a = laplace_1d(20);
+        let mut first = Cholesky::new(a.lower_csc().as_ref()).unwrap();
+        let mut second = first.clone();
+        assert!(Arc::ptr_eq(&first.l_values, &second.l_values));
+        let mut a2 = a.clone();
+        a2.values.iter_mut().for_each(|v| *v *= 2.0);
+        second.refactor(a2.lower_csc().as_ref()).unwrap();
+        assert!(!Arc::ptr_eq(&first.l_values, &second.l_values));
+        let (mut x1, mut x2) = (vec![1.0; 20], vec![1.0; 20]);
+        first.solve_in_place(&mut x1);
+        second.solve_in_place(&mut x2);
+        for (u, v) in x1.iter().zip(&x2) {
+            assert!(
+                (u - 2.0 * v).abs() < 1e-12,
+                "the original factor is untouched"
+            );
         }
     }
 

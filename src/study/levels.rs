@@ -15,6 +15,8 @@ use std::time::Instant;
 pub struct Work {
     pub problem: Problem,
     pub keep: BTreeSet<usize>,
+    /// The run is a study's reference (its norms are computed as soon as it ends).
+    pub is_reference: bool,
 }
 
 impl Work {

@@ -27,10 +27,11 @@ use crate::problem::Problem;
 use crate::run::RunError;
 use crate::solve::SolverSettings;
 use levels::{LevelRun, Work};
+use reference::Reference;
 use std::collections::BTreeSet;
 use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 /// Snapshots of the reference kept for the time-maximum of the errors are capped at this
@@ -83,7 +84,138 @@ pub fn run(
     exec: Execution,
     progress: &(dyn Fn(usize, usize) -> ControlFlow<()> + Sync),
 ) -> Result<StudyResult, StudyError> {
+    let mut results = run_many(std::slice::from_ref(plan), cache, exec, progress)?;
+    Ok(results.pop().expect("one study"))
+}
+
+/// Runs several studies as one schedule: the reference runs they share are computed once,
+/// and all runs (references and levels of every study) share the threads, largest first, so
+/// that the short levels fill the time a long reference takes.
+pub fn run_many(
+    plans: &[Plan],
+    cache: &ReferenceCache,
+    exec: Execution,
+    progress: &(dyn Fn(usize, usize) -> ControlFlow<()> + Sync),
+) -> Result<Vec<StudyResult>, StudyError> {
     let started = Instant::now();
+    for plan in plans {
+        check_nested(plan)?;
+    }
+    let compared: Vec<BTreeSet<usize>> = plans.iter().map(compared_steps).collect();
+    // One slot per distinct reference, locked in key order (no deadlock between concurrent
+    // callers). Holding a slot while computing makes another study of the same reference
+    // wait for this one instead of computing it twice.
+    let mut groups: Vec<(String, Vec<usize>)> = Vec::new();
+    for (i, plan) in plans.iter().enumerate() {
+        let key = &plan.reference_key;
+        match groups.iter_mut().find(|(k, _)| !k.is_empty() && k == key) {
+            Some((_, members)) => members.push(i),
+            None => groups.push((key.clone(), vec![i])),
+        }
+    }
+    groups.sort_by(|a, b| a.0.cmp(&b.0));
+    let slots: Vec<reference::Slot> = groups.iter().map(|(k, _)| cache.slot(k)).collect();
+    let mut guards: Vec<_> = slots
+        .iter()
+        .map(|s| s.lock().unwrap_or_else(|e| e.into_inner()))
+        .collect();
+    let mut jobs: Vec<Work> = Vec::new();
+    // Per group: the cached reference, or the index of the job computing it.
+    let mut sources: Vec<Result<Arc<Reference>, usize>> = Vec::new();
+    for ((_, members), guard) in groups.iter().zip(&guards) {
+        let mut keep: BTreeSet<usize> = BTreeSet::new();
+        for &i in members {
+            keep.extend(&compared[i]);
+        }
+        match guard
+            .as_ref()
+            .filter(|r| keep.is_subset(&r.snapshot_steps()))
+        {
+            Some(r) => sources.push(Ok(r.clone())),
+            None => {
+                // The union with what an earlier study kept lets the new entry serve both.
+                if let Some(old) = guard.as_ref() {
+                    keep.extend(old.snapshot_steps());
+                }
+                sources.push(Err(jobs.len()));
+                let plan = &plans[members[0]];
+                jobs.push(Work {
+                    problem: with(&plan.base, plan.reference),
+                    keep,
+                    is_reference: true,
+                });
+            }
+        }
+    }
+    let mut level_jobs: Vec<Vec<usize>> = Vec::with_capacity(plans.len());
+    for (plan, compared) in plans.iter().zip(&compared) {
+        let mut idx = Vec::with_capacity(plan.levels.len());
+        for &(n, steps) in &plan.levels {
+            let ratio = plan.reference.1 / steps;
+            let keep = compared
+                .iter()
+                .filter(|&&m| m % ratio == 0)
+                .map(|&m| m / ratio)
+                .collect();
+            idx.push(jobs.len());
+            jobs.push(Work {
+                problem: with(&plan.base, (n, steps)),
+                keep,
+                is_reference: false,
+            });
+        }
+        level_jobs.push(idx);
+    }
+    let total = jobs.iter().map(|j| j.problem.steps).sum::<usize>();
+    let mut done: Vec<Option<Done>> = run_all(jobs, exec, total, progress)?
+        .into_iter()
+        .map(Some)
+        .collect();
+    let mut references: Vec<(Arc<Reference>, bool)> = Vec::with_capacity(groups.len());
+    for (source, guard) in sources.into_iter().zip(guards.iter_mut()) {
+        references.push(match source {
+            Ok(r) => (r, true),
+            Err(j) => {
+                let Some(Done::Reference(r)) = done[j].take() else {
+                    unreachable!("job {j} computed a reference")
+                };
+                let r = Arc::new(r);
+                **guard = Some(r.clone());
+                (r, false)
+            }
+        });
+    }
+    drop(guards);
+    let mut results = Vec::with_capacity(plans.len());
+    for (i, plan) in plans.iter().enumerate() {
+        let g = groups
+            .iter()
+            .position(|(_, m)| m.contains(&i))
+            .expect("grouped");
+        let (reference, cached) = &references[g];
+        // Later studies of a group reuse the reference the first one computed.
+        let cached = *cached || groups[g].1[0] != i;
+        let runs: Vec<LevelRun> = level_jobs[i]
+            .iter()
+            .map(|&j| match done[j].take() {
+                Some(Done::Level(r)) => r,
+                _ => unreachable!("job {j} ran a level"),
+            })
+            .collect();
+        results.push(compare::tabulate(
+            plan,
+            reference,
+            cached,
+            &runs,
+            &compared[i],
+            exec.threads,
+            started.elapsed().as_secs_f64(),
+        ));
+    }
+    Ok(results)
+}
+
+fn check_nested(plan: &Plan) -> Result<(), StudyError> {
     let (ref_n, ref_steps) = plan.reference;
     for &(n, steps) in &plan.levels {
         if n == 0 || steps == 0 || ref_n % n != 0 || ref_steps % steps != 0 {
@@ -95,62 +227,7 @@ pub fn run(
             });
         }
     }
-    let compared = compared_steps(plan);
-    let slot = cache.slot(&plan.reference_key);
-    // Holding the slot while computing makes a second study of the same reference wait for
-    // this one instead of computing the reference twice.
-    let mut slot = slot.lock().unwrap_or_else(|e| e.into_inner());
-    let cached = slot
-        .as_ref()
-        .filter(|r| compared.is_subset(&r.run.snapshot_steps()))
-        .cloned();
-    let from_cache = cached.is_some();
-    let mut jobs: Vec<Work> = Vec::new();
-    if !from_cache {
-        // The union with what an earlier study kept lets the cached entry serve both.
-        let mut keep = compared.clone();
-        if let Some(old) = slot.as_ref() {
-            keep.extend(old.run.snapshot_steps());
-        }
-        jobs.push(Work {
-            problem: with(&plan.base, plan.reference),
-            keep,
-        });
-    }
-    for &(n, steps) in &plan.levels {
-        let ratio = ref_steps / steps;
-        let keep = compared
-            .iter()
-            .filter(|&&m| m % ratio == 0)
-            .map(|&m| m / ratio)
-            .collect();
-        jobs.push(Work {
-            problem: with(&plan.base, (n, steps)),
-            keep,
-        });
-    }
-    let total = jobs.iter().map(|j| j.problem.steps).sum::<usize>();
-    let runs = run_all(jobs, exec, total, progress)?;
-    let mut runs = runs.into_iter();
-    let reference = match cached {
-        Some(r) => r,
-        None => {
-            let r = std::sync::Arc::new(reference::Reference::new(runs.next().expect("ran")));
-            *slot = Some(r.clone());
-            r
-        }
-    };
-    drop(slot);
-    let level_runs: Vec<LevelRun> = runs.collect();
-    Ok(compare::tabulate(
-        plan,
-        &reference,
-        from_cache,
-        &level_runs,
-        &compared,
-        exec.threads,
-        started.elapsed().as_secs_f64(),
-    ))
+    Ok(())
 }
 
 fn with(base: &Problem, (n, steps): (usize, usize)) -> Problem {
@@ -171,7 +248,8 @@ fn compared_steps(plan: &Plan) -> BTreeSet<usize> {
         all.extend((1..=steps).map(|m| m * ratio));
     }
     let (nx, ny) = with(&plan.base, (ref_n, ref_steps)).cells();
-    let per_snapshot = ((nx + 1) * (ny + 1) + nx * ny) * 3 * 8;
+    // ζ per node and three strain components per triangle (see reference::Reference).
+    let per_snapshot = ((nx + 1) * (ny + 1) + 2 * nx * ny * 3) * 8;
     let fit = (SNAPSHOT_BUDGET_BYTES / per_snapshot.max(1)).max(1);
     if all.len() <= fit {
         return all;
@@ -184,19 +262,25 @@ fn compared_steps(plan: &Plan) -> BTreeSet<usize> {
     thinned
 }
 
+/// A finished run.
+enum Done {
+    Level(LevelRun),
+    Reference(Reference),
+}
+
 /// Runs the jobs on `exec.threads` threads, largest first, and returns them in input order.
 fn run_all(
     jobs: Vec<Work>,
     exec: Execution,
     total: usize,
     progress: &(dyn Fn(usize, usize) -> ControlFlow<()> + Sync),
-) -> Result<Vec<LevelRun>, StudyError> {
+) -> Result<Vec<Done>, StudyError> {
     let mut order: Vec<usize> = (0..jobs.len()).collect();
     order.sort_by_key(|&i| std::cmp::Reverse(jobs[i].cost()));
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
-    let results: Vec<Mutex<Option<Result<LevelRun, StudyError>>>> =
+    let results: Vec<Mutex<Option<Result<Done, StudyError>>>> =
         jobs.iter().map(|_| Mutex::new(None)).collect();
     let tick = || {
         let d = done.fetch_add(1, Ordering::Relaxed) + 1;
@@ -212,7 +296,15 @@ fn run_all(
         if stop.load(Ordering::Relaxed) {
             break;
         }
-        let r = levels::run_level(&jobs[j], exec.settings, &tick);
+        // A reference's norms are computed here, on the computing thread, while the other
+        // threads may still be running levels.
+        let r = levels::run_level(&jobs[j], exec.settings, &tick).map(|run| {
+            if jobs[j].is_reference {
+                Done::Reference(Reference::new(run))
+            } else {
+                Done::Level(run)
+            }
+        });
         if r.is_err() {
             stop.store(true, Ordering::Relaxed);
         }

@@ -2,53 +2,107 @@
 //! share h = k = 1/128) compare with the same reference; it is computed once per process and
 //! kept, keyed by a content hash of the scene and the reference resolution.
 
-use super::levels::LevelRun;
+use super::levels::{LevelRun, RunStats};
 use crate::fem::{assembly, norms, Geometry};
 use crate::linalg::Csr;
-use std::collections::VecDeque;
+use crate::mesh::Mesh;
+use std::collections::{BTreeSet, VecDeque};
 use std::sync::{Arc, Mutex};
 
-/// A finished reference run with what every comparison needs: its geometry, mass matrix and
-/// the norms |w(t)|_V, |ζ(t)|_Z0 at its kept steps.
+/// A finished reference run reduced to what comparisons need: per kept step the strain
+/// ε(w) on every triangle (w itself is never needed: errors in |·|_V compare strains) and ζ,
+/// with the norms |w|_V and |ζ|_Z0; the mesh, its geometry and mass matrix.
 pub struct Reference {
-    pub run: LevelRun,
+    pub mesh: Mesh,
     pub geo: Geometry,
     pub mass: Csr,
-    /// Per snapshot (same order): |w|_V and |ζ|_Z0.
+    pub unknowns: usize,
+    pub steps: usize,
+    pub seconds: f64,
+    pub stats: RunStats,
+    /// In increasing step order.
+    pub snapshots: Vec<RefSnapshot>,
     pub w_norms: Vec<f64>,
     pub zeta_norms: Vec<f64>,
 }
 
+pub struct RefSnapshot {
+    pub step: usize,
+    /// (ε_xx, ε_yy, ε_xy) per triangle.
+    pub strain: Vec<[f64; 3]>,
+    pub zeta: Vec<f64>,
+}
+
+/// (ε_xx, ε_yy, ε_xy) of the nodal field `w` on every triangle.
+pub fn strains(mesh: &Mesh, geo: &Geometry, w: &[f64]) -> Vec<[f64; 3]> {
+    (0..mesh.triangles.len())
+        .map(|t| {
+            let e = geo.strain(mesh, t, w);
+            [e[(0, 0)], e[(1, 1)], e[(0, 1)]]
+        })
+        .collect()
+}
+
+/// ε:ε of a symmetric tensor stored as (xx, yy, xy).
+#[inline]
+pub fn double_dot(e: [f64; 3]) -> f64 {
+    e[0] * e[0] + e[1] * e[1] + 2.0 * e[2] * e[2]
+}
+
 impl Reference {
     pub fn new(run: LevelRun) -> Reference {
-        let geo = Geometry::new(&run.mesh);
-        let mass = assembly::mass(&run.mesh, &geo);
-        let mut scratch = vec![0.0; run.mesh.n_nodes()];
-        let w_norms = run
-            .snapshots
-            .iter()
-            .map(|s| norms::strain_norm(&run.mesh, &geo, &s.w))
-            .collect();
-        let zeta_norms = run
-            .snapshots
-            .iter()
-            .map(|s| norms::mass_norm(&mass, &s.zeta, &mut scratch))
+        let LevelRun {
+            mesh,
+            unknowns,
+            steps,
+            seconds,
+            stats,
+            snapshots,
+        } = run;
+        let geo = Geometry::new(&mesh);
+        let mass = assembly::mass(&mesh, &geo);
+        let mut scratch = vec![0.0; mesh.n_nodes()];
+        let mut w_norms = Vec::with_capacity(snapshots.len());
+        let mut zeta_norms = Vec::with_capacity(snapshots.len());
+        let snapshots = snapshots
+            .into_iter()
+            .map(|s| {
+                let strain = strains(&mesh, &geo, &s.w);
+                let w2: f64 = strain
+                    .iter()
+                    .zip(&geo.area)
+                    .map(|(e, a)| a * double_dot(*e))
+                    .sum();
+                w_norms.push(w2.sqrt());
+                zeta_norms.push(norms::mass_norm(&mass, &s.zeta, &mut scratch));
+                RefSnapshot {
+                    step: s.step,
+                    strain,
+                    zeta: s.zeta,
+                }
+            })
             .collect();
         Reference {
-            run,
+            mesh,
             geo,
             mass,
+            unknowns,
+            steps,
+            seconds,
+            stats,
+            snapshots,
             w_norms,
             zeta_norms,
         }
     }
 
+    pub fn snapshot_steps(&self) -> BTreeSet<usize> {
+        self.snapshots.iter().map(|s| s.step).collect()
+    }
+
     /// Index of the snapshot at `step`.
     pub fn index(&self, step: usize) -> Option<usize> {
-        self.run
-            .snapshots
-            .binary_search_by_key(&step, |s| s.step)
-            .ok()
+        self.snapshots.binary_search_by_key(&step, |s| s.step).ok()
     }
 }
 
