@@ -4,6 +4,7 @@
 
 pub mod damage;
 pub mod friction_reduced;
+pub mod invariants;
 pub mod smallness;
 pub mod stepper;
 pub mod velocity;
