@@ -20,6 +20,7 @@ pub mod run;
 pub mod scene;
 pub mod service;
 pub mod solve;
+pub mod stress;
 pub mod study;
 #[cfg(test)]
 mod test_rng;

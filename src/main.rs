@@ -101,6 +101,17 @@ enum Command {
         #[arg(long, default_value_t = 3)]
         repeat: usize,
     },
+    /// The stability suite: hard scenes (friction, non-convexity, damage, extreme h and k, a
+    /// slender beam, load jumps) run with every invariant checked, or refused with a reason.
+    /// Exit code 1 if any case does not do what it must.
+    Stress {
+        /// The coarse subset (what tests/stability.rs runs).
+        #[arg(long)]
+        quick: bool,
+        /// text (default) or json.
+        #[arg(long, default_value = "text")]
+        format: String,
+    },
 }
 
 fn main() -> ExitCode {
@@ -191,6 +202,7 @@ fn main() -> ExitCode {
             threads,
             report_dir,
         } => cmd_study(&files, &preset, &format, threads, report_dir.as_deref()),
+        Command::Stress { quick, format } => cmd_stress(quick, &format),
         Command::Bench { levels, repeat } => match bench::run(&levels, repeat.max(1)) {
             Ok(report) => {
                 eprintln!("{}", report.table());
@@ -422,6 +434,23 @@ fn cmd_study(
         println!("{}", serde_json::to_string_pretty(&results).expect("JSON"));
     }
     ExitCode::SUCCESS
+}
+
+fn cmd_stress(quick: bool, format: &str) -> ExitCode {
+    if format != "text" && format != "json" {
+        return fail(2, &format!("unknown format {format:?}; use text or json"));
+    }
+    let report = contact_sim::stress::run(quick);
+    if format == "json" {
+        println!("{}", serde_json::to_string_pretty(&report).expect("JSON"));
+    } else {
+        print!("{}", report.text_table());
+    }
+    if report.all_as_expected {
+        ExitCode::SUCCESS
+    } else {
+        fail(1, "some stress cases did not do what they must (marked !)")
+    }
 }
 
 fn fail(code: u8, msg: &str) -> ExitCode {

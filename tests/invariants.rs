@@ -2,11 +2,13 @@
 //! paper's g = 20 every contact node sticks, so the non-smooth solver is never exercised):
 //! 0 ≤ ζ ≤ 1; zero normal velocity on Γ3; the discrete friction law at every Γ3 node
 //! (stick: |σ_τ| ≤ μ(0); slip: σ_τ = μ(|w_τ|) w_τ/|w_τ|, the friction force on the body
-//! opposing the slip); sub-problem residuals at tolerance.
+//! opposing the slip); sub-problem residuals at tolerance. The checks themselves are
+//! `contact_sim::solve::invariants` (shared with the stability suite, tests/stability.rs).
 
 mod common;
 use common::*;
-use contact_sim::problem::{BoundaryKind, Problem};
+use contact_sim::problem::Problem;
+use contact_sim::solve::invariants;
 use contact_sim::solve::stepper::Simulation;
 use contact_sim::solve::SolverSettings;
 use serde_json::json;
@@ -17,59 +19,13 @@ struct Outcome {
 }
 
 fn check_run(p: Problem) -> Outcome {
-    let tol = SolverSettings::default().tolerance;
-    let contact_parts: Vec<usize> = p
-        .boundary
-        .iter()
-        .enumerate()
-        .filter(|(_, b)| matches!(b.kind, BoundaryKind::Contact))
-        .map(|(i, _)| i)
-        .collect();
-    let law = p.friction.clone();
     let mut out = Outcome {
         steps_with_slip: 0,
         max_velocity_iterations: 0,
     };
     run_checked(p, |sim: &Simulation, r| {
-        assert!(r.velocity.residual <= tol && r.damage.is_none_or(|d| d.residual <= tol));
-        assert!(
-            sim.state.zeta.iter().all(|z| (0.0..=1.0).contains(z)),
-            "ζ out of [0, 1] at step {}",
-            r.n
-        );
-        // Normal velocity on Γ3: every node of a contact edge, normal of that edge.
-        for e in sim
-            .mesh
-            .boundary_edges
-            .iter()
-            .filter(|e| e.part.is_some_and(|p| contact_parts.contains(&p)))
-        {
-            for &i in &e.nodes {
-                let wn = sim.w[2 * i] * e.normal[0] + sim.w[2 * i + 1] * e.normal[1];
-                assert_eq!(wn, 0.0, "normal velocity at node {i}, step {}", r.n);
-            }
-        }
-        let contact = sim.contact_state();
-        // Tractions of these scenes are O(1); the floor covers frictionless (μ ≡ 0) runs.
-        let scale = contact.iter().fold(law.mu(0.0).max(1.0), |s, c| {
-            s.max(c.friction_traction.abs())
-        });
-        for c in &contact {
-            if c.slipping {
-                let expect = law.mu(c.slip_velocity.abs()) * c.slip_velocity.signum();
-                assert!(
-                    (c.friction_traction - expect).abs() <= 1e-8 * scale,
-                    "slip law at node {}: {} vs {expect}",
-                    c.node,
-                    c.friction_traction
-                );
-            } else {
-                assert!(
-                    c.friction_traction.abs() <= law.mu(0.0) + 1e-8 * scale,
-                    "stick bound at node {}",
-                    c.node
-                );
-            }
+        if let Err(e) = invariants::check_step(sim, r) {
+            panic!("{e}");
         }
         out.steps_with_slip += (r.slip_nodes > 0) as usize;
         out.max_velocity_iterations = out.max_velocity_iterations.max(r.velocity.iterations);

@@ -71,6 +71,71 @@ pub fn add_tractions(mesh: &Mesh, parts: &[BoundaryPart], t: f64, out: &mut [f64
     }
 }
 
+/// A load datum found infinite or NaN at one of its quadrature points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadFault {
+    /// `None`: the body force f0; `Some(p)`: the traction f2 of boundary part p.
+    pub part: Option<usize>,
+    /// Component (0 = x, 1 = y).
+    pub component: usize,
+    pub at: [f64; 2],
+    pub value: f64,
+}
+
+/// The first quadrature point (of [`add_body_force`] and [`add_tractions`]) at time t where
+/// f0 or an f2 is not finite, if any.
+pub fn find_non_finite(
+    mesh: &Mesh,
+    f0: &VectorField,
+    parts: &[BoundaryPart],
+    t: f64,
+) -> Option<LoadFault> {
+    let check = |f: &VectorField, part: Option<usize>, x: f64, y: f64| {
+        let v = f.eval(x, y, t);
+        (0..2).find(|&c| !v[c].is_finite()).map(|c| LoadFault {
+            part,
+            component: c,
+            at: [x, y],
+            value: v[c],
+        })
+    };
+    if !f0.is_zero() {
+        if f0.is_constant_in_space() {
+            if let Some(fault) = check(f0, None, 0.0, 0.0) {
+                return Some(fault);
+            }
+        } else {
+            for tri in &mesh.triangles {
+                for a in 0..3 {
+                    let (p, q) = (mesh.nodes[tri[a]], mesh.nodes[tri[(a + 1) % 3]]);
+                    if let Some(fault) = check(f0, None, 0.5 * (p[0] + q[0]), 0.5 * (p[1] + q[1])) {
+                        return Some(fault);
+                    }
+                }
+            }
+        }
+    }
+    let g = 0.5 / 3f64.sqrt();
+    for e in &mesh.boundary_edges {
+        let Some((p, BoundaryKind::Traction(f2))) = e.part.map(|p| (p, &parts[p].kind)) else {
+            continue;
+        };
+        let (a, b) = (mesh.nodes[e.nodes[0]], mesh.nodes[e.nodes[1]]);
+        let points: &[f64] = if f2.is_constant_in_space() {
+            &[0.5]
+        } else {
+            &[0.5 - g, 0.5 + g]
+        };
+        for &s in points {
+            let (x, y) = (a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]));
+            if let Some(fault) = check(f2, Some(p), x, y) {
+                return Some(fault);
+            }
+        }
+    }
+    None
+}
+
 /// Adds −(B_T, ε(ψ_a e_c)) = −|T| (B_T ∇ψ_a)_c for per-element stresses `b` (B symmetric).
 pub fn add_stress_divergence(mesh: &Mesh, geo: &Geometry, b: &[Tensor2<f64>], out: &mut [f64]) {
     for (e, tri) in mesh.triangles.iter().enumerate() {

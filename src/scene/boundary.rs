@@ -3,7 +3,7 @@
 use serde_json::Value;
 
 use super::read::{describe, index, join, point, required, variant_object, Cx};
-use super::{vector_field, Sampled, PART_VARIANTS, SIDE_TOL};
+use super::{vector_field, Sampled, MAX_BOUNDARY_PARTS, PART_VARIANTS, SIDE_TOL};
 use crate::problem::{BoundaryKind, BoundaryPart, Segment, VectorField};
 
 /// The sides of the rectangle [0, W] × [0, H]: (name, fixed coordinate index, its value).
@@ -60,6 +60,16 @@ pub(super) fn boundary(
         );
         return None;
     };
+    if items.len() > MAX_BOUNDARY_PARTS {
+        cx.err(
+            ptr,
+            format!(
+                "boundary must have at most {MAX_BOUNDARY_PARTS} parts, got {}",
+                describe(v)
+            ),
+        );
+        return None;
+    }
     let mut parts = Vec::with_capacity(items.len());
     let mut placed: Vec<Option<Placed>> = Vec::with_capacity(items.len());
     let mut types_known = true;

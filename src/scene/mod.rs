@@ -19,6 +19,8 @@
 mod boundary;
 mod canonical;
 pub mod expr;
+#[cfg(test)]
+mod hostile;
 pub mod presets;
 mod read;
 
@@ -233,6 +235,10 @@ pub const DEFAULT_SOURCE: DamageSource = DamageSource {
 const MAX_NAME_LEN: usize = 200;
 /// Most points in a piecewise-linear friction table.
 const MAX_TABLE_POINTS: usize = 1000;
+/// Most boundary parts (their overlap check is quadratic in the count).
+const MAX_BOUNDARY_PARTS: usize = 1000;
+/// Longest list of output field names (there are six; repeats are harmless).
+const MAX_OUTPUT_FIELDS: usize = 64;
 /// Representability guards (not resource limits, which belong to the service): counts stay
 /// far inside the range where f64 holds integers exactly and `usize` conversions are safe.
 const MAX_CELLS_PER_SIDE: f64 = 1.0e6;
@@ -254,7 +260,7 @@ pub fn validate(doc: &Value) -> Result<Problem, ValidationErrors> {
             if cx.errors.is_empty() {
                 cx.err("", "internal error: scene rejected without a reason");
             }
-            Err(ValidationErrors(cx.errors))
+            Err(ValidationErrors(cx.finish()))
         }
     }
 }
@@ -935,6 +941,17 @@ fn output_fields(cx: &mut Cx, v: &Value, ptr: &str) -> Option<FieldSet> {
         );
         return None;
     };
+    if items.len() > MAX_OUTPUT_FIELDS {
+        cx.err(
+            ptr,
+            format!(
+                "fields must list at most {MAX_OUTPUT_FIELDS} names (from {}), got {}",
+                OUTPUT_FIELD_NAMES.join(", "),
+                describe(v)
+            ),
+        );
+        return None;
+    }
     let mut set = FieldSet::default();
     let mut ok = true;
     for (i, item) in items.iter().enumerate() {

@@ -8,18 +8,42 @@ use serde_json::{Map, Value};
 
 use super::{parse_ratio, FieldError};
 
+/// Most errors reported for one scene: a hostile document (a million unknown fields) must
+/// not produce a million messages. The rest are counted.
+pub(super) const MAX_ERRORS: usize = 100;
+
 /// The errors collected so far.
 #[derive(Default)]
 pub(super) struct Cx {
     pub(super) errors: Vec<FieldError>,
+    /// Errors beyond [`MAX_ERRORS`], counted but not kept.
+    dropped: usize,
 }
 
 impl Cx {
     pub(super) fn err(&mut self, pointer: &str, message: impl Into<String>) {
+        if self.errors.len() >= MAX_ERRORS {
+            self.dropped += 1;
+            return;
+        }
         self.errors.push(FieldError {
             pointer: pointer.to_string(),
             message: message.into(),
         });
+    }
+
+    /// The errors, with a last entry counting those not kept.
+    pub(super) fn finish(mut self) -> Vec<FieldError> {
+        if self.dropped > 0 {
+            self.errors.push(FieldError {
+                pointer: String::new(),
+                message: format!(
+                    "... and {} more problems (only the first {MAX_ERRORS} are listed)",
+                    self.dropped
+                ),
+            });
+        }
+        self.errors
     }
 }
 

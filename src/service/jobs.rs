@@ -554,6 +554,14 @@ fn solve_problem(e: &SolveError) -> serde_json::Value {
             p["type"] = "/problems/smallness".into();
             p
         }
+        // Scene data unusable where the scheme evaluates it (e.g. a load formula infinite at
+        // a quadrature point between validation's samples): the scene's fault, at its field.
+        SolveError::Data { pointer, message } => {
+            let mut p = problem_json(422, "invalid scene data", &e.to_string());
+            p["type"] = "/problems/scene-data".into();
+            p["errors"] = serde_json::json!([{"pointer": pointer, "message": message}]);
+            p
+        }
         _ => {
             let mut p = problem_json(500, "simulation failed", &e.to_string());
             p["type"] = "/problems/solver".into();

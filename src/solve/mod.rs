@@ -4,6 +4,7 @@
 
 pub mod damage;
 pub mod friction_reduced;
+pub mod invariants;
 pub mod smallness;
 pub mod stepper;
 pub mod velocity;
@@ -61,4 +62,10 @@ pub enum SolveError {
     Smallness(String),
     #[error("non-finite value in the {0} at step {1}")]
     NonFinite(&'static str, usize),
+    /// Scene data that validation's sampling let through but that is unusable where the
+    /// scheme evaluates it (a formula that is infinite or NaN at a quadrature point or time
+    /// node, an initial damage outside [0, 1] at a node). `pointer` is the field's RFC 6901
+    /// JSON pointer in the scene.
+    #[error("invalid scene data at {pointer}: {message}")]
+    Data { pointer: String, message: String },
 }

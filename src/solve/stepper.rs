@@ -176,6 +176,7 @@ impl Simulation {
             .iter()
             .flat_map(|p| problem.u0.eval(p[0], p[1], 0.0))
             .collect();
+        check_initial(&problem, &mesh, &u, &zeta)?;
         let nt = mesh.triangles.len();
         let n_free = dofs.n_free();
         Ok(Simulation {
@@ -252,6 +253,9 @@ impl Simulation {
                 load.iter_mut().for_each(|v| *v = 0.0);
                 loads::add_body_force(mesh, geo, &problem.body_force, t, load);
                 loads::add_tractions(mesh, &problem.boundary, t, load);
+                if load.iter().any(|v| !v.is_finite()) {
+                    return Err(load_fault(problem, mesh, t, n));
+                }
                 loads::add_stress_divergence(mesh, geo, b, load);
                 dofs.to_free(load, load_free);
                 velocity.solve(load_free, w_free, settings, n)
@@ -405,5 +409,90 @@ impl Simulation {
         self.damage
             .as_ref()
             .map_or(0, |d| d.solver.refactorizations)
+    }
+}
+
+/// Where a formula meets the scheme: the scene's sampling check (a small grid at t = 0, T/2,
+/// T) cannot see every node, quadrature point and time node, so the data are checked again
+/// where they are used, and a bad value is reported at the field's JSON pointer.
+fn formula_text(f: &crate::problem::ScalarField) -> String {
+    match f {
+        crate::problem::ScalarField::Const(c) => c.to_string(),
+        crate::problem::ScalarField::Expr(e) => format!("\"{}\"", e.source()),
+    }
+}
+
+/// u0 finite and ζ0 in [0, 1] at every node.
+fn check_initial(
+    problem: &Problem,
+    mesh: &Mesh,
+    u: &[f64],
+    zeta: &[f64],
+) -> Result<(), SolveError> {
+    for (i, p) in mesh.nodes.iter().enumerate() {
+        for c in 0..2 {
+            let v = u[2 * i + c];
+            if !v.is_finite() {
+                return Err(SolveError::Data {
+                    pointer: format!("/initial/u0/{c}"),
+                    message: format!(
+                        "{} evaluates to {v} at the node (x, y) = ({}, {}); the initial \
+                         displacement must be finite at every node",
+                        formula_text(&problem.u0.0[c]),
+                        p[0],
+                        p[1]
+                    ),
+                });
+            }
+        }
+        if let Some(d) = &problem.damage {
+            let z = zeta[i];
+            if !(0.0..=1.0).contains(&z) {
+                return Err(SolveError::Data {
+                    pointer: "/damage/zeta0".into(),
+                    message: format!(
+                        "{} evaluates to {z} at the node (x, y) = ({}, {}); the initial damage \
+                         must be in [0, 1] (1 = intact) at every node",
+                        formula_text(&d.zeta0),
+                        p[0],
+                        p[1]
+                    ),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The error for a non-finite load vector at step n: the field and point responsible.
+fn load_fault(problem: &Problem, mesh: &Mesh, t: f64, n: usize) -> SolveError {
+    use crate::problem::BoundaryKind;
+    let Some(f) = loads::find_non_finite(mesh, &problem.body_force, &problem.boundary, t) else {
+        // Finite values whose integrals overflow.
+        return SolveError::NonFinite("load vector", n);
+    };
+    let (pointer, field) = match f.part {
+        None => (
+            format!("/loads/f0/{}", f.component),
+            &problem.body_force.0[f.component],
+        ),
+        Some(p) => match &problem.boundary[p].kind {
+            BoundaryKind::Traction(f2) => (
+                format!("/boundary/{p}/f2/{}", f.component),
+                &f2.0[f.component],
+            ),
+            _ => return SolveError::NonFinite("load vector", n),
+        },
+    };
+    SolveError::Data {
+        pointer,
+        message: format!(
+            "{} evaluates to {} at (x, y, t) = ({}, {}, {t}), a quadrature point of time step \
+             {n}; loads must be finite on the whole domain and time interval",
+            formula_text(field),
+            f.value,
+            f.at[0],
+            f.at[1]
+        ),
     }
 }

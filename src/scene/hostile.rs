@@ -1,0 +1,464 @@
+//! Hostile input: property tests of [`super::validate`] over arbitrary and adversarial JSON
+//! (extreme numbers, "NaN"/"Inf"/"1e400" strings, deep nesting, giant arrays, formulas that
+//! divide by zero, very long formulas). Validation must answer Ok or Err — never panic — in
+//! bounded time; whatever it accepts must set up and take a step without panicking, and
+//! without NaN results (bad data is refused at its field).
+
+use super::read::MAX_ERRORS;
+use super::*;
+use crate::solve::stepper::Simulation;
+use crate::solve::{SolveError, SolverSettings};
+use proptest::prelude::*;
+use serde_json::json;
+use std::time::{Duration, Instant};
+
+/// A small scene with every section present (so that edits have somewhere to go).
+fn template(width: u32, n: u32, steps: u32) -> Value {
+    json!({
+        "domain": {"width": width, "height": 1},
+        "mesh": {"h": format!("1/{n}")},
+        "time": {"t_end": 1, "N": steps},
+        "boundary": [
+            {"type": "clamped", "from": [0, 0], "to": [0, 1]},
+            {"type": "contact", "from": [0, 0], "to": [width, 0]},
+            {"type": "traction", "from": [0, 1], "to": [width, 1], "f2": [-1, -1]}
+        ],
+        "loads": {"f0": [0, -0.2]},
+        "material": {"viscosity": {"eta": 2, "xi": 2},
+                     "elasticity": {"type": "linear", "mu": 4, "lambda": 4}},
+        "friction": {"law": "tresca", "g": 1},
+        "damage": {"kappa": 0.5, "source": {"a": 2, "b": 20, "zeta_star": 0.2}, "zeta0": 1},
+        "initial": {"u0": [0, 0]}
+    })
+}
+
+/// Where the edits go.
+const SLOTS: &[&str] = &[
+    "/domain/width",
+    "/domain/height",
+    "/mesh/h",
+    "/time/t_end",
+    "/time/N",
+    "/material/viscosity/eta",
+    "/material/viscosity/xi",
+    "/material/elasticity/mu",
+    "/material/elasticity/lambda",
+    "/friction/g",
+    "/friction",
+    "/smallness",
+    "/damage/kappa",
+    "/damage/source/a",
+    "/damage/source/b",
+    "/damage/source/zeta_star",
+    "/damage/zeta0",
+    "/loads/f0/0",
+    "/loads/f0/1",
+    "/boundary/2/f2/0",
+    "/boundary/2/f2/1",
+    "/boundary/1/to",
+    "/initial/u0/0",
+    "/initial/u0/1",
+];
+
+fn extreme_number() -> impl Strategy<Value = Value> {
+    prop_oneof![
+        prop::sample::select(vec![
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.5,
+            2.0,
+            5e-324,
+            1e-308,
+            1e-300,
+            1e-12,
+            1e12,
+            1e300,
+            1e308,
+            -1e308,
+            f64::MAX,
+            f64::MIN,
+            f64::EPSILON,
+        ])
+        .prop_map(Value::from),
+        any::<i64>().prop_map(Value::from),
+        any::<u64>().prop_map(Value::from),
+        any::<f64>().prop_map(Value::from),
+    ]
+}
+
+fn hostile_string() -> impl Strategy<Value = Value> {
+    prop_oneof![
+        prop::sample::select(vec![
+            "NaN",
+            "nan",
+            "Inf",
+            "-inf",
+            "infinity",
+            "1e400",
+            "-1e400",
+            "1e-400",
+            "1/0",
+            "0/0",
+            "-1/0",
+            "1/3",
+            "1/1e-320",
+            "1e308*10",
+            "1/x",
+            "1/(x - 0.5)",
+            "1/(t - 0.5)",
+            "1/(t - 0.25)",
+            "1/(x - 0.25)",
+            "1/(y - 1)",
+            "log(x)",
+            "sqrt(-x)",
+            "sqrt(x - 0.3)",
+            "x^1e308",
+            "exp(1000*t)",
+            "exp(710*t)",
+            "tan(pi/2*x)",
+            "1/sin(pi*x)",
+            "0^-1",
+            "(-1)^0.5",
+            "1 + 0.5*sin(8*pi*x)",
+            "min(1, 0.05 + abs(x - 1))",
+            "1e308*x*y",
+            "-1e300*t",
+            "1/(1 - floor(4*x))",
+        ])
+        .prop_map(Value::from),
+        "[-+*/^(),.0-9eExyt pimnaxsqrtlogfloor]{0,40}".prop_map(Value::String),
+        (1usize..600).prop_map(|n| Value::String("x+".repeat(n) + "1")),
+        (1usize..120).prop_map(|n| Value::String("(".repeat(n) + "x" + &")".repeat(n))),
+        (1usize..400).prop_map(|n| Value::String("-".repeat(n) + "x")),
+        (1usize..200).prop_map(|n| Value::String("2^".repeat(n) + "2")),
+    ]
+}
+
+fn hostile_value() -> impl Strategy<Value = Value> {
+    let leaf = prop_oneof![
+        3 => extreme_number(),
+        3 => hostile_string(),
+        1 => Just(Value::Null),
+        1 => any::<bool>().prop_map(Value::Bool),
+        1 => prop::sample::select(vec![
+            json!({"law": "slip_weakening", "mu0": 1e308, "mu1": 0, "alpha": 1e308}),
+            json!({"law": "slip_weakening", "mu0": 1.2, "mu1": 0.4, "alpha": 3}),
+            json!({"law": "piecewise_linear", "points": [[0, 1e308], [1e-300, 0]]}),
+            json!({"law": "piecewise_linear", "points": [[0, 1], [5e-324, 0]]}),
+            json!({"law": "tresca", "g": 1e308}),
+            json!("warn"),
+            json!([2, 0]),
+        ]),
+    ];
+    leaf.prop_recursive(3, 24, 4, |inner| {
+        prop_oneof![
+            prop::collection::vec(inner.clone(), 0..4).prop_map(Value::Array),
+            prop::collection::btree_map(".{0,4}", inner, 0..4)
+                .prop_map(|m| Value::Object(m.into_iter().collect())),
+        ]
+    })
+}
+
+/// Positive numbers from tiny to huge: valid where a positive number is expected.
+fn extreme_positive() -> impl Strategy<Value = Value> {
+    prop::sample::select(vec![
+        5e-324,
+        1e-308,
+        1e-300,
+        1e-12,
+        1e-4,
+        0.5,
+        1.0,
+        2.0,
+        1e4,
+        1e12,
+        1e300,
+        1e308,
+        f64::MAX,
+    ])
+    .prop_map(Value::from)
+}
+
+/// Slots that take numbers, and slots that take formulas.
+const NUMBER_SLOTS: &[&str] = &[
+    "/domain/width",
+    "/mesh/h",
+    "/time/t_end",
+    "/material/viscosity/eta",
+    "/material/viscosity/xi",
+    "/material/elasticity/mu",
+    "/material/elasticity/lambda",
+    "/friction/g",
+    "/damage/kappa",
+    "/damage/source/a",
+    "/damage/source/b",
+    "/damage/source/zeta_star",
+];
+const FORMULA_SLOTS: &[&str] = &[
+    "/damage/zeta0",
+    "/loads/f0/0",
+    "/loads/f0/1",
+    "/boundary/2/f2/0",
+    "/boundary/2/f2/1",
+    "/initial/u0/0",
+    "/initial/u0/1",
+];
+
+fn edit() -> impl Strategy<Value = (&'static str, Value)> {
+    prop_oneof![
+        3 => (prop::sample::select(NUMBER_SLOTS.to_vec()), extreme_positive()),
+        3 => (prop::sample::select(FORMULA_SLOTS.to_vec()), hostile_string()),
+        1 => (prop::sample::select(SLOTS.to_vec()), hostile_value()),
+    ]
+}
+
+fn hostile_scene() -> impl Strategy<Value = Value> {
+    (
+        prop::sample::select(vec![1u32, 2]),
+        prop::sample::select(vec![1u32, 2, 4, 16]),
+        prop::sample::select(vec![1u32, 2, 4, 8]),
+        any::<bool>(),
+        prop::collection::vec(edit(), 1..4),
+    )
+        .prop_map(|(w, n, steps, warn, edits)| {
+            let mut doc = template(w, n, steps);
+            if warn {
+                doc["smallness"] = json!("warn");
+            }
+            for (ptr, v) in edits {
+                if let Some(slot) = doc.pointer_mut(ptr) {
+                    *slot = v;
+                } else if let Some((parent, key)) = ptr.rsplit_once('/') {
+                    if let Some(Value::Object(m)) = doc.pointer_mut(parent) {
+                        m.insert(key.to_string(), v);
+                    }
+                }
+            }
+            doc
+        })
+}
+
+/// Validation, and (for small accepted scenes) set-up and one step: never a panic, never a
+/// NaN result, always within `limit`.
+fn exercise(doc: &Value, limit: Duration) -> Result<(), TestCaseError> {
+    let start = Instant::now();
+    let result = validate(doc);
+    prop_assert!(
+        start.elapsed() < limit,
+        "validation took {:?}",
+        start.elapsed()
+    );
+    let p = match result {
+        Err(e) => {
+            prop_assert!(!e.0.is_empty());
+            for err in &e.0 {
+                prop_assert!(err.pointer.is_empty() || err.pointer.starts_with('/'));
+                prop_assert!(!err.message.contains("internal error"), "{}", err.message);
+            }
+            return Ok(());
+        }
+        Ok(p) => p,
+    };
+    let (nx, ny) = p.cells();
+    if (nx + 1) * (ny + 1) > 2000 {
+        return Ok(());
+    }
+    let mut sim = match Simulation::new(p, SolverSettings::default()) {
+        Ok(sim) => sim,
+        Err(_) => return Ok(()),
+    };
+    match sim.step() {
+        Ok(r) => {
+            prop_assert!(r.w_v.is_finite() && r.u_v.is_finite() && r.zeta_l2.is_finite());
+            prop_assert!(sim.w.iter().all(|v| v.is_finite()), "NaN velocity accepted");
+            prop_assert!(sim.state.zeta.iter().all(|z| (0.0..=1.0).contains(z)));
+        }
+        Err(SolveError::Data { pointer, message }) => {
+            prop_assert!(pointer.starts_with('/') && !message.is_empty());
+        }
+        Err(_) => {}
+    }
+    Ok(())
+}
+
+#[test]
+fn the_template_is_valid() {
+    for w in [1, 2] {
+        for n in [1, 2, 4] {
+            if let Err(e) = validate(&template(w, n, 4)) {
+                panic!("{e}");
+            }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(400))]
+
+    #[test]
+    fn hostile_scenes_are_answered_without_panic(doc in hostile_scene()) {
+        exercise(&doc, Duration::from_secs(2))?;
+    }
+}
+
+/// A scene with `parts` boundary parts (all but the first are tiny traction pieces of the
+/// top side), `fields` output field names and `points` friction-table points.
+fn giant(parts: usize, fields: usize, points: usize) -> Value {
+    let mut doc = template(1, 4, 4);
+    let mut boundary = vec![json!({"type": "clamped", "from": [0, 0], "to": [0, 1]})];
+    for i in 1..parts {
+        let (a, b) = ((i - 1) as f64 / parts as f64, i as f64 / parts as f64);
+        boundary.push(json!({"type": "traction", "from": [a, 1], "to": [b, 1], "f2": ["x*t", 0]}));
+    }
+    doc["boundary"] = Value::Array(boundary);
+    doc["output"] = json!({"fields": vec!["u"; fields]});
+    let table: Vec<Value> = (0..points).map(|i| json!([i, 1])).collect();
+    doc["friction"] = json!({"law": "piecewise_linear", "points": table});
+    doc
+}
+
+#[test]
+fn giant_arrays_are_refused_quickly_at_their_pointer() {
+    let doc = giant(100_000, 100_000, 100_000);
+    let start = Instant::now();
+    let errs = validate(&doc).unwrap_err().0;
+    assert!(
+        start.elapsed() < Duration::from_secs(2),
+        "took {:?}",
+        start.elapsed()
+    );
+    for (ptr, text) in [
+        ("/boundary", "at most"),
+        ("/output/fields", "at most"),
+        ("/friction/points", "got 100000 points"),
+    ] {
+        assert!(
+            errs.iter()
+                .any(|e| e.pointer == ptr && e.message.contains(text)),
+            "{ptr}: {errs:?}"
+        );
+    }
+    // At the limits they are accepted.
+    let doc = giant(MAX_BOUNDARY_PARTS, MAX_OUTPUT_FIELDS, MAX_TABLE_POINTS);
+    validate(&doc).unwrap_or_else(|e| panic!("{e}"));
+}
+
+#[test]
+fn errors_are_capped() {
+    // A million unknown fields: the list of errors stays bounded and says so.
+    let mut doc = template(1, 4, 4);
+    for i in 0..100_000 {
+        doc[format!("unknown{i}")] = json!(i);
+    }
+    let errs = validate(&doc).unwrap_err().0;
+    assert_eq!(errs.len(), MAX_ERRORS + 1);
+    assert!(
+        errs[MAX_ERRORS].message.contains("more problems"),
+        "{:?}",
+        errs[MAX_ERRORS]
+    );
+}
+
+#[test]
+fn deep_nesting_is_refused_without_recursion() {
+    // Deeply nested values where a number, an object or a formula is expected.
+    let mut deep = json!(1);
+    for _ in 0..2000 {
+        deep = Value::Array(vec![deep]);
+    }
+    for ptr in [
+        "/mesh/h",
+        "/loads/f0/0",
+        "/material",
+        "/boundary/0",
+        "/damage/zeta0",
+    ] {
+        let mut doc = template(1, 4, 4);
+        *doc.pointer_mut(ptr).unwrap_or_else(|| panic!("{ptr}")) = deep.clone();
+        let errs = validate(&doc).unwrap_err().0;
+        assert!(errs.iter().any(|e| e.pointer == ptr), "{ptr}: {errs:?}");
+    }
+    // The service parses request bodies with serde_json, which stops at depth 128.
+    let text = "[".repeat(10_000) + &"]".repeat(10_000);
+    assert!(serde_json::from_str::<Value>(&text).is_err());
+}
+
+#[test]
+fn non_numbers_in_strings_are_refused() {
+    for s in [
+        "NaN", "nan", "Inf", "-inf", "infinity", "1e400", "-1e400", "1/0", "0/0",
+    ] {
+        for ptr in ["/mesh/h", "/time/t_end"] {
+            let mut doc = template(1, 4, 4);
+            *doc.pointer_mut(ptr).unwrap() = json!(s);
+            let errs = validate(&doc).unwrap_err().0;
+            assert!(
+                errs.iter().any(|e| e.pointer == ptr),
+                "{s} at {ptr}: {errs:?}"
+            );
+        }
+        let mut doc = template(1, 4, 4);
+        doc["loads"]["f0"][0] = json!(s);
+        assert!(validate(&doc).is_err(), "{s} as a formula");
+    }
+    // "1e-400" underflows to 0: a valid number, but not a valid mesh size.
+    let mut doc = template(1, 4, 4);
+    doc["mesh"]["h"] = json!("1e-400");
+    assert!(validate(&doc).is_err());
+}
+
+/// The error of set-up or of the first step for a scene that validation accepts.
+fn first_error(doc: &Value) -> SolveError {
+    let p = validate(doc).unwrap_or_else(|e| panic!("validation should pass: {e}"));
+    let mut sim = match Simulation::new(p, SolverSettings::default()) {
+        Ok(sim) => sim,
+        Err(e) => return e,
+    };
+    sim.step().expect_err("the first step must fail")
+}
+
+#[track_caller]
+fn assert_data_error(doc: &Value, ptr: &str, text: &str) {
+    match first_error(doc) {
+        SolveError::Data { pointer, message } => {
+            assert_eq!(pointer, ptr, "{message}");
+            assert!(message.contains(text), "{message}");
+        }
+        other => panic!("expected a data error at {ptr}, got {other}"),
+    }
+}
+
+/// Regressions: validation samples formulas on a 5 × 5 grid at t = 0, T/2, T only, so a
+/// formula that is infinite at a time node, a quadrature point or a node in between used to
+/// reach the scheme: non-finite loads ended in "non-finite value in the velocity" (no field
+/// named), and an initial damage above 1 between the samples ran silently. Now each is
+/// refused at its field, with the point.
+#[test]
+fn formulas_bad_between_the_samples_are_refused_at_their_field() {
+    // Infinite at the time node t_1 = 0.25 (samples t = 0, 0.5, 1 are finite).
+    let mut doc = template(1, 4, 4);
+    doc["loads"]["f0"] = json!(["1/(t - 0.25)", 0]);
+    assert_data_error(
+        &doc,
+        "/loads/f0/0",
+        "evaluates to inf at (x, y, t) = (0, 0, 0.25)",
+    );
+    // Infinite at a 2-point Gauss point of a top edge, on x in (0.55, 0.6) only.
+    let mut doc = template(1, 16, 4);
+    doc["boundary"][2]["f2"] = json!(["1/(1 - max(0, sign(x - 0.55)*sign(0.6 - x)))", 0]);
+    assert_data_error(&doc, "/boundary/2/f2/0", "evaluates to inf");
+    // ζ0 = 1.5 at the node x = 1/16 (the samples x = 0, 1/4, ... give 1).
+    let mut doc = template(1, 16, 4);
+    doc["damage"]["zeta0"] = json!("1 + 0.5*sin(8*pi*x)");
+    assert_data_error(
+        &doc,
+        "/damage/zeta0",
+        "evaluates to 1.5 at the node (x, y) = (0.0625, 0)",
+    );
+    // u0 infinite at the node x = 1/16.
+    let mut doc = template(1, 16, 4);
+    doc["initial"]["u0"] = json!(["1/(x - 0.0625)", 0]);
+    assert_data_error(&doc, "/initial/u0/0", "evaluates to inf");
+}
