@@ -111,8 +111,6 @@ export function follow(id, onEvent, onEnd) {
   es.addEventListener('status', handle(true));
   // A stream that fails (server restart, deleted job) is handed back to the caller, which
   // falls back to polling instead of letting EventSource retry blindly.
-  es.onerror = () => {
-    if (es.readyState === EventSource.CLOSED || !ended) end();
-  };
+  es.onerror = end;
   return { close: end };
 }

@@ -21,8 +21,13 @@ const studyView = new StudyView(viewRoot);
 let presetList = [];
 let shownId = null; // the job whose results are on screen
 
+const narrow = window.matchMedia('(max-width: 900px)');
 const jobs = new JobList($('#job-list'), {
-  onSelect: (job) => show(job),
+  onSelect: (job, byUser) => {
+    show(job);
+    // In the one-column layout the results are below the list: bring them into view.
+    if (byUser && narrow.matches) $('#view-panel').scrollIntoView({ behavior: 'smooth', block: 'start' });
+  },
   onUpdate: (job) => {
     if (job.id !== jobs.selected) return;
     if (job.deleted) clearView('The job was deleted.');

@@ -70,11 +70,12 @@ export class JobList {
     if (this.selected === id) this.selected = null;
   }
 
-  select(id) {
+  /** Selects a job (`byUser`: clicked in the list, not chosen by the program). */
+  select(id, byUser = false) {
     this.selected = id;
     this.render();
     const job = this.jobs.get(id);
-    if (job) this.onSelect(job);
+    if (job) this.onSelect(job, byUser);
   }
 
   /** Opens event streams for unfinished jobs, newest first, up to MAX_STREAMS. */
@@ -174,7 +175,7 @@ export class JobList {
     r.li = el(
       'li',
       { class: 'job', dataset: { id } },
-      el('button', { class: 'job-open', type: 'button', title: 'show this job', onclick: () => this.select(id) }, r.name, r.badge, r.status),
+      el('button', { class: 'job-open', type: 'button', title: 'show this job', onclick: () => this.select(id, true) }, r.name, r.badge, r.status),
       r.progress,
       el('div', { class: 'job-meta' }, r.detail, r.actions),
       r.id,

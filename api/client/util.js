@@ -37,6 +37,7 @@ export function fmtStep(x) {
 
 export function fmtSeconds(s) {
   if (s === null || s === undefined) return '–';
+  if (s < 0.01) return `${Number((s * 1000).toPrecision(2))} ms`;
   if (s < 1) return `${(s * 1000).toFixed(0)} ms`;
   if (s < 120) return `${s.toFixed(1)} s`;
   return `${Math.floor(s / 60)} min ${Math.round(s % 60)} s`;

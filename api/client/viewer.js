@@ -204,8 +204,7 @@ export class SimulationView {
 
   /** The range inputs are editable only in "fixed" mode; switching fills them with the current range. */
   onRangeInputs(quantityChanged) {
-    const manual = this.rangeMode.value === 'manual';
-    this.lo.disabled = this.hi.disabled = !manual;
+    // A fixed range of one quantity means nothing for another: go back to automatic.
     if (quantityChanged) this.rangeMode.value = 'step';
     this.lo.disabled = this.hi.disabled = this.rangeMode.value !== 'manual';
     this.draw();

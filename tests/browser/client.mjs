@@ -12,6 +12,8 @@
 // 2. Submit a scene with mesh.h = -1 from the editor and check that the server's message is
 //    shown on the editor line of that key and in the error list; then a preset with
 //    overrides.h = -1 and check the message under the h input.
+// 3. A long job: its progress moves in the list (SSE), Cancel stops it, Delete removes it.
+// 4. The study view, with the study contract's answers injected by request interception.
 
 import { chromium } from 'playwright-core';
 import fs from 'node:fs';
@@ -56,14 +58,15 @@ const context = await chromium.launchPersistentContext(userDataDir, {
 });
 
 const pageErrors = [];
-async function openPage() {
+async function openPage(setup, hash = '') {
   const page = await context.newPage();
+  if (setup) await setup(page);
   page.on('pageerror', (e) => pageErrors.push(String(e)));
   page.on('console', (m) => {
     // A 422 answer is logged by the browser as a failed resource; that one is expected.
     if (m.type() === 'error' && !/status of 422/.test(m.text())) console.log(`  [console.${m.type()}] ${m.text()}`);
   });
-  await page.goto(base + '/');
+  await page.goto(base + '/' + hash);
   await page.waitForSelector('body[data-ready="true"]', { timeout: 15_000 });
   return page;
 }
@@ -154,6 +157,11 @@ async function testSimulation() {
   const s1 = await canvasStats(page);
   console.log('  canvas at step 1:', JSON.stringify(s1));
   check(s1.hash !== s8.hash, 'the canvas changed with the step');
+  // Consistency of the statistic: a step whose ζ is uniform (the colour bar says so) is
+  // drawn in a single colour-map entry.
+  if ((await page.textContent('#colorbar')).includes('(uniform)')) {
+    check(s1.distinct === 1, `uniform ζ at step 1 is drawn with ${s1.distinct} colour-map entry`);
+  }
   await page.keyboard.press('ArrowRight');
   await page.waitForSelector('#viewer[data-step="2"]', { timeout: 10_000 });
   const s2 = await canvasStats(page);
@@ -242,10 +250,91 @@ async function testInvalidScene() {
   await page.close();
 }
 
+async function testLiveJob() {
+  console.log('test 3: live progress (SSE), cancel, delete');
+  const events = [];
+  const page = await openPage((p) => p.on('request', (r) => events.push(r.url())));
+  page.on('dialog', (d) => d.accept()); // "Delete job ...?"
+  await page.selectOption('#preset-select', 'paper-exp2');
+  await page.fill('#ov-h', '1/16');
+  await page.fill('#ov-k', '1/20000');
+  await page.click('#submit-preset');
+  await page.waitForSelector('#viewer[data-state="waiting"]', { timeout: 10_000 });
+  const id = await page.getAttribute('#viewer', 'data-job');
+  const item = `#job-list li.job[data-id="${id}"]`;
+  await page.waitForSelector(`${item}[data-status="running"]`, { timeout: 30_000 });
+  const stepOf = () => page.$eval(`${item} .job-detail`, (e) => Number((/^(\d+)\//.exec(e.textContent) || [])[1] || 0));
+  const first = await stepOf();
+  await page.waitForFunction(
+    ([sel, s0]) => Number((/^(\d+)\//.exec(document.querySelector(sel).textContent) || [])[1] || 0) > s0 + 10,
+    [`${item} .job-detail`, first],
+    { timeout: 30_000 },
+  );
+  const later = await stepOf();
+  check(later > first, `progress moves in the list: step ${first} -> ${later} of 20000`);
+  check(events.some((u) => u.endsWith(`/jobs/${id}/events`)), 'progress comes from the SSE stream');
+  check((await page.textContent('#viewer')).includes('is running: step'), 'the result pane shows the running state');
+  await page.click(`${item} button:has-text("Cancel")`);
+  await page.waitForSelector(`${item}[data-status="cancelled"]`, { timeout: 15_000 });
+  check(true, 'Cancel stops the job (status cancelled)');
+  await page.click(`${item} button:has-text("Delete")`);
+  await page.waitForSelector(item, { state: 'detached', timeout: 10_000 });
+  const gone = (await page.request.get(`${base}/jobs/${id}`)).status();
+  check(gone === 404, 'Delete removes the job (GET /jobs/{id} is 404)');
+  await page.close();
+}
+
+/**
+ * Studies are computed by another part of the service; the view is written against their
+ * contract (kind "study", the study summary, links.report). Here the browser is given such
+ * answers through request interception, and the table and the report image are checked.
+ */
+async function testStudyView() {
+  console.log('test 4: study view (contract answers injected into the page)');
+  const id = '00000000-0000-4000-8000-000000000005';
+  const job = {
+    id, kind: 'study', scene: 'paper-table-1', status: 'succeeded',
+    progress: { step: 5, steps: 5, percent: 100, eta_s: 0, last_residual: null },
+    created_at: new Date().toISOString(), started_at: null, finished_at: null, error: null,
+    attempt: 1, worker: null, scene_hash: 'x',
+    links: { self: `/jobs/${id}`, summary: `/jobs/${id}/summary`, report: `/jobs/${id}/report.svg` },
+  };
+  const summary = {
+    kind: 'study', vary: 'h',
+    reference: { h: 1 / 128, k: 1 / 128, w_V: 0.1527592631, zeta_Z0: 0.7638660333, seconds: 2.1 },
+    rows: [
+      { h: 0.5, k: 1 / 128, err_w: 0.63547, err_zeta: 0.14115, order_w: null, order_zeta: null, unknowns: 12, steps: 128, seconds: 0.0004 },
+      { h: 0.25, k: 1 / 128, err_w: 0.40677, err_zeta: 0.068495, order_w: 0.644, order_zeta: 1.043, unknowns: 40, steps: 128, seconds: 0.001 },
+      { h: 0.125, k: 1 / 128, err_w: 0.23041, err_zeta: 0.025918, order_w: 0.82, order_zeta: 1.402, unknowns: 144, steps: 128, seconds: 0.004 },
+    ],
+    lsq_order_w: 0.78, lsq_order_zeta: 1.31,
+  };
+  const svg = '<svg xmlns="http://www.w3.org/2000/svg" width="400" height="200"><rect width="400" height="200" fill="#eef"/><text x="20" y="40">report</text></svg>';
+  const page = await openPage(async (p) => {
+    const json = (body) => ({ status: 200, contentType: 'application/json', body: JSON.stringify(body) });
+    await p.route((u) => u.pathname === '/jobs', (r) => r.fulfill(json({ jobs: [job], next: null })));
+    await p.route((u) => u.pathname === `/jobs/${id}`, (r) => r.fulfill(json(job)));
+    await p.route((u) => u.pathname === `/jobs/${id}/summary`, (r) => r.fulfill(json(summary)));
+    await p.route((u) => u.pathname === `/jobs/${id}/report.svg`, (r) => r.fulfill({ status: 200, contentType: 'image/svg+xml', body: svg }));
+  }, `#job=${id}`);
+  await page.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 10_000 });
+  const rows = await page.$$eval('#study-table tbody tr', (trs) => trs.map((tr) => [...tr.cells].map((c) => c.textContent)));
+  check(rows.length === 3, `${rows.length} table rows`);
+  check(rows[0][0] === '1/2' && rows[0][3] === '–' && rows[1][3] === '0.644', `rows read h as 1/n and orders (first row: –): ${JSON.stringify(rows[1])}`);
+  const img = await page.$eval('#viewer img.report', (i) => ({ src: i.getAttribute('src'), w: i.naturalWidth, done: i.complete }));
+  check(img.src === `/jobs/${id}/report.svg` && img.w > 0, `report SVG embedded and loaded (${img.w} px wide)`);
+  check((await page.locator('#viewer canvas').count()) === 0, 'nothing else is drawn for a study');
+  check((await page.textContent('#viewer')).includes('0.780'), 'least-squares orders shown');
+  await page.screenshot({ path: path.join(outDir, 'client-study.png'), fullPage: true });
+  await page.close();
+}
+
 let failed = false;
 try {
   await testSimulation();
   await testInvalidScene();
+  await testLiveJob();
+  await testStudyView();
   if (pageErrors.length) throw new Error(`uncaught errors in the page: ${pageErrors.join('; ')}`);
   console.log(`PASS (screenshots in ${outDir})`);
 } catch (e) {
