@@ -176,7 +176,11 @@ async function loadPresetIntoEditor(open) {
   }
 }
 
-$('#edit-preset').addEventListener('click', () => loadPresetIntoEditor(true));
+$('#edit-preset').addEventListener('click', () => {
+  // Do not throw away a scene the user has been editing without asking.
+  if (editor.edited && !confirm('Replace the edited scene with the preset?')) return;
+  loadPresetIntoEditor(true);
+});
 
 function submitScene() {
   // Syntax errors are shown locally (with their line) instead of a bare 400 from the server.

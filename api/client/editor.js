@@ -45,9 +45,15 @@ export class SceneEditor {
 
   set text(t) {
     this.textarea.value = t;
+    this.loaded = t;
     this.errors = [];
     this.render();
     this.textarea.scrollTop = 0;
+  }
+
+  /** True when the user changed the text since it was last set by the program. */
+  get edited() {
+    return this.textarea.value !== (this.loaded ?? '');
   }
 
   /** The parsed document, or null after showing where the syntax is wrong. */

@@ -147,9 +147,15 @@ export class SimulationView {
       ['min ζ', 'zeta_min', '#c92a2a'],
     ].map(([title, key, colour]) => linePlot(plots, { title, xs: ts, ys: s.map((r) => r[key]), colour }));
 
-    // Redraw at the new size when the layout changes (window resize, narrow screens).
-    this.resizeObserver = new ResizeObserver(() => this.draw());
-    this.resizeObserver.observe(this.canvas);
+    // Redraw at the new size when the layout changes (window resize, narrow screens). The
+    // wrapper's width is watched, not the canvas, whose height draw() itself sets.
+    let width = 0;
+    this.resizeObserver = new ResizeObserver(([entry]) => {
+      if (entry.contentRect.width === width) return;
+      width = entry.contentRect.width;
+      this.draw();
+    });
+    this.resizeObserver.observe(this.canvas.parentElement);
   }
 
   /** Shows stored step number `idx` (index into this.steps), fetching it if needed. */
@@ -221,8 +227,8 @@ export class SimulationView {
     } else {
       range = niceRange(min, max);
       if (this.rangeMode.value !== 'manual') {
-        this.lo.value = String(Number(min.toPrecision(6)));
-        this.hi.value = String(Number(max.toPrecision(6)));
+        this.lo.value = String(Number(min.toPrecision(4)));
+        this.hi.value = String(Number(max.toPrecision(4)));
       }
     }
     // Height follows the body's aspect ratio, within the window.
@@ -281,6 +287,7 @@ export class SimulationView {
       idx++;
       this.slider.value = String(idx);
       await this.show(idx);
+      if (!this.playing) break; // paused, or another job opened, while the step loaded
       // Fetch the next step while this one is on screen.
       const next = this.steps[idx + 1];
       if (next && !this.cache.has(next.n)) api.fields(this.job.id, next.n, false).then((d) => this.remember(d), () => {});
