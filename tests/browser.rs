@@ -34,7 +34,7 @@ fn temp_dir(tag: &str) -> PathBuf {
 
 fn start(tag: &str) -> (Server, PathBuf) {
     let dir = temp_dir(tag);
-    let srv = Server::start(Config {
+    let srv = Server::start_with(Config {
         data_dir: dir.clone(),
         workers: 2,
         ..Config::default()

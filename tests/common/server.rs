@@ -14,7 +14,7 @@ pub struct Server {
 }
 
 impl Server {
-    pub fn start(config: Config) -> Server {
+    pub fn start_with(config: Config) -> Server {
         let (addr_tx, addr_rx) = std::sync::mpsc::channel();
         let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
         let thread = std::thread::spawn(move || {
