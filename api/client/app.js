@@ -118,8 +118,9 @@ async function submit(body, fromEditor) {
     jobs.select(job.id);
   } catch (e) {
     if (e.status === 422 && e.errors.length) {
-      let rest = e.errors;
-      if (fromEditor) editor.showErrors(e.errors), (rest = []);
+      // From the editor every pointer is into the scene text; from the form they name inputs.
+      let rest = [];
+      if (fromEditor) editor.showErrors(e.errors);
       else rest = showFieldErrors(e.errors);
       const extra = rest.map((r) => `${r.pointer}: ${r.message}`).join('; ');
       setStatus(`${e.title || 'invalid scene'}: ${e.errors.length} error${e.errors.length > 1 ? 's' : ''}${extra ? ` (${extra})` : ''}`, true);

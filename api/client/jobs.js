@@ -24,6 +24,7 @@ export class JobList {
     this.onUpdate = onUpdate;
     this.jobs = new Map(); // id -> job resource
     this.streams = new Map(); // id -> {close}
+    this.pollOnly = new Set(); // ids whose stream broke while unfinished: polled instead
     this.selected = null;
     this.timer = 0;
     this.empty = el('li', { class: 'empty' }, 'No jobs yet: run a preset or a scene.');
@@ -81,7 +82,7 @@ export class JobList {
   /** Opens event streams for unfinished jobs, newest first, up to MAX_STREAMS. */
   followSome() {
     const waiting = [...this.jobs.values()]
-      .filter((j) => !isFinished(j) && !this.streams.has(j.id))
+      .filter((j) => !isFinished(j) && !this.streams.has(j.id) && !this.pollOnly.has(j.id))
       .sort((a, b) => (a.created_at < b.created_at ? 1 : -1));
     for (const j of waiting) {
       if (this.streams.size >= MAX_STREAMS) break;
@@ -102,7 +103,13 @@ export class JobList {
           this.streams.delete(id);
           // The final event carries no links and no error: read the whole resource.
           try {
-            if (this.jobs.has(id)) this.upsert(await api.job(id));
+            if (this.jobs.has(id)) {
+              const job = await api.job(id);
+              // A stream that ended before the job did broke (e.g. a proxy or a restart):
+              // reconnecting at once could loop, so this job is left to the list's polling.
+              if (!isFinished(job)) this.pollOnly.add(id);
+              this.upsert(job);
+            }
           } catch (e) {
             if (e.status === 404) this.drop(id);
           }
