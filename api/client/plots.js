@@ -15,8 +15,8 @@ const svg = (tag, attrs = {}) => {
  * The SVG uses a fixed viewBox and scales with its container (CSS width: 100%).
  */
 export function linePlot(parent, { title, xs, ys, xLabel = 't', colour = '#1864ab' }) {
-  const w = 260, h = 120;
-  const m = { l: 46, r: 8, t: 18, b: 20 };
+  const w = 220, h = 120;
+  const m = { l: 44, r: 8, t: 18, b: 20 };
   const root = svg('svg', { viewBox: `0 0 ${w} ${h}`, class: 'plot', role: 'img', 'aria-label': title });
   const good = xs.map((x, i) => [x, ys[i]]).filter(([x, y]) => Number.isFinite(x) && Number.isFinite(y));
   const xmin = Math.min(...good.map((p) => p[0]));
