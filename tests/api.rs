@@ -3,7 +3,7 @@
 //! idempotency, cancellation, and restart on the same data directory with resumption from a
 //! checkpoint.
 
-use contact_sim::service::{app, Config};
+use contact_sim::service::Config;
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::io::{Read, Write};
@@ -11,11 +11,8 @@ use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-struct Server {
-    addr: SocketAddr,
-    stop: Option<tokio::sync::oneshot::Sender<()>>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
+mod common;
+use common::server::Server;
 
 impl Server {
     fn start(data_dir: &Path, workers: usize) -> Server {
@@ -25,41 +22,6 @@ impl Server {
             max_nodes: 20_000,
             ..Config::default()
         })
-    }
-
-    fn start_with(config: Config) -> Server {
-        let (addr_tx, addr_rx) = std::sync::mpsc::channel();
-        let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-        let thread = std::thread::spawn(move || {
-            let rt = tokio::runtime::Builder::new_multi_thread()
-                .worker_threads(2)
-                .enable_all()
-                .build()
-                .unwrap();
-            rt.block_on(async move {
-                let state = app::start(config).expect("start");
-                let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-                addr_tx.send(listener.local_addr().unwrap()).unwrap();
-                app::serve(listener, state, async move {
-                    let _ = stop_rx.await;
-                })
-                .await
-                .unwrap();
-            });
-        });
-        let addr = addr_rx
-            .recv_timeout(Duration::from_secs(30))
-            .expect("server started");
-        Server {
-            addr,
-            stop: Some(stop_tx),
-            thread: Some(thread),
-        }
-    }
-
-    fn stop(mut self) {
-        self.stop.take().unwrap().send(()).ok();
-        self.thread.take().unwrap().join().unwrap();
     }
 }
 

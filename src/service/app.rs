@@ -3,7 +3,7 @@
 
 use super::error::ApiError;
 use super::jobs::Runtime;
-use super::routes::{jobs, misc, results};
+use super::routes::{client, jobs, misc, results};
 use super::store::results::ResultFiles;
 use super::store::sqlite::SqliteStore;
 use super::store::Store;
@@ -48,6 +48,8 @@ pub fn app(state: AppState) -> Router {
         .route("/healthz", get(misc::healthz))
         .route("/metrics", get(misc::metrics))
         .route("/openapi.yaml", get(misc::openapi))
+        .route("/", get(client::index))
+        .route("/client/{file}", get(client::file))
         .fallback(|| async { ApiError::not_found("no such route; see GET /openapi.yaml") })
         .method_not_allowed_fallback(|| async {
             ApiError::new(

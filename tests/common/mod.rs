@@ -1,6 +1,8 @@
 //! Shared helpers of the whole-run tests: scenes from presets with edits, and runs.
 #![allow(dead_code)]
 
+pub mod server;
+
 use contact_sim::problem::Problem;
 use contact_sim::scene::{self, presets, Overrides};
 use contact_sim::solve::stepper::{Simulation, StepReport};

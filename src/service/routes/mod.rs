@@ -1,5 +1,6 @@
 //! HTTP handlers, one file per resource family.
 
+pub mod client;
 pub mod jobs;
 pub mod misc;
 pub mod results;

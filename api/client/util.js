@@ -1,0 +1,44 @@
+// Small DOM and formatting helpers shared by the modules.
+
+/** Creates an element: el('td', {class: 'num', title: 'x'}, 'text', childNode, ...). */
+export function el(tag, attrs = {}, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (v === undefined || v === null || v === false) continue;
+    if (k.startsWith('on') && typeof v === 'function') e.addEventListener(k.slice(2), v);
+    else if (k === 'dataset') Object.assign(e.dataset, v);
+    else e.setAttribute(k, v === true ? '' : String(v));
+  }
+  for (const c of children.flat()) {
+    if (c === null || c === undefined || c === false) continue;
+    e.append(c instanceof Node ? c : String(c));
+  }
+  return e;
+}
+
+export const $ = (sel, root = document) => root.querySelector(sel);
+
+/** A number in a compact, readable form (4 significant digits, exponent when needed). */
+export function fmt(x, digits = 4) {
+  if (x === null || x === undefined || Number.isNaN(x)) return '–';
+  if (x === 0) return '0';
+  const a = Math.abs(x);
+  if (a >= 1e-3 && a < 1e5) return String(Number(x.toPrecision(digits)));
+  return x.toExponential(digits - 1);
+}
+
+/** Mesh sizes and time steps read best as 1/n when they are reciprocals of integers. */
+export function fmtStep(x) {
+  if (typeof x !== 'number' || !(x > 0)) return fmt(x);
+  const n = 1 / x;
+  if (Math.abs(n - Math.round(n)) < 1e-9 * n && Math.round(n) > 1) return `1/${Math.round(n)}`;
+  return fmt(x);
+}
+
+export function fmtSeconds(s) {
+  if (s === null || s === undefined) return '–';
+  if (s < 0.01) return `${Number((s * 1000).toPrecision(2))} ms`;
+  if (s < 1) return `${(s * 1000).toFixed(0)} ms`;
+  if (s < 120) return `${s.toFixed(1)} s`;
+  return `${Math.floor(s / 60)} min ${Math.round(s % 60)} s`;
+}

@@ -1,0 +1,303 @@
+// The result view of a finished simulation: the deformed mesh coloured by a field, the
+// contact boundary with its stick/slip state, a time slider with play, norms over time,
+// and download links. Data (all from the real endpoints):
+//   GET /jobs/{id}/fields?step=N&mesh=1  -> {job, mesh: {nodes, triangles, boundary_edges},
+//        n, t, u: [ux0, uy0, ...], w: [...], zeta: [...], von_mises: [per triangle],
+//        contact: [{node, slip_velocity, friction_traction, bound, slipping}]}
+//   GET /jobs/{id}/summary -> {mesh, time, final, stats, steps: [{n, t, w_V, u_V, zeta_L2, zeta_min, ...}], ...}
+//   GET /jobs/{id}/result.pvd -> which steps are stored (see api.storedSteps).
+// The mesh is fetched once (with the first step); later steps are fetched without it and
+// kept in a small cache, so scrubbing back and forth does not refetch.
+
+import * as api from './api.js';
+import { el, fmt, fmtStep, fmtSeconds } from './util.js';
+import { drawField, STICK, SLIP } from './render.js';
+import { cssGradient, niceRange } from './colormap.js';
+import { linePlot } from './plots.js';
+
+const QUANTITIES = {
+  zeta: { label: 'damage ζ', key: 'zeta', perCell: false },
+  von_mises: { label: 'von Mises stress (per triangle)', key: 'von_mises', perCell: true },
+  w: { label: 'velocity |w|', key: 'w', perCell: false },
+};
+const CACHE_STEPS = 400;
+const FRAME_MS = 150;
+
+export class SimulationView {
+  constructor(root) {
+    this.root = root;
+    this.token = 0; // increases with every step request; stale answers are dropped
+    this.cache = new Map();
+    this.playing = false;
+  }
+
+  /** Shows the results of a succeeded simulation job. */
+  async open(job) {
+    this.close();
+    const id = job.id;
+    this.job = job;
+    this.root.dataset.state = 'loading';
+    this.root.dataset.job = id;
+    this.root.replaceChildren(el('p', { class: 'hint' }, 'Loading results…'));
+    let summary, steps, first;
+    try {
+      [summary, steps, first] = await Promise.all([api.summary(id), api.storedSteps(id), api.fields(id, 'last', true)]);
+    } catch (e) {
+      if (this.job !== job) return;
+      this.root.dataset.state = 'error';
+      this.root.replaceChildren(el('p', { class: 'error' }, `Cannot load the results: ${e.message}`));
+      return;
+    }
+    if (this.job !== job) return; // another job was opened meanwhile
+    this.mesh = first.mesh;
+    delete first.mesh;
+    this.summary = summary;
+    this.steps = steps.length ? steps : [{ n: first.n, t: first.t }];
+    this.cache = new Map([[first.n, first]]);
+    this.current = first;
+    this.build();
+    const idx = Math.max(0, this.steps.findIndex((s) => s.n === first.n));
+    this.slider.value = String(idx);
+    this.showLoaded(idx, first);
+    this.root.dataset.state = 'ready';
+  }
+
+  close() {
+    this.stop();
+    this.token++;
+    this.job = null;
+    this.resizeObserver?.disconnect();
+    this.root.replaceChildren();
+    delete this.root.dataset.state;
+    delete this.root.dataset.step;
+  }
+
+  build() {
+    const { summary, job } = this;
+    const id = job.id;
+    const f = this.current;
+    // Offer only the fields this run stored (a scene's output.fields selects them).
+    this.quantity = el('select', { id: 'quantity', onchange: () => this.onRangeInputs(true) },
+      Object.entries(QUANTITIES).map(([k, q]) => el('option', { value: k, disabled: !f[q.key] }, q.label)));
+    this.quantity.value = Object.keys(QUANTITIES).find((k) => f[QUANTITIES[k].key]) || 'zeta';
+    this.factor = el('input', { id: 'factor', type: 'number', min: '0', step: 'any', value: '1', inputmode: 'decimal', oninput: () => this.draw() });
+    this.edges = el('input', { id: 'show-edges', type: 'checkbox', onchange: () => this.draw() });
+    this.rangeMode = el('select', { id: 'range-mode', onchange: () => this.onRangeInputs(false) },
+      el('option', { value: 'step' }, 'this step'),
+      el('option', { value: 'manual' }, 'fixed'));
+    this.lo = el('input', { id: 'range-lo', type: 'number', step: 'any', 'aria-label': 'colour range minimum', oninput: () => this.draw() });
+    this.hi = el('input', { id: 'range-hi', type: 'number', step: 'any', 'aria-label': 'colour range maximum', oninput: () => this.draw() });
+    this.canvas = el('canvas', { id: 'mesh-canvas', role: 'img', 'aria-label': 'deformed mesh coloured by the selected field' });
+    this.cbLo = el('span', { class: 'cb-lo' });
+    this.cbHi = el('span', { class: 'cb-hi' });
+    this.cbLabel = el('span', { class: 'cb-label' });
+    this.contactInfo = el('span', { class: 'contact-info' });
+    this.slider = el('input', {
+      id: 'step-slider', type: 'range', min: '0', max: String(this.steps.length - 1), step: '1', value: '0',
+      'aria-label': 'stored step', oninput: () => this.show(Number(this.slider.value)),
+    });
+    this.playBtn = el('button', { id: 'play', type: 'button', class: 'small', onclick: () => (this.playing ? this.stop() : this.play()) }, '▶ Play');
+    this.stepLabel = el('span', { id: 'step-label', 'aria-live': 'off' });
+    this.vtuLink = el('a', { id: 'dl-vtu', download: '' }, 'VTU (this step)');
+    const plots = el('div', { class: 'plots', id: 'plots' });
+
+    const m = summary.mesh || {};
+    const t = summary.time || {};
+    const info = el('p', { class: 'run-info' },
+      `${m.nodes} nodes · ${m.triangles} triangles · h = ${fmtStep(m.h)} · k = ${fmtStep(t.k)} · ${t.steps} steps · `,
+      `solved in ${fmtSeconds(summary.timing?.solve_s)} · ${summary.stats?.steps_with_slip ?? 0} steps with slip`);
+    const warnings = (summary.warnings || []).map((w) => el('p', { class: 'warning' }, w));
+
+    this.root.replaceChildren(
+      el('div', { class: 'view-head' },
+        el('h2', {}, job.scene || 'simulation', ' ', el('small', {}, id.slice(0, 8))),
+        el('nav', { class: 'downloads', 'aria-label': 'downloads' },
+          this.vtuLink,
+          el('a', { href: `/jobs/${id}/result.pvd`, download: `contact-sim-${id.slice(0, 8)}.pvd` }, 'PVD (all steps)'),
+          el('a', { href: `/jobs/${id}/archive.tar`, download: '' }, 'archive.tar'),
+          el('a', { href: `/jobs/${id}/summary`, download: `summary-${id.slice(0, 8)}.json` }, 'summary JSON'))),
+      info,
+      ...warnings,
+      el('div', { class: 'toolbar' },
+        el('label', {}, 'Colour by ', this.quantity),
+        el('label', {}, 'Magnify u × ', this.factor),
+        el('button', { type: 'button', class: 'small', title: 'largest displacement = 10% of the body', onclick: () => this.autoFactor() }, 'auto'),
+        el('label', {}, 'Range ', this.rangeMode),
+        el('span', { class: 'range-inputs' }, this.lo, '–', this.hi),
+        el('label', {}, this.edges, ' mesh lines')),
+      el('div', { class: 'canvas-wrap' }, this.canvas),
+      el('div', { class: 'colorbar', id: 'colorbar' },
+        this.cbLo, el('div', { class: 'bar', style: `background: ${cssGradient()}` }), this.cbHi, this.cbLabel),
+      el('div', { class: 'legend' },
+        'Γ3 contact: ', el('span', { class: 'swatch', style: `background:${STICK}` }), ' stick ',
+        el('span', { class: 'swatch', style: `background:${SLIP}` }), ' slip ', this.contactInfo,
+        el('span', { class: 'hint' }, ' · dashed: reference configuration')),
+      el('div', { class: 'time' }, this.playBtn, this.slider, this.stepLabel),
+      plots,
+    );
+    this.onRangeInputs(false);
+
+    // Norms over time, with a marker at the displayed step.
+    const s = summary.steps || [];
+    const ts = s.map((r) => r.t);
+    this.plots = [
+      ['|w|_V', 'w_V', '#1864ab'],
+      ['|u|_V', 'u_V', '#5f3dc4'],
+      ['|ζ|_Z0', 'zeta_L2', '#2b8a3e'],
+      ['min ζ', 'zeta_min', '#c92a2a'],
+    ].map(([title, key, colour]) => linePlot(plots, { title, xs: ts, ys: s.map((r) => r[key]), colour }));
+
+    // Redraw at the new size when the layout changes (window resize, narrow screens). The
+    // wrapper's width is watched, not the canvas, whose height draw() itself sets.
+    let width = 0;
+    this.resizeObserver = new ResizeObserver(([entry]) => {
+      if (entry.contentRect.width === width) return;
+      width = entry.contentRect.width;
+      this.draw();
+    });
+    this.resizeObserver.observe(this.canvas.parentElement);
+  }
+
+  /** Shows stored step number `idx` (index into this.steps), fetching it if needed. */
+  async show(idx) {
+    const entry = this.steps[idx];
+    if (!entry) return;
+    const token = ++this.token;
+    let doc = this.cache.get(entry.n);
+    if (!doc) {
+      this.stepLabel.textContent = `step ${entry.n} · loading…`;
+      try {
+        doc = await api.fields(this.job.id, entry.n, false);
+      } catch (e) {
+        if (token === this.token) this.stepLabel.textContent = `step ${entry.n}: ${e.message}`;
+        return;
+      }
+      this.remember(doc);
+    }
+    if (token !== this.token) return; // the slider moved on meanwhile
+    this.showLoaded(idx, doc);
+  }
+
+  remember(doc) {
+    if (this.cache.size >= CACHE_STEPS) this.cache.delete(this.cache.keys().next().value);
+    this.cache.set(doc.n, doc);
+  }
+
+  showLoaded(idx, doc) {
+    this.current = doc;
+    this.root.dataset.step = String(doc.n);
+    this.stepLabel.textContent = `step ${doc.n} of ${this.summary.time?.steps ?? '?'} · t = ${fmt(doc.t)}`;
+    this.vtuLink.href = `/jobs/${this.job.id}/fields/${doc.n}.vtu`;
+    this.vtuLink.download = `step-${doc.n}.vtu`;
+    this.slider.setAttribute('aria-valuetext', `step ${doc.n}, t = ${fmt(doc.t)}`);
+    for (const p of this.plots) p.setMarker(doc.t);
+    this.draw();
+  }
+
+  /** Values of the selected quantity for the current step, and whether per triangle. */
+  values() {
+    const q = QUANTITIES[this.quantity.value];
+    const d = this.current;
+    if (q.key === 'w') {
+      if (!d.w) return null;
+      const n = d.w.length / 2;
+      const v = new Float64Array(n);
+      for (let i = 0; i < n; i++) v[i] = Math.hypot(d.w[2 * i], d.w[2 * i + 1]);
+      return { v, perCell: false };
+    }
+    return d[q.key] ? { v: d[q.key], perCell: q.perCell } : null;
+  }
+
+  /** The range inputs are editable only in "fixed" mode; switching fills them with the current range. */
+  onRangeInputs(quantityChanged) {
+    // A fixed range of one quantity means nothing for another: go back to automatic.
+    if (quantityChanged) this.rangeMode.value = 'step';
+    this.lo.disabled = this.hi.disabled = this.rangeMode.value !== 'manual';
+    this.draw();
+  }
+
+  draw() {
+    if (!this.canvas || !this.current || !this.mesh) return;
+    const vals = this.values();
+    let min = Infinity, max = -Infinity;
+    if (vals) for (const x of vals.v) if (Number.isFinite(x)) { if (x < min) min = x; if (x > max) max = x; }
+    let range;
+    if (this.rangeMode.value === 'manual' && Number(this.hi.value) > Number(this.lo.value)) {
+      range = [Number(this.lo.value), Number(this.hi.value)];
+    } else {
+      range = niceRange(min, max);
+      if (this.rangeMode.value !== 'manual') {
+        this.lo.value = String(Number(min.toPrecision(4)));
+        this.hi.value = String(Number(max.toPrecision(4)));
+      }
+    }
+    // Height follows the body's aspect ratio, within the window.
+    const wrapW = this.canvas.parentElement.clientWidth || 600;
+    const nodes = this.mesh.nodes;
+    let w = 0, h = 0;
+    for (const [x, y] of nodes) { w = Math.max(w, x); h = Math.max(h, y); }
+    const cssH = Math.round(Math.min(Math.max(wrapW * (h / (w || 1)) * 1.25 + 32, 180), window.innerHeight * 0.6));
+    if (this.canvas.style.height !== `${cssH}px`) this.canvas.style.height = `${cssH}px`;
+    const factor = Number(this.factor.value);
+    drawField(this.canvas, {
+      nodes,
+      triangles: this.mesh.triangles,
+      boundaryEdges: this.mesh.boundary_edges,
+      disp: this.current.u || null,
+      factor: Number.isFinite(factor) && factor >= 0 ? factor : 1,
+      values: vals ? vals.v : new Float64Array(nodes.length),
+      perCell: vals ? vals.perCell : false,
+      range,
+      contact: this.current.contact || null,
+      showEdges: this.edges.checked,
+    });
+    const q = QUANTITIES[this.quantity.value];
+    this.cbLo.textContent = fmt(range[0]);
+    this.cbHi.textContent = fmt(range[1]);
+    this.cbLabel.textContent = vals
+      ? `${q.label}: min ${fmt(min)}, max ${fmt(max)}${max - min <= 1e-12 * Math.max(1, Math.abs(max)) ? ' (uniform)' : ''}`
+      : `${q.label}: not stored`;
+    const c = this.current.contact;
+    this.contactInfo.textContent = c ? `(${c.filter((x) => x.slipping).length} of ${c.length} nodes slip)` : '(contact state not stored)';
+  }
+
+  /** A factor that makes the largest displacement 10% of the body's size (1 significant digit). */
+  autoFactor() {
+    const u = this.current?.u;
+    if (!u) return;
+    let umax = 0;
+    for (let i = 0; i < u.length; i += 2) umax = Math.max(umax, Math.hypot(u[i], u[i + 1]));
+    let size = 0;
+    for (const [x, y] of this.mesh.nodes) size = Math.max(size, x, y);
+    if (!(umax > 0)) return;
+    const f = (0.1 * size) / umax;
+    const p = 10 ** Math.floor(Math.log10(f));
+    this.factor.value = String(Number((Math.round(f / p) * p).toPrecision(1)));
+    this.draw();
+  }
+
+  async play() {
+    if (this.steps.length < 2) return;
+    this.playing = true;
+    this.playBtn.textContent = '❚❚ Pause';
+    let idx = Number(this.slider.value);
+    if (idx >= this.steps.length - 1) idx = -1; // at the end: start over
+    while (this.playing && idx < this.steps.length - 1) {
+      const t0 = performance.now();
+      idx++;
+      this.slider.value = String(idx);
+      await this.show(idx);
+      if (!this.playing) break; // paused, or another job opened, while the step loaded
+      // Fetch the next step while this one is on screen.
+      const next = this.steps[idx + 1];
+      if (next && !this.cache.has(next.n)) api.fields(this.job.id, next.n, false).then((d) => this.remember(d), () => {});
+      await new Promise((r) => setTimeout(r, Math.max(0, FRAME_MS - (performance.now() - t0))));
+    }
+    this.stop();
+  }
+
+  stop() {
+    this.playing = false;
+    if (this.playBtn) this.playBtn.textContent = '▶ Play';
+  }
+}

@@ -1,0 +1,182 @@
+//! The browser client (GET /, api/client/): how its files are served, and the client itself
+//! in a real browser. The second test starts the real server on an ephemeral port and runs
+//! `node tests/browser/client.mjs <base-url> <screenshot-dir>` (playwright-core driving
+//! Debian's headless Chromium; see that script for what it checks). It needs
+//! /usr/bin/chromium (or $CHROMIUM), node and `npm ci` in tests/browser; without them it is
+//! skipped with a message, except when $CI is set, where it fails (.ci/run installs them).
+//! Screenshots and the script's log go to target/browser-artifacts/.
+
+mod common;
+
+use common::server::{get, Server};
+use contact_sim::service::Config;
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn target_dir() -> PathBuf {
+    match std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from) {
+        Some(d) if d.is_absolute() => d,
+        Some(d) => root().join(d),
+        None => root().join("target"),
+    }
+}
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("contact-sim-browser-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn start(tag: &str) -> (Server, PathBuf) {
+    let dir = temp_dir(tag);
+    let srv = Server::start_with(Config {
+        data_dir: dir.clone(),
+        workers: 2,
+        ..Config::default()
+    });
+    (srv, dir)
+}
+
+#[test]
+fn client_files_are_served_with_types_and_etags() {
+    let (srv, dir) = start("files");
+    let a = srv.addr;
+
+    let page = get(a, "/", &[]);
+    assert_eq!(page.status, 200);
+    assert_eq!(
+        page.header("content-type"),
+        Some("text/html; charset=utf-8")
+    );
+    let html = String::from_utf8_lossy(&page.body).to_string();
+    assert!(html.contains(r#"<script type="module" src="/client/app.js">"#));
+    assert_eq!(page.header("cache-control"), Some("no-cache"));
+    let etag = page.header("etag").expect("ETag").to_string();
+    assert!(etag.starts_with('"') && etag.ends_with('"'), "{etag}");
+
+    // Revalidation: the same ETag gives 304 without a body; another gives the file.
+    let again = get(a, "/", &[("If-None-Match", &etag)]);
+    assert_eq!(again.status, 304);
+    assert!(again.body.is_empty());
+    assert_eq!(again.header("etag"), Some(etag.as_str()));
+    assert_eq!(get(a, "/", &[("If-None-Match", "\"other\"")]).status, 200);
+
+    for (file, ct) in [
+        ("app.js", "text/javascript; charset=utf-8"),
+        ("viewer.js", "text/javascript; charset=utf-8"),
+        ("style.css", "text/css; charset=utf-8"),
+        ("index.html", "text/html; charset=utf-8"),
+    ] {
+        let r = get(a, &format!("/client/{file}"), &[]);
+        assert_eq!(r.status, 200, "{file}");
+        assert_eq!(r.header("content-type"), Some(ct), "{file}");
+        assert_eq!(r.header("x-content-type-options"), Some("nosniff"));
+        let on_disk = std::fs::read(root().join("api/client").join(file)).unwrap();
+        assert_eq!(r.body, on_disk, "{file} is served as it is in api/client/");
+    }
+    // Every module the page imports is served (a missing entry in client.rs would be a 404
+    // only a browser would notice).
+    for entry in std::fs::read_dir(root().join("api/client")).unwrap() {
+        let name = entry.unwrap().file_name().to_string_lossy().into_owned();
+        assert_eq!(
+            get(a, &format!("/client/{name}"), &[]).status,
+            200,
+            "{name}"
+        );
+    }
+
+    for bad in ["/client/nope.js", "/client/..%2Fapp.rs", "/client/"] {
+        let r = get(a, bad, &[]);
+        assert_eq!(r.status, 404, "{bad}");
+        assert_eq!(
+            r.header("content-type"),
+            Some("application/problem+json"),
+            "{bad}"
+        );
+    }
+    srv.stop();
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// Why the browser test cannot run here, if it cannot.
+fn missing_prerequisites(chromium: &str) -> Option<String> {
+    if !std::path::Path::new(chromium).exists() {
+        return Some(format!(
+            "no Chromium at {chromium} (apt-get install chromium, or set CHROMIUM)"
+        ));
+    }
+    let node = Command::new("node")
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status();
+    if !node.is_ok_and(|s| s.success()) {
+        return Some("node is not on the PATH".into());
+    }
+    if !root()
+        .join("tests/browser/node_modules/playwright-core/package.json")
+        .exists()
+    {
+        return Some(
+            "tests/browser/node_modules is missing (run `npm ci` in tests/browser)".into(),
+        );
+    }
+    None
+}
+
+#[test]
+fn client_in_chromium() {
+    let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
+    if let Some(why) = missing_prerequisites(&chromium) {
+        if std::env::var_os("CI").is_some() {
+            panic!("the browser test cannot run although CI is set: {why}");
+        }
+        eprintln!("skipping the browser test: {why}");
+        return;
+    }
+    let (srv, dir) = start("chromium");
+    let out = target_dir().join("browser-artifacts");
+    std::fs::create_dir_all(&out).unwrap();
+    let log_path = out.join("client.log");
+    let log = std::fs::File::create(&log_path).unwrap();
+    let mut child = Command::new("node")
+        .arg(root().join("tests/browser/client.mjs"))
+        .arg(srv.url())
+        .arg(&out)
+        .env("CHROMIUM", &chromium)
+        .stdin(Stdio::null())
+        .stdout(log.try_clone().unwrap())
+        .stderr(log)
+        .spawn()
+        .expect("run node");
+    // The script has its own time limit; this one only guards against a stuck node.
+    let deadline = Instant::now() + Duration::from_secs(300);
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break Some(s);
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let output = std::fs::read_to_string(&log_path).unwrap_or_default();
+    print!("{output}");
+    srv.stop();
+    let _ = std::fs::remove_dir_all(dir);
+    match status {
+        Some(s) => assert!(
+            s.success(),
+            "browser tests failed ({s}); output above, screenshots in {}",
+            out.display()
+        ),
+        None => panic!("browser tests did not finish in 300 s; output above"),
+    }
+}
