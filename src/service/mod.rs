@@ -4,6 +4,7 @@
 pub mod app;
 pub mod error;
 pub mod jobs;
+pub mod limits;
 pub mod routes;
 pub mod store;
 pub mod stream;
@@ -26,6 +27,12 @@ pub struct Config {
     pub max_stored_bytes: u64,
     /// Request body limit in bytes.
     pub max_body_bytes: usize,
+    /// Deepest array/object nesting accepted in a submitted document (scenes need 4).
+    pub max_json_depth: usize,
+    /// Submissions per second per client IP (token bucket refill rate; 0 disables).
+    pub submit_rate: f64,
+    /// Submissions a client may make at once (token bucket size).
+    pub submit_burst: u32,
 }
 
 impl Default for Config {
@@ -39,6 +46,9 @@ impl Default for Config {
             max_steps: 100_000,
             max_stored_bytes: 2 << 30,
             max_body_bytes: 1 << 20,
+            max_json_depth: 32,
+            submit_rate: 10.0,
+            submit_burst: 50,
         }
     }
 }
