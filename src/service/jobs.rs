@@ -26,7 +26,7 @@ use uuid::Uuid;
 
 /// Lease of a claimed job; renewed at every checkpoint.
 const LEASE_S: f64 = 30.0;
-/// A job is attempted at most this often (dead-letter after that).
+/// A job interrupted this often in a row without a new checkpoint is dead-lettered.
 const MAX_ATTEMPTS: u32 = 3;
 const CHECKPOINT_EVERY: Duration = Duration::from_secs(1);
 /// File names inside a job's result directory.
