@@ -14,6 +14,8 @@ use serde_json::Value;
 use service_support::*;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 const ROUNDS: usize = 6;
@@ -59,6 +61,7 @@ fn kill_9_and_restart_loses_nothing() {
     let mut kills_running = 0;
     let mut kills_mid_write = 0;
     let mut interrupted: BTreeMap<String, usize> = BTreeMap::new();
+    let mut inflight = 0;
     for round in 0..ROUNDS {
         let srv = Proc::start(&data, &args);
         let a = srv.addr;
@@ -100,15 +103,68 @@ fn kill_9_and_restart_loses_nothing() {
                 scene,
             });
         }
-        std::thread::sleep(Duration::from_millis(300 + rng.below(2200) as u64));
-        // Which jobs are running right now (they will be interrupted).
-        let running: Vec<String> = get(a, "/jobs?status=running&limit=500").json()["jobs"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|j| j["id"].as_str().unwrap().to_string())
-            .collect();
+        // Meanwhile a client keeps submitting: every 202 it gets must survive the kill.
+        let stop = Arc::new(AtomicBool::new(false));
+        let submitter = {
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                let mut got = Vec::new();
+                let mut k = 0;
+                while !stop.load(Ordering::Relaxed) {
+                    k += 1;
+                    let scene = small_scene(&format!("crash-inflight-{round}-{k}"));
+                    let r = try_http(
+                        a,
+                        "POST",
+                        "/jobs",
+                        &[("Content-Type", "application/json")],
+                        scene.to_string().as_bytes(),
+                        Duration::from_secs(10),
+                    );
+                    match r {
+                        Ok(r) if r.status == 202 => {
+                            got.push((r.json()["id"].as_str().unwrap().to_string(), scene))
+                        }
+                        Ok(r) => panic!("submit: {} {}", r.status, r.text()),
+                        // The server died while answering: not accepted.
+                        Err(_) => break,
+                    }
+                    std::thread::sleep(Duration::from_millis(100));
+                }
+                got
+            })
+        };
+        let running_now = || -> Vec<String> {
+            get(a, "/jobs?status=running&limit=500").json()["jobs"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|j| j["id"].as_str().unwrap().to_string())
+                .collect()
+        };
+        // The jobs running when the server is killed (interrupted).
+        let running = if round % 2 == 1 {
+            // Aim at a result write: kill as soon as a temporary file is seen.
+            std::thread::sleep(Duration::from_millis(300));
+            let running = running_now();
+            let until = Instant::now() + Duration::from_secs(3);
+            while temp_files(&data).is_empty() && Instant::now() < until {}
+            running
+        } else {
+            std::thread::sleep(Duration::from_millis(300 + rng.below(2200) as u64));
+            running_now()
+        };
         srv.kill9();
+        stop.store(true, Ordering::Relaxed);
+        for (id, scene) in submitter.join().unwrap() {
+            inflight += 1;
+            jobs.push(Job {
+                id,
+                steps: 4,
+                every: 1,
+                scene,
+            });
+        }
         kills_running += usize::from(!running.is_empty());
         for id in running {
             *interrupted.entry(id).or_default() += 1;
@@ -213,8 +269,8 @@ fn kill_9_and_restart_loses_nothing() {
     let interruptions: usize = interrupted.values().sum();
     eprintln!(
         "crash: {ROUNDS} kill -9 rounds in {total_s:.1} s ({kills_running} while jobs ran, \
-         {kills_mid_write} with a result write in flight); {} jobs accepted, {} succeeded, \
-         0 lost; {interruptions} job interruptions, {resumed} jobs resumed after a crash \
+         {kills_mid_write} with a result write in flight); {} jobs accepted ({inflight} of them \
+         by a client submitting until the kill), {} succeeded, 0 lost; {interruptions} job interruptions, {resumed} jobs resumed after a crash \
          (max attempt {max_attempt})",
         jobs.len(),
         finals
