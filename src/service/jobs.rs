@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 use tokio::sync::broadcast;
 use uuid::Uuid;
 
-/// Lease of a claimed job; renewed at every checkpoint.
+/// Lease of a claimed job; renewed while it runs (`lease::Keeper`) and at checkpoints.
 const LEASE_S: f64 = 30.0;
 /// A job interrupted this often in a row without a new checkpoint is dead-lettered.
 const MAX_ATTEMPTS: u32 = 3;
@@ -213,7 +213,9 @@ impl Runtime {
             },
         );
         self.running.fetch_add(1, Ordering::SeqCst);
+        let keeper = super::lease::Keeper::start(self.store.clone(), id, worker, LEASE_S);
         let outcome = self.execute(&job, worker, &cancel);
+        drop(keeper);
         let final_status = match outcome {
             Ok(Outcome::Succeeded) => Some((JobStatus::Succeeded, None)),
             Ok(Outcome::Cancelled) => Some((JobStatus::Cancelled, None)),

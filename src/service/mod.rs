@@ -4,6 +4,7 @@
 pub mod app;
 pub mod error;
 pub mod jobs;
+pub mod lease;
 pub mod limits;
 pub mod routes;
 pub mod store;
