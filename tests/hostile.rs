@@ -168,6 +168,28 @@ fn submissions_are_rate_limited_per_client() {
         metrics.contains("contact_sim_jobs{status=\"queued\"} 3"),
         "{metrics}"
     );
+    // Other clients (other loopback addresses) have buckets of their own.
+    let me: std::net::IpAddr = "127.0.0.1".parse().unwrap();
+    let ct = [("Content-Type", "application/json")];
+    while try_http_from(me, a, "POST", "/jobs", &ct, b"{")
+        .unwrap()
+        .status
+        != 429
+    {}
+    for (i, other) in ["127.0.0.2", "127.0.0.3"].iter().enumerate() {
+        let other: std::net::IpAddr = other.parse().unwrap();
+        for k in 0..3 {
+            let body = small_scene(&format!("rate-other-{i}-{k}")).to_string();
+            let r = try_http_from(other, a, "POST", "/jobs", &ct, body.as_bytes()).unwrap();
+            assert_eq!(r.status, 202, "{other}: {}", r.text());
+        }
+        let r = try_http_from(other, a, "POST", "/jobs", &ct, b"{}").unwrap();
+        assert_problem(&r, 429);
+    }
+    assert_problem(
+        &try_http_from(me, a, "POST", "/jobs", &ct, b"{").unwrap(),
+        429,
+    );
 }
 
 /// Every file under `dir` (relative path, size), sorted.

@@ -140,14 +140,56 @@ pub fn raw_eof(addr: SocketAddr, request: &[u8], timeout: Duration) -> Result<Re
     raw_with(addr, request, timeout, true)
 }
 
+/// A connection from the local address `from` (e.g. 127.0.0.2: every 127/8 address is
+/// loopback on Linux), so that the server sees another client.
+pub fn connect_from(from: std::net::IpAddr, to: SocketAddr) -> Result<TcpStream, String> {
+    let s = socket2::Socket::new(
+        socket2::Domain::for_address(to),
+        socket2::Type::STREAM,
+        None,
+    )
+    .map_err(|e| e.to_string())?;
+    s.bind(&SocketAddr::new(from, 0).into())
+        .map_err(|e| format!("bind {from}: {e}"))?;
+    s.connect(&to.into()).map_err(|e| format!("connect: {e}"))?;
+    Ok(s.into())
+}
+
+/// As [`try_http`], from the local address `from`.
+pub fn try_http_from(
+    from: std::net::IpAddr,
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: &[u8],
+) -> Result<Resp, String> {
+    let s = connect_from(from, addr)?;
+    exchange(
+        s,
+        &request_bytes(method, path, headers, body),
+        Duration::from_secs(60),
+        false,
+    )
+}
+
 fn raw_with(
     addr: SocketAddr,
     request: &[u8],
     timeout: Duration,
     eof: bool,
 ) -> Result<Resp, String> {
+    let s = TcpStream::connect_timeout(&addr, timeout).map_err(|e| format!("connect: {e}"))?;
+    exchange(s, request, timeout, eof)
+}
+
+fn exchange(
+    mut s: TcpStream,
+    request: &[u8],
+    timeout: Duration,
+    eof: bool,
+) -> Result<Resp, String> {
     let deadline = Instant::now() + timeout;
-    let mut s = TcpStream::connect_timeout(&addr, timeout).map_err(|e| format!("connect: {e}"))?;
     s.set_write_timeout(Some(timeout)).ok();
     // The server may answer (and close) before reading everything: ignore write errors.
     let _ = s.write_all(request);
@@ -238,6 +280,10 @@ pub fn try_http(
     body: &[u8],
     timeout: Duration,
 ) -> Result<Resp, String> {
+    raw(addr, &request_bytes(method, path, headers, body), timeout)
+}
+
+fn request_bytes(method: &str, path: &str, headers: &[(&str, &str)], body: &[u8]) -> Vec<u8> {
     let mut req = format!(
         "{method} {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\nContent-Length: {}\r\n",
         body.len()
@@ -248,7 +294,7 @@ pub fn try_http(
     }
     req.extend_from_slice(b"\r\n");
     req.extend_from_slice(body);
-    raw(addr, &req, timeout)
+    req
 }
 
 pub fn http(
