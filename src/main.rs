@@ -58,6 +58,9 @@ enum Command {
         /// Submissions a client may make in one burst (token bucket size).
         #[arg(long = "submit-burst", default_value_t = 50)]
         submit_burst: u32,
+        /// Seconds a client has to send a complete request head (then disconnected).
+        #[arg(long = "header-timeout", default_value_t = 30.0)]
+        header_timeout: f64,
     },
     /// Run a scene (a JSON file or a preset) and print the summary JSON.
     Run {
@@ -118,6 +121,7 @@ fn main() -> ExitCode {
         max_json_depth: 32,
         submit_rate: 10.0,
         submit_burst: 50,
+        header_timeout: 30.0,
     });
     match command {
         Command::Serve {
@@ -132,6 +136,7 @@ fn main() -> ExitCode {
             max_json_depth,
             submit_rate,
             submit_burst,
+            header_timeout,
         } => {
             let defaults = Config::default();
             let config = Config {
@@ -145,6 +150,11 @@ fn main() -> ExitCode {
                 max_json_depth,
                 submit_rate,
                 submit_burst,
+                header_timeout: if header_timeout.is_finite() && header_timeout > 0.0 {
+                    std::time::Duration::from_secs_f64(header_timeout.min(1e6))
+                } else {
+                    defaults.header_timeout
+                },
                 ..defaults
             };
             cmd_serve(&addr, config)

@@ -711,3 +711,103 @@ fn raw_head(a: std::net::SocketAddr, path: &str) -> Result<Resp, String> {
         Duration::from_secs(20),
     )
 }
+
+/// A client that sends its request head too slowly, or nothing at all, is disconnected
+/// after `--header-timeout`; other clients are served meanwhile, and a long-lived event
+/// stream (head sent at once) is not cut.
+#[test]
+fn slow_and_silent_clients_are_disconnected() {
+    use std::io::{Read, Write};
+    let dir = TempDir::new("slow");
+    let srv = Proc::start(&dir.0, &["--workers", "0", "--header-timeout", "1"]);
+    let a = srv.addr;
+    let id = post_json(a, "/jobs", &small_scene("slow")).json()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    // Bytes read until the server closes (or 10 s pass: then it did not); the time is
+    // counted from the connection.
+    let start = Instant::now();
+    let until_closed = |mut s: std::net::TcpStream| -> (Duration, Vec<u8>) {
+        s.set_read_timeout(Some(Duration::from_millis(100)))
+            .unwrap();
+        let t = start;
+        let mut got = Vec::new();
+        let mut buf = [0u8; 1024];
+        while t.elapsed() < Duration::from_secs(10) {
+            match s.read(&mut buf) {
+                Ok(0) => break,
+                Ok(n) => got.extend_from_slice(&buf[..n]),
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ) => {}
+                Err(_) => break,
+            }
+        }
+        (t.elapsed(), got)
+    };
+    // Silent: connects and sends nothing.
+    let silent = std::net::TcpStream::connect(a).unwrap();
+    // Slow loris: a header line every 300 ms, never the blank line.
+    let mut slow = std::net::TcpStream::connect(a).unwrap();
+    slow.write_all(b"GET /healthz HTTP/1.1\r\nHost: t\r\n")
+        .unwrap();
+    let feeder = {
+        let mut s = slow.try_clone().unwrap();
+        std::thread::spawn(move || {
+            for i in 0..30 {
+                if s.write_all(format!("X-Slow-{i}: 1\r\n").as_bytes())
+                    .is_err()
+                {
+                    return i;
+                }
+                std::thread::sleep(Duration::from_millis(300));
+            }
+            30
+        })
+    };
+    // An event stream that stays open longer than the header timeout.
+    let mut sse = std::net::TcpStream::connect(a).unwrap();
+    sse.write_all(format!("GET /jobs/{id}/events HTTP/1.1\r\nHost: t\r\n\r\n").as_bytes())
+        .unwrap();
+    // Others are served meanwhile.
+    for _ in 0..10 {
+        assert_eq!(get(a, "/healthz").status, 200);
+    }
+    let (t_silent, _) = until_closed(silent);
+    let (t_slow, got) = until_closed(slow);
+    let lines_sent = feeder.join().unwrap();
+    assert!(
+        t_silent < Duration::from_secs(5),
+        "silent client kept {t_silent:?}"
+    );
+    assert!(
+        t_slow < Duration::from_secs(5),
+        "slow client kept {t_slow:?}"
+    );
+    assert!(lines_sent < 30, "the slow client was never cut off");
+    let got = String::from_utf8_lossy(&got);
+    assert!(got.is_empty() || got.starts_with("HTTP/1.1 408"), "{got}");
+    // The event stream is still open after more than the header timeout.
+    sse.set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    let t = Instant::now();
+    let mut buf = [0u8; 4096];
+    let mut head = Vec::new();
+    while t.elapsed() < Duration::from_millis(1500) {
+        match sse.read(&mut buf) {
+            Ok(0) => panic!("event stream closed after {:?}", t.elapsed()),
+            Ok(n) => head.extend_from_slice(&buf[..n]),
+            Err(_) => {}
+        }
+    }
+    assert!(String::from_utf8_lossy(&head).starts_with("HTTP/1.1 200"));
+    assert_eq!(get(a, "/healthz").status, 200);
+    eprintln!(
+        "slow clients: silent one disconnected after {:.1} s, slow loris after {:.1} s ({lines_sent} header lines)",
+        t_silent.as_secs_f64(),
+        t_slow.as_secs_f64()
+    );
+}

@@ -13,7 +13,6 @@ use axum::extract::DefaultBodyLimit;
 use axum::http::StatusCode;
 use axum::routing::{get, post};
 use axum::{middleware, Router};
-use std::net::SocketAddr;
 use std::sync::Arc;
 
 /// Shared state of the handlers.
@@ -101,11 +100,10 @@ pub async fn serve(
         shutdown.await;
         let _ = closing.send(true);
     };
-    // Peer addresses reach the handlers (per-client submission rate).
-    let service = app(state).into_make_service_with_connect_info::<SocketAddr>();
-    let r = axum::serve(listener, service)
-        .with_graceful_shutdown(signal)
-        .await;
+    // Peer addresses reach the handlers (per-client submission rate); slow clients are
+    // disconnected after the header timeout.
+    let header_timeout = state.rt.config.header_timeout;
+    let r = super::server::run(listener, app(state), header_timeout, signal).await;
     tokio::task::spawn_blocking(move || rt.shutdown())
         .await
         .ok();

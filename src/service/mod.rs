@@ -7,6 +7,7 @@ pub mod jobs;
 pub mod lease;
 pub mod limits;
 pub mod routes;
+pub mod server;
 pub mod store;
 pub mod stream;
 
@@ -34,6 +35,9 @@ pub struct Config {
     pub submit_rate: f64,
     /// Submissions a client may make at once (token bucket size).
     pub submit_burst: u32,
+    /// Time a client has to send a complete request head (slow or silent clients are
+    /// disconnected).
+    pub header_timeout: std::time::Duration,
 }
 
 impl Default for Config {
@@ -50,6 +54,7 @@ impl Default for Config {
             max_json_depth: 32,
             submit_rate: 10.0,
             submit_burst: 50,
+            header_timeout: std::time::Duration::from_secs(30),
         }
     }
 }
