@@ -45,9 +45,22 @@ enum Command {
         /// Per-job limit on stored result bytes.
         #[arg(long = "max-stored-bytes", default_value_t = 2 << 30)]
         max_stored_bytes: u64,
-        /// Request body limit in bytes.
+        /// Request body limit in bytes (413 beyond).
         #[arg(long = "max-body-bytes", default_value_t = 1 << 20)]
         max_body_bytes: usize,
+        /// Deepest array/object nesting of a submitted document (422 beyond).
+        #[arg(long = "max-json-depth", default_value_t = 32)]
+        max_json_depth: usize,
+        /// Submissions (POST) per second per client IP, refill rate of a token bucket
+        /// (429 + Retry-After beyond); 0 disables the limit.
+        #[arg(long = "submit-rate", default_value_t = 10.0)]
+        submit_rate: f64,
+        /// Submissions a client may make in one burst (token bucket size).
+        #[arg(long = "submit-burst", default_value_t = 50)]
+        submit_burst: u32,
+        /// Seconds a client has to send a complete request head (then disconnected).
+        #[arg(long = "header-timeout", default_value_t = 30.0)]
+        header_timeout: f64,
     },
     /// Run a scene (a JSON file or a preset) and print the summary JSON.
     Run {
@@ -124,6 +137,10 @@ fn main() -> ExitCode {
         max_steps: 100_000,
         max_stored_bytes: 2 << 30,
         max_body_bytes: 1 << 20,
+        max_json_depth: 32,
+        submit_rate: 10.0,
+        submit_burst: 50,
+        header_timeout: 30.0,
     });
     match command {
         Command::Serve {
@@ -135,6 +152,10 @@ fn main() -> ExitCode {
             max_steps,
             max_stored_bytes,
             max_body_bytes,
+            max_json_depth,
+            submit_rate,
+            submit_burst,
+            header_timeout,
         } => {
             let defaults = Config::default();
             let config = Config {
@@ -145,6 +166,14 @@ fn main() -> ExitCode {
                 max_steps,
                 max_stored_bytes,
                 max_body_bytes,
+                max_json_depth,
+                submit_rate,
+                submit_burst,
+                header_timeout: if header_timeout.is_finite() && header_timeout > 0.0 {
+                    std::time::Duration::from_secs_f64(header_timeout.min(1e6))
+                } else {
+                    defaults.header_timeout
+                },
                 ..defaults
             };
             cmd_serve(&addr, config)

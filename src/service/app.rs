@@ -3,6 +3,7 @@
 
 use super::error::ApiError;
 use super::jobs::Runtime;
+use super::limits::{self, RateLimiter};
 use super::routes::{client, jobs, misc, results};
 use super::store::results::ResultFiles;
 use super::store::sqlite::SqliteStore;
@@ -11,7 +12,7 @@ use super::Config;
 use axum::extract::DefaultBodyLimit;
 use axum::http::StatusCode;
 use axum::routing::{get, post};
-use axum::Router;
+use axum::{middleware, Router};
 use std::sync::Arc;
 
 /// Shared state of the handlers.
@@ -21,6 +22,8 @@ pub struct AppState {
     /// Turns true when the server starts shutting down (ends open event streams).
     pub closing: tokio::sync::watch::Receiver<bool>,
     closing_tx: Arc<tokio::sync::watch::Sender<bool>>,
+    /// Submission rate per client (see `limits`).
+    pub limiter: Arc<RateLimiter>,
 }
 
 impl AppState {
@@ -31,6 +34,7 @@ impl AppState {
 
 pub fn app(state: AppState) -> Router {
     let limit = state.rt.config.max_body_bytes;
+    let limiter = state.limiter.clone();
     Router::new()
         .route("/jobs", post(jobs::submit).get(jobs::list))
         .route("/jobs/{id}", get(jobs::get_job).delete(jobs::delete_job))
@@ -59,6 +63,8 @@ pub fn app(state: AppState) -> Router {
             )
         })
         .layer(DefaultBodyLimit::max(limit))
+        .layer(middleware::from_fn_with_state(limiter, limits::rate_limit))
+        .layer(middleware::from_fn(limits::problem_json_errors))
         .with_state(state)
 }
 
@@ -73,12 +79,14 @@ pub fn start(config: Config) -> Result<AppState, String> {
         .release_worker_leases(&format!("{}-", config.node))
         .map_err(|e| e.to_string())?;
     let results = ResultFiles::new(&config.data_dir).map_err(|e| e.to_string())?;
+    let limiter = Arc::new(RateLimiter::new(config.submit_rate, config.submit_burst));
     let rt = Runtime::start(Arc::new(store), Arc::new(results), config);
     let (tx, rx) = tokio::sync::watch::channel(false);
     Ok(AppState {
         rt,
         closing: rx,
         closing_tx: Arc::new(tx),
+        limiter,
     })
 }
 
@@ -95,9 +103,10 @@ pub async fn serve(
         shutdown.await;
         let _ = closing.send(true);
     };
-    let r = axum::serve(listener, app(state))
-        .with_graceful_shutdown(signal)
-        .await;
+    // Peer addresses reach the handlers (per-client submission rate); slow clients are
+    // disconnected after the header timeout.
+    let header_timeout = state.rt.config.header_timeout;
+    let r = super::server::run(listener, app(state), header_timeout, signal).await;
     tokio::task::spawn_blocking(move || rt.shutdown())
         .await
         .ok();

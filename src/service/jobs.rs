@@ -27,9 +27,9 @@ use std::time::{Duration, Instant};
 use tokio::sync::broadcast;
 use uuid::Uuid;
 
-/// Lease of a claimed job; renewed at every checkpoint.
+/// Lease of a claimed job; renewed while it runs (`lease::Keeper`) and at checkpoints.
 const LEASE_S: f64 = 30.0;
-/// A job is attempted at most this often (dead-letter after that).
+/// A job interrupted this often in a row without a new checkpoint is dead-lettered.
 const MAX_ATTEMPTS: u32 = 3;
 const CHECKPOINT_EVERY: Duration = Duration::from_secs(1);
 /// Reference runs of studies kept in memory (an h = k = 1/128 one holds about 50 MB).
@@ -232,11 +232,13 @@ impl Runtime {
             },
         );
         self.running.fetch_add(1, Ordering::SeqCst);
+        let keeper = super::lease::Keeper::start(self.store.clone(), id, worker, LEASE_S);
         let outcome = if is_study(&job.scene) {
             self.execute_study(&job, worker, &cancel)
         } else {
             self.execute(&job, worker, &cancel)
         };
+        drop(keeper);
         let final_status = match outcome {
             Ok(Outcome::Succeeded) => Some((JobStatus::Succeeded, None)),
             Ok(Outcome::Cancelled) => Some((JobStatus::Cancelled, None)),

@@ -4,7 +4,10 @@
 pub mod app;
 pub mod error;
 pub mod jobs;
+pub mod lease;
+pub mod limits;
 pub mod routes;
+pub mod server;
 pub mod store;
 pub mod stream;
 
@@ -28,6 +31,15 @@ pub struct Config {
     pub max_body_bytes: usize,
     /// Runs of one study computed at the same time (its reference and its levels).
     pub study_threads: usize,
+    /// Deepest array/object nesting accepted in a submitted document (scenes need 4).
+    pub max_json_depth: usize,
+    /// Submissions per second per client IP (token bucket refill rate; 0 disables).
+    pub submit_rate: f64,
+    /// Submissions a client may make at once (token bucket size).
+    pub submit_burst: u32,
+    /// Time a client has to send a complete request head (slow or silent clients are
+    /// disconnected).
+    pub header_timeout: std::time::Duration,
 }
 
 impl Default for Config {
@@ -42,6 +54,10 @@ impl Default for Config {
             max_stored_bytes: 2 << 30,
             max_body_bytes: 1 << 20,
             study_threads: 2,
+            max_json_depth: 32,
+            submit_rate: 10.0,
+            submit_burst: 50,
+            header_timeout: std::time::Duration::from_secs(30),
         }
     }
 }

@@ -257,6 +257,7 @@ pub async fn submit(
     }
     let doc: Value = serde_json::from_slice(&body)
         .map_err(|e| ApiError::bad_request(format!("malformed JSON: {e}")))?;
+    crate::service::limits::check_depth(&doc, state.rt.config.max_json_depth)?;
     let (scene_doc, steps) = match doc.get("study") {
         Some(study) => {
             if let Some(k) = doc

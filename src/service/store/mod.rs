@@ -142,7 +142,8 @@ pub trait Store: Send + Sync + 'static {
     ) -> Result<Page, StoreError>;
     /// Claims the oldest queued job, or a running job whose lease expired (a dead worker's:
     /// its attempt counter is incremented), for `worker` until now + `lease_s`.
-    /// Jobs at `max_attempts` are failed instead of claimed (dead letter).
+    /// Jobs whose last `max_attempts` attempts all died without saving a new checkpoint are
+    /// failed instead of claimed (dead letter); attempts that made progress do not count.
     fn claim(
         &self,
         worker: &str,

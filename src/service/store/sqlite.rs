@@ -81,6 +81,13 @@ const MIGRATIONS: &[&str] = &[
     CREATE INDEX jobs_status_seq ON jobs (status, seq);
     CREATE INDEX jobs_scene_hash ON jobs (scene_hash);
     ",
+    // Version 2: dead-lettering counts only interrupted attempts that made no progress.
+    // `claim_step` is the checkpoint step the job was last claimed at; `stalls` the number
+    // of claims in a row with no new checkpoint in between.
+    "
+    ALTER TABLE jobs ADD COLUMN claim_step INTEGER;
+    ALTER TABLE jobs ADD COLUMN stalls INTEGER NOT NULL DEFAULT 0;
+    ",
 ];
 
 /// Columns of a [`JobRecord`] (plus `seq`), in the order [`RawJob::from_row`] reads them.
@@ -355,17 +362,19 @@ impl SqliteStore {
         // Each iteration either returns or moves the candidate to a final status, so the
         // loop ends.
         loop {
-            let candidate: Option<(String, i64, bool)> = tx
+            let candidate: Option<(String, i64, bool, i64, bool)> = tx
                 .query_row(
-                    "SELECT id, attempt, cancel_requested != 0 FROM jobs
+                    "SELECT id, attempt, cancel_requested != 0, stalls,
+                            COALESCE(checkpoint_step, -1) > COALESCE(claim_step, -1)
+                     FROM jobs
                      WHERE (status = 'queued' AND cancel_requested = 0)
                         OR (status = 'running' AND COALESCE(lease_until, 0) < ?1)
                      ORDER BY seq LIMIT 1",
                     params![now],
-                    |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)),
+                    |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?)),
                 )
                 .optional()?;
-            let Some((id, attempt, cancel_requested)) = candidate else {
+            let Some((id, attempt, cancel_requested, stalls, progressed)) = candidate else {
                 tx.commit()?;
                 return Ok(None);
             };
@@ -380,15 +389,19 @@ impl SqliteStore {
                 )?;
                 continue;
             }
-            if attempt >= i64::from(max_attempts) {
+            // An attempt that saved a new checkpoint before dying made progress: a job that
+            // keeps progressing finishes eventually, however often the server is killed.
+            // Only attempts in a row without progress count towards `max_attempts`.
+            if !progressed && stalls >= i64::from(max_attempts) {
                 let error = serde_json::json!({
                     "type": "about:blank",
                     "title": "job abandoned",
                     "status": 500,
                     "detail": format!(
-                        "the job was started {attempt} times (max_attempts = {max_attempts}) \
-                         and each time its worker stopped renewing the lease before finishing \
-                         (crash, kill or hang); it is not retried again"
+                        "the job was started {attempt} times; its worker stopped renewing the \
+                         lease before finishing (crash, kill or hang) {stalls} times in a row \
+                         without saving a new checkpoint (max_attempts = {max_attempts}); it \
+                         is not retried again"
                     ),
                 });
                 tx.execute(
@@ -401,9 +414,16 @@ impl SqliteStore {
             }
             tx.execute(
                 "UPDATE jobs SET status = 'running', worker = ?2, lease_until = ?3,
-                        attempt = attempt + 1, started_at = COALESCE(started_at, ?4)
+                        attempt = attempt + 1, started_at = COALESCE(started_at, ?4),
+                        stalls = ?5, claim_step = checkpoint_step
                  WHERE id = ?1",
-                params![id, worker, now + lease_s, now],
+                params![
+                    id,
+                    worker,
+                    now + lease_s,
+                    now,
+                    if progressed { 1 } else { stalls + 1 }
+                ],
             )?;
             let job = select_one(&tx, "id = ?1", params![id])?;
             tx.commit()?;
@@ -618,9 +638,13 @@ impl Store for SqliteStore {
     /// `queued` (and not cancel-requested) or `running` with an expired lease
     /// (`lease_until < now`: its worker died or hung).
     ///
-    /// * If that job's `attempt` is already `max_attempts` or more, it is marked `failed`
-    ///   with a problem+json error (`"title": "job abandoned"`, status 500) and the search
-    ///   goes on: a job that kills its worker every time must not loop forever.
+    /// * If that job was already claimed `max_attempts` times in a row without saving a
+    ///   new checkpoint in between (and none since), it is marked `failed` with a
+    ///   problem+json error (`"title": "job abandoned"`, status 500) and the search goes
+    ///   on: a job that kills its worker every time must not loop forever. Attempts that
+    ///   made progress (a checkpoint after the step they resumed from) reset that count:
+    ///   checkpoints only move forward, so such a job finishes however often the server
+    ///   is killed under it.
     /// * An expired running job with a pending cancel request is marked `cancelled`
     ///   instead (its worker can no longer honour the request) and the search goes on.
     /// * Otherwise the job becomes `running` for `worker` until `now + lease_s`, `attempt`
@@ -925,26 +949,62 @@ mod tests {
         let bad = enqueue(&store, 0).id;
         let good = enqueue(&store, 1).id;
         let mut t = 1000.0;
-        for attempt in 1..=2 {
+        for attempt in 1..=3 {
             let j = store.claim_at("w", 1.0, 2, t).unwrap().unwrap();
             assert_eq!((j.id, j.attempt), (bad, attempt));
+            if attempt == 1 {
+                // Progress in the first attempt: the second one does not count.
+                store.checkpoint(bad, 1, b"x").unwrap();
+            }
             t += 10.0; // the worker dies
         }
-        store.checkpoint(bad, 1, b"x").unwrap();
-        // bad is at attempt 2 = max: failed, and the claim moves on to good.
+        // bad failed twice in a row without progress = max: failed, and the claim moves
+        // on to good.
         let j = store.claim_at("w", 1.0, 2, t).unwrap().unwrap();
         assert_eq!(j.id, good);
         let failed = store.get(bad).unwrap().unwrap();
         assert_eq!(failed.status, JobStatus::Failed);
         assert_eq!(failed.finished_at, Some(t));
         assert_eq!(failed.lease_until, None);
-        assert_eq!(failed.attempt, 2);
+        assert_eq!(failed.attempt, 3);
         let err = failed.error.unwrap();
         assert_eq!(err["type"], "about:blank");
         assert_eq!(err["title"], "job abandoned");
         assert_eq!(err["status"], 500);
-        assert!(err["detail"].as_str().unwrap().contains("2 times"));
+        assert!(err["detail"].as_str().unwrap().contains("2 times in a row"));
         assert!(store.load_checkpoint(bad).unwrap().is_none());
+    }
+
+    /// A job whose every attempt saves a new checkpoint before its server is killed is
+    /// never abandoned (crash test: a long job lost after 3 kills of the server).
+    #[test]
+    fn progressing_job_is_not_abandoned_however_often_it_is_interrupted() {
+        let store = SqliteStore::open_in_memory().unwrap();
+        let id = enqueue(&store, 0).id;
+        let mut t = 1000.0;
+        for attempt in 1..=10u32 {
+            let j = store.claim_at("node-w0", 30.0, 3, t).unwrap().unwrap();
+            assert_eq!(
+                (j.id, j.attempt, j.status),
+                (id, attempt, JobStatus::Running)
+            );
+            store
+                .checkpoint(id, attempt as usize * 100, b"state")
+                .unwrap();
+            // kill -9, restart: the new process releases the old leases.
+            assert_eq!(store.release_worker_leases("node-").unwrap(), 1);
+            t += 5.0;
+        }
+        // Three more kills without a new checkpoint: abandoned at the next claim.
+        for _ in 0..3 {
+            assert!(store.claim_at("node-w0", 30.0, 3, t).unwrap().is_some());
+            store.release_worker_leases("node-").unwrap();
+            t += 5.0;
+        }
+        assert!(store.claim_at("node-w0", 30.0, 3, t).unwrap().is_none());
+        let rec = store.get(id).unwrap().unwrap();
+        assert_eq!(rec.status, JobStatus::Failed);
+        assert_eq!(rec.attempt, 13);
     }
 
     #[test]
