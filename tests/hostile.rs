@@ -621,7 +621,10 @@ fn fuzz_the_http_surface() {
     }
     // 6. Unknown routes and bad UUIDs.
     for p in [
-        "/",
+        "/client/",
+        "/client/nope.js",
+        "/client/..%2F..%2Fsecret",
+        "/client/%2e%2e/app.js",
         "/jobs/",
         "/job",
         "/jobs/x/y/z",
@@ -654,6 +657,9 @@ fn fuzz_the_http_surface() {
         format!("/jobs/{id}/fields/last.vtu"),
         format!("/jobs/{id}/result.pvd"),
         format!("/jobs/{id}/archive.tar"),
+        format!("/jobs/{id}/report.svg"),
+        "/".to_string(),
+        "/client/app.js".to_string(),
         "/presets".to_string(),
         "/presets/paper-exp1".to_string(),
         "/healthz".to_string(),
