@@ -130,3 +130,49 @@ fn peak_rss_mib() -> Option<f64> {
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb / 1024.0)
 }
+
+/// The paper's Tables 1 and 2 computed together (one shared h = k = 1/128 reference, a
+/// fresh cache each repetition), against the reference run alone measured in the same
+/// process: the ratio says what the ten ladder levels and all the error evaluations add to
+/// the one run a user would make anyway.
+#[derive(Debug, Clone, Serialize)]
+pub struct TablesBench {
+    pub threads: usize,
+    /// Best end-to-end time of both tables (validation, every run, errors, tabulation).
+    pub tables_s: f64,
+    /// Best time of the reference run alone (h = k = 1/128, end to end).
+    pub reference_alone_s: f64,
+    pub tables_over_reference: f64,
+    /// Repetitions (the fastest of each is reported).
+    pub runs: usize,
+}
+
+pub fn tables(repeat: usize, threads: usize) -> Result<TablesBench, Box<dyn std::error::Error>> {
+    use crate::study;
+    let plans: Vec<study::Plan> = ["paper-table-1", "paper-table-2"]
+        .iter()
+        .map(|n| study::presets::get(n).ok_or("preset"))
+        .map(|d| Ok(study::parse(&d?, "")?.0))
+        .collect::<Result<_, Box<dyn std::error::Error>>>()?;
+    let exec = study::Execution {
+        threads,
+        ..Default::default()
+    };
+    let (mut tables_s, mut reference_alone_s) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..repeat {
+        reference_alone_s = reference_alone_s.min(one("paper-convergence", 128)?.total_s);
+        let start = Instant::now();
+        let cache = study::ReferenceCache::new(1);
+        study::run_many(&plans, &cache, exec, &|_, _| {
+            std::ops::ControlFlow::Continue(())
+        })?;
+        tables_s = tables_s.min(start.elapsed().as_secs_f64());
+    }
+    Ok(TablesBench {
+        threads,
+        tables_s,
+        reference_alone_s,
+        tables_over_reference: tables_s / reference_alone_s,
+        runs: repeat,
+    })
+}

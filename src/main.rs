@@ -113,6 +113,10 @@ enum Command {
         /// Repetitions per level (the fastest is reported).
         #[arg(long, default_value_t = 3)]
         repeat: usize,
+        /// Instead: Tables 1 and 2 together (one shared reference) against the reference
+        /// run alone.
+        #[arg(long)]
+        tables: bool,
     },
     /// The stability suite: hard scenes (friction, non-convexity, damage, extreme h and k, a
     /// slender beam, load jumps) run with every invariant checked, or refused with a reason.
@@ -232,7 +236,21 @@ fn main() -> ExitCode {
             report_dir,
         } => cmd_study(&files, &preset, &format, threads, report_dir.as_deref()),
         Command::Stress { quick, format } => cmd_stress(quick, &format),
-        Command::Bench { levels, repeat } => match bench::run(&levels, repeat.max(1)) {
+        Command::Bench {
+            repeat,
+            tables: true,
+            ..
+        } => {
+            let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(4));
+            match bench::tables(repeat.max(1), threads) {
+                Ok(r) => {
+                    println!("{}", serde_json::to_string_pretty(&r).expect("JSON"));
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail(1, &e.to_string()),
+            }
+        }
+        Command::Bench { levels, repeat, .. } => match bench::run(&levels, repeat.max(1)) {
             Ok(report) => {
                 eprintln!("{}", report.table());
                 println!("{}", serde_json::to_string_pretty(&report).expect("JSON"));

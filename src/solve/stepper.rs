@@ -92,6 +92,49 @@ struct DamagePart {
     next: Vec<f64>,
 }
 
+/// The set-up that depends only on the mesh, the boundary, the viscosity and the friction law,
+/// not on the time step: mesh, geometry, DOF numbering, the factored velocity operator, the
+/// smallness estimate and the mass matrix. Cloning shares the velocity factor.
+#[derive(Clone)]
+pub struct Prepared {
+    mesh: Mesh,
+    geo: Geometry,
+    dofs: DofMap,
+    velocity: VelocityStep,
+    smallness: SmallnessReport,
+    mass: Csr,
+    /// Wall time it took.
+    pub seconds: f64,
+}
+
+impl Prepared {
+    /// Meshes, assembles and factors the velocity operator; estimates the smallness
+    /// condition (2.31).
+    pub fn new(problem: &Problem) -> Result<Prepared, SolveError> {
+        let start = Instant::now();
+        let (nx, ny) = problem.cells();
+        let mut mesh = Mesh::rectangle(problem.width, problem.height, nx, ny, problem.pattern);
+        let segments: Vec<_> = problem.boundary.iter().map(|p| p.segment).collect();
+        mesh.tag_boundary(&segments);
+        let geo = Geometry::new(&mesh);
+        let dofs = DofMap::new(&mesh, &problem.boundary);
+        let visc = problem.material.viscosity;
+        let k = assembly::viscous_stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi);
+        let mut velocity = VelocityStep::new(k, &dofs, problem.friction.clone())?;
+        let smallness = smallness::check(problem, &mesh, &geo, &dofs, &mut velocity)?;
+        let mass = assembly::mass(&mesh, &geo);
+        Ok(Prepared {
+            mesh,
+            geo,
+            dofs,
+            velocity,
+            smallness,
+            mass,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+}
+
 /// One job's assembled operators, factorisations and current state.
 pub struct Simulation {
     pub problem: Problem,
@@ -118,17 +161,33 @@ pub struct Simulation {
 impl Simulation {
     /// Meshes, assembles and factors everything once; checks the smallness condition.
     pub fn new(problem: Problem, settings: SolverSettings) -> Result<Simulation, SolveError> {
+        let prepared = Prepared::new(&problem)?;
+        Simulation::from_prepared(problem, settings, prepared)
+    }
+
+    /// The set-up on a [`Prepared`] made for a problem with the same mesh, boundary,
+    /// viscosity and friction law (only the time step, loads, damage data and outputs may
+    /// differ): what runs of one study on one mesh do instead of factoring again.
+    pub fn from_prepared(
+        problem: Problem,
+        settings: SolverSettings,
+        prepared: Prepared,
+    ) -> Result<Simulation, SolveError> {
         let start = Instant::now();
-        let (nx, ny) = problem.cells();
-        let mut mesh = Mesh::rectangle(problem.width, problem.height, nx, ny, problem.pattern);
-        let segments: Vec<_> = problem.boundary.iter().map(|p| p.segment).collect();
-        mesh.tag_boundary(&segments);
-        let geo = Geometry::new(&mesh);
-        let dofs = DofMap::new(&mesh, &problem.boundary);
-        let visc = problem.material.viscosity;
-        let k = assembly::viscous_stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi);
-        let mut velocity = VelocityStep::new(k, &dofs, problem.friction.clone())?;
-        let smallness = smallness::check(&problem, &mesh, &geo, &dofs, &mut velocity)?;
+        let Prepared {
+            mesh,
+            geo,
+            dofs,
+            velocity,
+            smallness,
+            mass,
+            seconds: prepared_seconds,
+        } = prepared;
+        debug_assert_eq!(
+            (mesh.nx, mesh.ny),
+            problem.cells(),
+            "prepared for another mesh"
+        );
         if !smallness.holds && problem.smallness == SmallnessPolicy::Refuse {
             let discrete = match smallness.discrete_margin {
                 Some(m) if m > 0.0 => format!("each discrete velocity step is still strongly convex (margin {m:.4}), so \"smallness\": \"warn\" computes its unique solution"),
@@ -142,7 +201,6 @@ impl Simulation {
                 smallness.c_tau.unwrap_or(f64::NAN)
             )));
         }
-        let mass = assembly::mass(&mesh, &geo);
         let nn = mesh.n_nodes();
         let zeta: Vec<f64> = match &problem.damage {
             Some(d) => mesh
@@ -190,7 +248,7 @@ impl Simulation {
             load: vec![0.0; 2 * nn],
             load_free: vec![0.0; n_free],
             w_free: vec![0.0; n_free],
-            setup_seconds: start.elapsed().as_secs_f64(),
+            setup_seconds: prepared_seconds + start.elapsed().as_secs_f64(),
             problem,
             mesh,
             geo,

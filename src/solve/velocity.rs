@@ -25,6 +25,8 @@ const SCHUR_BLOCK: usize = 32;
 /// Most rounds of iterative refinement of the interior velocity per step.
 const REFINEMENTS: usize = 3;
 
+/// Cloning shares the factor of K_II (see [`Cholesky`]); the clone has its own warm start.
+#[derive(Clone)]
 pub struct VelocityStep {
     /// The operator on all free DOFs (for residuals), interior first, contact last.
     k: Csr,

@@ -4,11 +4,12 @@
 use crate::mesh::Mesh;
 use crate::problem::Problem;
 use crate::run::RunError;
-use crate::solve::stepper::Simulation;
+use crate::solve::stepper::{Prepared, Simulation};
 use crate::solve::SolverSettings;
 use serde::Serialize;
 use std::collections::BTreeSet;
 use std::ops::ControlFlow;
+use std::sync::Mutex;
 use std::time::Instant;
 
 /// What to run and which step indices n (t_n = n k) to keep.
@@ -17,6 +18,9 @@ pub struct Work {
     pub keep: BTreeSet<usize>,
     /// The run is a study's reference (its norms are computed as soon as it ends).
     pub is_reference: bool,
+    /// Runs with equal keys have the same mesh and physics and share one [`Prepared`]
+    /// set-up (the factored velocity operator does not depend on k).
+    pub share: Option<(String, usize)>,
 }
 
 impl Work {
@@ -77,14 +81,37 @@ impl LevelRun {
     }
 }
 
-/// Runs `work` to t = T; `tick` is called after every step (`Break` cancels).
+/// Runs `work` to t = T; `tick` is called after every step (`Break` cancels). With `shared`,
+/// the set-up is taken from (or, first, left in) that slot; a run that reuses it counts the
+/// set-up's time in its own `seconds` all the same, so that work–precision figures are those
+/// of standalone runs.
 pub fn run_level(
     work: &Work,
     settings: SolverSettings,
     tick: &(dyn Fn() -> ControlFlow<()> + Sync),
+    shared: Option<&Mutex<Option<Prepared>>>,
 ) -> Result<LevelRun, super::StudyError> {
     let start = Instant::now();
-    let mut sim = Simulation::new(work.problem.clone(), settings).map_err(RunError::from)?;
+    let mut reused_seconds = 0.0;
+    let prepared = match shared {
+        Some(slot) => {
+            let mut slot = slot.lock().unwrap_or_else(|e| e.into_inner());
+            match slot.as_ref() {
+                Some(p) => {
+                    reused_seconds = p.seconds;
+                    p.clone()
+                }
+                None => {
+                    let p = Prepared::new(&work.problem).map_err(RunError::from)?;
+                    *slot = Some(p.clone());
+                    p
+                }
+            }
+        }
+        None => Prepared::new(&work.problem).map_err(RunError::from)?,
+    };
+    let mut sim = Simulation::from_prepared(work.problem.clone(), settings, prepared)
+        .map_err(RunError::from)?;
     let mut acc = StatsAccumulator::new(settings);
     let mut snapshots = Vec::with_capacity(work.keep.len());
     while !sim.finished() {
@@ -104,7 +131,7 @@ pub fn run_level(
     Ok(LevelRun {
         unknowns: sim.dofs.n_free(),
         steps: work.problem.steps,
-        seconds: start.elapsed().as_secs_f64(),
+        seconds: start.elapsed().as_secs_f64() + reused_seconds,
         stats: acc.finish(),
         snapshots,
         mesh: sim.mesh,

@@ -25,10 +25,12 @@ pub use spec::{parse, Plan, Vary};
 
 use crate::problem::Problem;
 use crate::run::RunError;
+use crate::solve::stepper::Prepared;
 use crate::solve::SolverSettings;
 use levels::{LevelRun, Work};
 use reference::Reference;
 use std::collections::BTreeSet;
+use std::collections::HashMap;
 use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
@@ -143,6 +145,7 @@ pub fn run_many(
                     problem: with(&plan.base, plan.reference),
                     keep,
                     is_reference: true,
+                    share: Some((plan.reference_key.clone(), plan.reference.0)),
                 });
             }
         }
@@ -162,9 +165,26 @@ pub fn run_many(
                 problem: with(&plan.base, (n, steps)),
                 keep,
                 is_reference: false,
+                share: Some((plan.reference_key.clone(), n)),
             });
         }
         level_jobs.push(idx);
+    }
+    // Only set-ups used by two runs or more are kept (each holds a factor in memory); an
+    // empty key (an unshared reference) never identifies a physics.
+    for j in 0..jobs.len() {
+        let shared_by = |key: &(String, usize)| {
+            jobs.iter()
+                .filter(|o| o.share.as_ref() == Some(key))
+                .count()
+        };
+        if jobs[j]
+            .share
+            .as_ref()
+            .is_some_and(|k| k.0.is_empty() || shared_by(k) < 2)
+        {
+            jobs[j].share = None;
+        }
     }
     let total = jobs.iter().map(|j| j.problem.steps).sum::<usize>();
     let mut done: Vec<Option<Done>> = run_all(jobs, exec, total, progress)?
@@ -282,6 +302,10 @@ fn run_all(
     let stop = AtomicBool::new(false);
     let results: Vec<Mutex<Option<Result<Done, StudyError>>>> =
         jobs.iter().map(|_| Mutex::new(None)).collect();
+    let mut setups: HashMap<&(String, usize), Mutex<Option<Prepared>>> = HashMap::new();
+    for key in jobs.iter().filter_map(|j| j.share.as_ref()) {
+        setups.entry(key).or_insert_with(|| Mutex::new(None));
+    }
     let tick = || {
         let d = done.fetch_add(1, Ordering::Relaxed) + 1;
         if stop.load(Ordering::Relaxed) || progress(d, total).is_break() {
@@ -298,7 +322,8 @@ fn run_all(
         }
         // A reference's norms are computed here, on the computing thread, while the other
         // threads may still be running levels.
-        let r = levels::run_level(&jobs[j], exec.settings, &tick).map(|run| {
+        let slot = jobs[j].share.as_ref().and_then(|k| setups.get(k));
+        let r = levels::run_level(&jobs[j], exec.settings, &tick, slot).map(|run| {
             if jobs[j].is_reference {
                 Done::Reference(Reference::new(run))
             } else {
