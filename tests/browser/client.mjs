@@ -13,7 +13,7 @@
 //    shown on the editor line of that key and in the error list; then a preset with
 //    overrides.h = -1 and check the message under the h input.
 // 3. A long job: its progress moves in the list (SSE), Cancel stops it, Delete removes it.
-// 4. The study view, with the study contract's answers injected by request interception.
+// 4. The study view of a real study job.
 
 import { chromium } from 'playwright-core';
 import fs from 'node:fs';
@@ -285,46 +285,39 @@ async function testLiveJob() {
 }
 
 /**
- * Studies are computed by another part of the service; the view is written against their
- * contract (kind "study", the study summary, links.report). Here the browser is given such
- * answers through request interception, and the table and the report image are checked.
+ * A real convergence study submitted to the server (coarse, a second or two): the view shows
+ * the server's table (h as 1/n, "–" for the first row's orders, the least-squares orders) and
+ * embeds the server's report SVG; nothing else is drawn.
  */
 async function testStudyView() {
-  console.log('test 4: study view (contract answers injected into the page)');
-  const id = '00000000-0000-4000-8000-000000000005';
-  const job = {
-    id, kind: 'study', scene: 'paper-table-1', status: 'succeeded',
-    progress: { step: 5, steps: 5, percent: 100, eta_s: 0, last_residual: null },
-    created_at: new Date().toISOString(), started_at: null, finished_at: null, error: null,
-    attempt: 1, worker: null, scene_hash: 'x',
-    links: { self: `/jobs/${id}`, summary: `/jobs/${id}/summary`, report: `/jobs/${id}/report.svg` },
-  };
-  const summary = {
-    kind: 'study', vary: 'h',
-    reference: { h: 1 / 128, k: 1 / 128, w_V: 0.1527592631, zeta_Z0: 0.7638660333, seconds: 2.1 },
-    rows: [
-      { h: 0.5, k: 1 / 128, err_w: 0.63547, err_zeta: 0.14115, order_w: null, order_zeta: null, unknowns: 12, steps: 128, seconds: 0.0004 },
-      { h: 0.25, k: 1 / 128, err_w: 0.40677, err_zeta: 0.068495, order_w: 0.644, order_zeta: 1.043, unknowns: 40, steps: 128, seconds: 0.001 },
-      { h: 0.125, k: 1 / 128, err_w: 0.23041, err_zeta: 0.025918, order_w: 0.82, order_zeta: 1.402, unknowns: 144, steps: 128, seconds: 0.004 },
-    ],
-    lsq_order_w: 0.78, lsq_order_zeta: 1.31,
-  };
-  const svg = '<svg xmlns="http://www.w3.org/2000/svg" width="400" height="200"><rect width="400" height="200" fill="#eef"/><text x="20" y="40">report</text></svg>';
-  const page = await openPage(async (p) => {
-    const json = (body) => ({ status: 200, contentType: 'application/json', body: JSON.stringify(body) });
-    await p.route((u) => u.pathname === '/jobs', (r) => r.fulfill(json({ jobs: [job], next: null })));
-    await p.route((u) => u.pathname === `/jobs/${id}`, (r) => r.fulfill(json(job)));
-    await p.route((u) => u.pathname === `/jobs/${id}/summary`, (r) => r.fulfill(json(summary)));
-    await p.route((u) => u.pathname === `/jobs/${id}/report.svg`, (r) => r.fulfill({ status: 200, contentType: 'image/svg+xml', body: svg }));
-  }, `#job=${id}`);
+  console.log('test 4: study view (a real study job)');
+  const request = context.request;
+  const submit = await request.post(`${base}/jobs`, {
+    data: { study: { scene: 'paper-convergence', h: ['1/2', '1/4', '1/8'], k: '1/16', reference: { h: '1/16', k: '1/16' } } },
+  });
+  check(submit.status() === 202 || submit.status() === 200, `study accepted (${submit.status()})`);
+  const id = (await submit.json()).id;
+  const t0 = Date.now();
+  let job;
+  for (;;) {
+    job = await (await request.get(`${base}/jobs/${id}`)).json();
+    if (['succeeded', 'failed', 'cancelled'].includes(job.status)) break;
+    check(Date.now() - t0 < 60_000, 'the study finishes within 60 s');
+    await new Promise((r) => setTimeout(r, 100));
+  }
+  check(job.status === 'succeeded' && job.kind === 'study', `study ${job.status}`);
+  const summary = await (await request.get(`${base}/jobs/${id}/summary`)).json();
+  const page = await openPage(async () => {}, `#job=${id}`);
   await page.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 10_000 });
   const rows = await page.$$eval('#study-table tbody tr', (trs) => trs.map((tr) => [...tr.cells].map((c) => c.textContent)));
   check(rows.length === 3, `${rows.length} table rows`);
-  check(rows[0][0] === '1/2' && rows[0][3] === '–' && rows[1][3] === '0.644', `rows read h as 1/n and orders (first row: –): ${JSON.stringify(rows[1])}`);
-  const img = await page.$eval('#viewer img.report', (i) => ({ src: i.getAttribute('src'), w: i.naturalWidth, done: i.complete }));
+  const order = Number(summary.rows[1].order_w).toFixed(3);
+  check(rows[0][0] === '1/2' && rows[0][3] === '–' && rows[1][3] === order, `rows read h as 1/n and orders (first row: –): ${JSON.stringify(rows[1])}, expected ${order}`);
+  const img = await page.$eval('#viewer img.report', (i) => ({ src: i.getAttribute('src'), w: i.naturalWidth }));
   check(img.src === `/jobs/${id}/report.svg` && img.w > 0, `report SVG embedded and loaded (${img.w} px wide)`);
   check((await page.locator('#viewer canvas').count()) === 0, 'nothing else is drawn for a study');
-  check((await page.textContent('#viewer')).includes('0.780'), 'least-squares orders shown');
+  const lsq = Number(summary.lsq_order_w).toFixed(3);
+  check((await page.textContent('#viewer')).includes(lsq), `least-squares order ${lsq} shown`);
   await page.screenshot({ path: path.join(outDir, 'client-study.png'), fullPage: true });
   await page.close();
 }
