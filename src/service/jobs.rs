@@ -185,6 +185,27 @@ impl Runtime {
         }
     }
 
+    /// Records a running job's progress in memory and tells its subscribers (with an ETA).
+    fn running_progress(&self, id: Uuid, progress: Progress) {
+        let eta_s = {
+            let mut live = self.live.lock().unwrap();
+            live.get_mut(&id).and_then(|l| {
+                l.progress = progress;
+                eta(l)
+            })
+        };
+        self.publish(
+            id,
+            JobEvent {
+                status: JobStatus::Running,
+                step: progress.step,
+                steps: progress.steps,
+                last_residual: progress.last_residual,
+                eta_s,
+            },
+        );
+    }
+
     /// Asks a running job to stop within one step.
     pub fn cancel(&self, id: Uuid) {
         if let Some(l) = self.live.lock().unwrap().get(&id) {
@@ -333,23 +354,7 @@ impl Runtime {
             };
             reports.push(r);
             self.steps_done.fetch_add(1, Ordering::Relaxed);
-            let eta_s = {
-                let mut live = self.live.lock().unwrap();
-                live.get_mut(&id).and_then(|l| {
-                    l.progress = progress;
-                    eta(l)
-                })
-            };
-            self.publish(
-                id,
-                JobEvent {
-                    status: JobStatus::Running,
-                    step: progress.step,
-                    steps,
-                    last_residual: progress.last_residual,
-                    eta_s,
-                },
-            );
+            self.running_progress(id, progress);
             if last_checkpoint.elapsed() >= CHECKPOINT_EVERY && !sim.finished() {
                 last_checkpoint = Instant::now();
                 self.checkpoint(id, &sim, &reports, estimator.as_ref())
@@ -402,23 +407,7 @@ impl Runtime {
                 steps: total,
                 last_residual: None,
             };
-            let eta_s = {
-                let mut live = self.live.lock().unwrap();
-                live.get_mut(&id).and_then(|l| {
-                    l.progress = p;
-                    eta(l)
-                })
-            };
-            self.publish(
-                id,
-                JobEvent {
-                    status: JobStatus::Running,
-                    step: done,
-                    steps: total,
-                    last_residual: None,
-                    eta_s,
-                },
-            );
+            self.running_progress(id, p);
             let mut beat = last_beat.lock().unwrap();
             if beat.elapsed() >= CHECKPOINT_EVERY {
                 *beat = Instant::now();
