@@ -146,6 +146,13 @@ impl Panel {
         if x2 <= x1 {
             return;
         }
+        // The guides meet at the anchor: label the steeper one at its upper end and the
+        // other at its lower end so the labels never overlap.
+        let label = if p > 1.5 {
+            (self.px(x2) - 48.0, self.py(y(x2)) + 14.0)
+        } else {
+            (self.px(x1) + 6.0, self.py(y(x1)) - 6.0)
+        };
         let _ = writeln!(
             out,
             r##"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="#888" stroke-dasharray="6 4"/><text x="{:.1}" y="{:.1}" font-size="11" fill="#555">slope {p}</text>"##,
@@ -153,8 +160,8 @@ impl Panel {
             self.py(y(x1)),
             self.px(x2),
             self.py(y(x2)),
-            self.px(x1) + 6.0,
-            self.py(y(x1)) - 6.0,
+            label.0,
+            label.1,
         );
     }
 }
