@@ -107,6 +107,15 @@ export class SimulationView {
       `${m.nodes} nodes · ${m.triangles} triangles · h = ${fmtStep(m.h)} · k = ${fmtStep(t.k)} · ${t.steps} steps · `,
       `solved in ${fmtSeconds(summary.timing?.solve_s)} · ${summary.stats?.steps_with_slip ?? 0} steps with slip`);
     const warnings = (summary.warnings || []).map((w) => el('p', { class: 'warning' }, w));
+    // The (2h, 2k) error bar, when the scene asked for one ("error_estimate": true).
+    const est = summary.error_estimate?.final;
+    const pct = (x) => (x === null || x === undefined ? '–' : `${(100 * x).toPrecision(2)} %`);
+    const estimate = est
+      ? el('p', { class: est.flagged ? 'warning' : 'run-info', id: 'error-estimate' },
+        `Estimated error at T (from a run at 2h, 2k): w ${pct(est.w)}, ζ ${pct(est.zeta)}`,
+        est.observed_order_w != null ? ` · observed order ${Number(est.observed_order_w).toFixed(2)}` : '',
+        est.flagged ? ' · flagged: the runs disagree more than a first-order model allows' : '')
+      : null;
 
     this.root.replaceChildren(
       el('div', { class: 'view-head' },
@@ -117,6 +126,7 @@ export class SimulationView {
           el('a', { href: `/jobs/${id}/archive.tar`, download: '' }, 'archive.tar'),
           el('a', { href: `/jobs/${id}/summary`, download: `summary-${id.slice(0, 8)}.json` }, 'summary JSON'))),
       info,
+      ...(estimate ? [estimate] : []),
       ...warnings,
       el('div', { class: 'toolbar' },
         el('label', {}, 'Colour by ', this.quantity),

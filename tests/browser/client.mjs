@@ -320,6 +320,25 @@ async function testStudyView() {
   check((await page.textContent('#viewer')).includes(lsq), `least-squares order ${lsq} shown`);
   await page.screenshot({ path: path.join(outDir, 'client-study.png'), fullPage: true });
   await page.close();
+
+  // A simulation with an error bar shows the estimate at T next to the run's facts.
+  const scene = await (await request.get(`${base}/presets/paper-exp2`)).json();
+  scene.mesh.h = '1/8';
+  scene.time = { t_end: 1, k: '1/8' };
+  scene.error_estimate = true;
+  const sim = await request.post(`${base}/jobs`, { data: scene });
+  check(sim.status() === 202, `scene with error_estimate accepted (${sim.status()})`);
+  const simId = (await sim.json()).id;
+  const t1 = Date.now();
+  while ((await (await request.get(`${base}/jobs/${simId}`)).json()).status !== 'succeeded') {
+    check(Date.now() - t1 < 60_000, 'the simulation finishes within 60 s');
+    await new Promise((r) => setTimeout(r, 100));
+  }
+  const estPage = await openPage(async () => {}, `#job=${simId}`);
+  await estPage.waitForSelector(`#viewer[data-state="ready"][data-job="${simId}"]`, { timeout: 15_000 });
+  const text = await estPage.textContent('#error-estimate');
+  check(/Estimated error at T .*w [0-9.]+ %/.test(text), `error estimate shown: ${text}`);
+  await estPage.close();
 }
 
 let failed = false;
