@@ -187,6 +187,10 @@ pub fn encode_state(s: &State) -> Vec<u8> {
     w.u64(s.step as u64);
     w.f64s(&s.u);
     w.f64s(&s.zeta);
+    // The solvers' warm starts; checkpoints written before they were added end after ζ.
+    w.f64s(&s.contact_velocity);
+    let active: Vec<f64> = s.damage_active.iter().map(|&c| f64::from(c)).collect();
+    w.f64s(&active);
     w.finish()
 }
 
@@ -197,8 +201,31 @@ pub fn decode_state(bytes: &[u8]) -> Result<State, DecodeError> {
     let step = r.usize("step")?;
     let u = r.f64s("u")?;
     let zeta = r.f64s("zeta")?;
+    let (mut contact_velocity, mut damage_active) = (Vec::new(), Vec::new());
+    if r.available() > 0 {
+        contact_velocity = r.f64s("contact velocity")?;
+        damage_active = r
+            .f64s("damage active set")?
+            .into_iter()
+            .map(|c| match c {
+                0.0 => Ok(0),
+                1.0 => Ok(1),
+                2.0 => Ok(2),
+                _ => Err(DecodeError::ValueOutOfRange {
+                    what: "damage active set",
+                    value: c.to_bits(),
+                }),
+            })
+            .collect::<Result<_, _>>()?;
+    }
     r.close()?;
-    Ok(State { step, u, zeta })
+    Ok(State {
+        step,
+        u,
+        zeta,
+        contact_velocity,
+        damage_active,
+    })
 }
 
 /// The first 8 bytes of SHA-256, as a little-endian `u64`.
@@ -578,6 +605,8 @@ mod tests {
             step: 123_456,
             u: rng.f64s(30),
             zeta: rng.f64s(15),
+            contact_velocity: rng.f64s(4),
+            damage_active: vec![0, 1, 2, 0, 2],
         };
         let bytes = encode_state(&s);
         assert_eq!(&bytes[..6], STATE_MAGIC);
@@ -586,12 +615,10 @@ mod tests {
         let b = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(b(&back.u), b(&s.u));
         assert_eq!(b(&back.zeta), b(&s.zeta));
+        assert_eq!(b(&back.contact_velocity), b(&s.contact_velocity));
+        assert_eq!(back.damage_active, s.damage_active);
 
-        let empty = State {
-            step: 0,
-            u: Vec::new(),
-            zeta: Vec::new(),
-        };
+        let empty = State::default();
         assert_eq!(decode_state(&encode_state(&empty)).unwrap(), empty);
     }
 
@@ -601,6 +628,7 @@ mod tests {
             step: 1,
             u: vec![1.0],
             zeta: vec![1.0],
+            ..State::default()
         };
         assert_eq!(
             decode_step(&encode_state(&s)),
@@ -634,6 +662,7 @@ mod tests {
             step: 3,
             u: vec![1.0, -2.0],
             zeta: vec![0.5],
+            ..State::default()
         });
         for i in 0..state.len() {
             let mut bad = state.clone();
@@ -657,6 +686,8 @@ mod tests {
             step: 2,
             u: vec![0.25; 4],
             zeta: vec![1.0; 2],
+            contact_velocity: vec![0.5],
+            damage_active: vec![1, 0],
         });
         for len in 0..state.len() {
             assert!(decode_state(&state[..len]).is_err(), "length {len}");
@@ -820,7 +851,7 @@ mod tests {
             u in proptest::collection::vec(any::<f64>(), 0..50),
             zeta in proptest::collection::vec(any::<f64>(), 0..50),
         ) {
-            let s = State { step, u, zeta };
+            let s = State { step, u, zeta, ..State::default() };
             let back = decode_state(&encode_state(&s)).unwrap();
             prop_assert_eq!(back.step, s.step);
             prop_assert!(back.u.iter().zip(&s.u).all(|(a, b)| a.to_bits() == b.to_bits()));

@@ -473,7 +473,7 @@ impl Runtime {
             self.results.write_atomic(id, ESTIMATES_FILE, &bytes)?;
         }
         self.store
-            .checkpoint(id, sim.state.step, &encode_state(&sim.state))?;
+            .checkpoint(id, sim.state.step, &encode_state(&sim.checkpoint_state()))?;
         self.store.set_progress(
             id,
             Progress {

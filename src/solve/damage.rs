@@ -195,6 +195,35 @@ impl DamageStep {
         })
     }
 
+    /// The warm start for the next solve as codes: 0 free, 1 at the lower bound, 2 at the
+    /// upper bound (what a checkpoint stores).
+    pub fn active_codes(&self) -> Vec<u8> {
+        self.active
+            .iter()
+            .map(|b| match b {
+                Bound::Free => 0,
+                Bound::Lower => 1,
+                Bound::Upper => 2,
+            })
+            .collect()
+    }
+
+    /// Restores a warm start saved by [`DamageStep::active_codes`]; false (and nothing
+    /// changed) when the codes do not fit this problem.
+    pub fn set_active_codes(&mut self, codes: &[u8]) -> bool {
+        if codes.len() != self.active.len() || codes.iter().any(|&c| c > 2) {
+            return false;
+        }
+        for (a, &c) in self.active.iter_mut().zip(codes) {
+            *a = match c {
+                0 => Bound::Free,
+                1 => Bound::Lower,
+                _ => Bound::Upper,
+            };
+        }
+        true
+    }
+
     /// Warm start from a given ζ (e.g. the initial data or a checkpoint).
     pub fn set_active_from(&mut self, zeta: &[f64]) {
         for (a, &z) in self.active.iter_mut().zip(zeta) {

@@ -24,7 +24,7 @@ use std::time::Instant;
 const PARALLEL_MIN_NODES: usize = 3000;
 
 /// The state at a time node: all that is needed to continue (a checkpoint).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct State {
     /// Index n of the time node t_n = n k.
     pub step: usize,
@@ -32,6 +32,15 @@ pub struct State {
     pub u: Vec<f64>,
     /// Damage ζ_n per node.
     pub zeta: Vec<f64>,
+    /// Warm starts of the two sub-problem solvers after step n, filled only by
+    /// [`Simulation::checkpoint_state`] (empty otherwise): the tangential velocities on Γ3
+    /// and the damage active set (0 free, 1 at ζ = 0, 2 at ζ = 1). Restoring them makes a
+    /// resumed run repeat an uninterrupted one bit for bit; without them it agrees to the
+    /// solver tolerance.
+    #[serde(default)]
+    pub contact_velocity: Vec<f64>,
+    #[serde(default)]
+    pub damage_active: Vec<u8>,
 }
 
 /// What one time step did.
@@ -238,7 +247,12 @@ impl Simulation {
         let nt = mesh.triangles.len();
         let n_free = dofs.n_free();
         Ok(Simulation {
-            state: State { step: 0, u, zeta },
+            state: State {
+                step: 0,
+                u,
+                zeta,
+                ..State::default()
+            },
             w: vec![0.0; 2 * nn],
             mass,
             velocity,
@@ -258,12 +272,33 @@ impl Simulation {
         })
     }
 
-    /// Continue from a checkpointed state.
-    pub fn restore(&mut self, state: State) {
+    /// The state with the solvers' warm starts, for a checkpoint.
+    pub fn checkpoint_state(&self) -> State {
+        State {
+            contact_velocity: self.velocity.contact_velocity().to_vec(),
+            damage_active: self
+                .damage
+                .as_ref()
+                .map_or_else(Vec::new, |d| d.solver.active_codes()),
+            ..self.state.clone()
+        }
+    }
+
+    /// Continue from a checkpointed state (warm starts restored when present and of the
+    /// right size, else rebuilt from ζ).
+    pub fn restore(&mut self, mut state: State) {
         assert_eq!(state.u.len(), self.state.u.len());
         assert_eq!(state.zeta.len(), self.state.zeta.len());
+        let warm = std::mem::take(&mut state.contact_velocity);
+        if warm.len() == self.velocity.n_contact() {
+            self.velocity.set_contact_velocity(&warm);
+        }
+        let active = std::mem::take(&mut state.damage_active);
         if let Some(d) = &mut self.damage {
-            d.solver.set_active_from(&state.zeta);
+            if !d.solver.set_active_codes(&active) {
+                d.solver.set_active_from(&state.zeta);
+            }
+            d.next.copy_from_slice(&state.zeta);
         }
         self.state = state;
     }
