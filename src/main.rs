@@ -28,11 +28,26 @@ enum Command {
     Serve {
         #[arg(long, default_value = "127.0.0.1:8080")]
         addr: String,
+        /// Result files (and the embedded store); with --store, a directory shared by all
+        /// nodes.
         #[arg(long = "data-dir", default_value = "./data")]
         data_dir: PathBuf,
-        /// Worker threads (default: number of cores).
+        /// Worker threads (default: number of cores; 0: an API-only node).
         #[arg(long)]
         workers: Option<usize>,
+        /// Job store: a `postgres://user@host/db` URL shared by many nodes, or omitted for
+        /// the embedded SQLite database in the data directory (single node).
+        #[arg(long)]
+        store: Option<String>,
+        /// This node's name, the prefix of its worker names; a restarted node with the same
+        /// name takes its interrupted jobs back at once. Must differ between live nodes
+        /// (default: "local" for the embedded store, host-pid for a shared one).
+        #[arg(long)]
+        node: Option<String>,
+        /// Seconds a job's lease lasts: a dead worker's job is claimed by another this long
+        /// after its last renewal.
+        #[arg(long = "lease-seconds", default_value_t = 30.0)]
+        lease_seconds: f64,
         /// Maximum queued jobs before POST /jobs answers 503.
         #[arg(long = "queue-capacity", default_value_t = 1000)]
         queue_capacity: usize,
@@ -61,6 +76,29 @@ enum Command {
         /// Seconds a client has to send a complete request head (then disconnected).
         #[arg(long = "header-timeout", default_value_t = 30.0)]
         header_timeout: f64,
+    },
+    /// A compute-only node: workers that claim jobs from a shared store (no HTTP). Stops on
+    /// SIGINT or SIGTERM; its running jobs are checkpointed and resumed by any node.
+    Worker {
+        /// The directory of result files, shared with every other node.
+        #[arg(long = "data-dir", default_value = "./data")]
+        data_dir: PathBuf,
+        /// Worker threads (default: number of cores).
+        #[arg(long)]
+        workers: Option<usize>,
+        /// Job store: a `postgres://user@host/db` URL shared by many nodes, or omitted for
+        /// the embedded SQLite database in the data directory (single node).
+        #[arg(long)]
+        store: Option<String>,
+        /// This node's name, the prefix of its worker names; a restarted node with the same
+        /// name takes its interrupted jobs back at once. Must differ between live nodes
+        /// (default: "local" for the embedded store, host-pid for a shared one).
+        #[arg(long)]
+        node: Option<String>,
+        /// Seconds a job's lease lasts: a dead worker's job is claimed by another this long
+        /// after its last renewal.
+        #[arg(long = "lease-seconds", default_value_t = 30.0)]
+        lease_seconds: f64,
     },
     /// Run a scene (a JSON file or a preset) and print the summary JSON.
     Run {
@@ -145,6 +183,9 @@ fn main() -> ExitCode {
         submit_rate: 10.0,
         submit_burst: 50,
         header_timeout: 30.0,
+        store: None,
+        node: None,
+        lease_seconds: 30.0,
     });
     match command {
         Command::Serve {
@@ -160,11 +201,20 @@ fn main() -> ExitCode {
             submit_rate,
             submit_burst,
             header_timeout,
+            store,
+            node,
+            lease_seconds,
         } => {
             let defaults = Config::default();
             let config = Config {
                 data_dir,
                 workers: workers.unwrap_or(defaults.workers),
+                node: node_name(node, store.is_some()),
+                store,
+                lease_s: match lease(lease_seconds) {
+                    Ok(s) => s,
+                    Err(e) => return fail(2, &e),
+                },
                 queue_capacity,
                 max_nodes,
                 max_steps,
@@ -181,6 +231,33 @@ fn main() -> ExitCode {
                 ..defaults
             };
             cmd_serve(&addr, config)
+        }
+        Command::Worker {
+            data_dir,
+            workers,
+            store,
+            node,
+            lease_seconds,
+        } => {
+            let Some(store) = store else {
+                return fail(
+                    2,
+                    "a worker node needs the shared store: --store postgres://user@host/db",
+                );
+            };
+            let defaults = Config::default();
+            let config = Config {
+                data_dir,
+                workers: workers.unwrap_or(defaults.workers).max(1),
+                node: node_name(node, true),
+                store: Some(store),
+                lease_s: match lease(lease_seconds) {
+                    Ok(s) => s,
+                    Err(e) => return fail(2, &e),
+                },
+                ..defaults
+            };
+            cmd_worker(config)
         }
         Command::Run {
             scene,
@@ -261,6 +338,80 @@ fn main() -> ExitCode {
     }
 }
 
+/// `--node`, or a name unique to this process for a shared store (host and pid), "local"
+/// for the embedded one.
+fn node_name(node: Option<String>, shared: bool) -> String {
+    node.unwrap_or_else(|| {
+        if shared {
+            let host = std::fs::read_to_string("/etc/hostname")
+                .ok()
+                .map(|h| h.trim().to_string())
+                .filter(|h| !h.is_empty())
+                .unwrap_or_else(|| "node".into());
+            format!("{host}-{}", std::process::id())
+        } else {
+            "local".into()
+        }
+    })
+}
+
+fn lease(seconds: f64) -> Result<f64, String> {
+    if seconds.is_finite() && (0.3..=86_400.0).contains(&seconds) {
+        Ok(seconds)
+    } else {
+        Err(format!(
+            "--lease-seconds {seconds}: must be between 0.3 and 86400"
+        ))
+    }
+}
+
+/// Resolves on SIGINT (Ctrl-C) or SIGTERM (what `docker stop` and service managers send).
+async fn shutdown_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    _ = tokio::signal::ctrl_c() => {}
+                    _ = term.recv() => {}
+                }
+            }
+            Err(_) => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+    }
+}
+
+fn cmd_worker(config: Config) -> ExitCode {
+    let rt = match service::app::open_runtime(config.clone()) {
+        Ok(rt) => rt,
+        Err(e) => return fail(1, &e),
+    };
+    eprintln!(
+        "contact-sim {} worker node {} ({} workers, results in {})",
+        env!("CARGO_PKG_VERSION"),
+        config.node,
+        config.workers,
+        config.data_dir.display()
+    );
+    match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(signals) => signals.block_on(shutdown_signal()),
+        Err(e) => return fail(1, &format!("cannot wait for signals: {e}")),
+    }
+    eprintln!("contact-sim: worker node stopping (running jobs are checkpointed)");
+    rt.shutdown();
+    ExitCode::SUCCESS
+}
+
 fn cmd_serve(addr: &str, config: Config) -> ExitCode {
     // The async runtime only does I/O; the numerics runs on the worker pool's own threads.
     let rt = match tokio::runtime::Builder::new_multi_thread()
@@ -271,11 +422,12 @@ fn cmd_serve(addr: &str, config: Config) -> ExitCode {
         Ok(rt) => rt,
         Err(e) => return fail(1, &format!("cannot start the async runtime: {e}")),
     };
+    // Opening a PostgreSQL store blocks: not on the runtime's threads.
+    let state = match service::app::start(config.clone()) {
+        Ok(s) => s,
+        Err(e) => return fail(1, &e),
+    };
     rt.block_on(async {
-        let state = match service::app::start(config.clone()) {
-            Ok(s) => s,
-            Err(e) => return fail(1, &e),
-        };
         let listener = match tokio::net::TcpListener::bind(addr).await {
             Ok(l) => l,
             Err(e) => return fail(1, &format!("cannot listen on {addr}: {e}")),
@@ -288,7 +440,7 @@ fn cmd_serve(addr: &str, config: Config) -> ExitCode {
             config.workers
         );
         let shutdown = async {
-            let _ = tokio::signal::ctrl_c().await;
+            shutdown_signal().await;
             eprintln!("contact-sim: shutting down (running jobs are checkpointed and resume at the next start)");
         };
         match service::app::serve(listener, state, shutdown).await {

@@ -5,6 +5,7 @@ use super::error::ApiError;
 use super::jobs::Runtime;
 use super::limits::{self, RateLimiter};
 use super::routes::{client, jobs, misc, results};
+use super::store::postgres::PgStore;
 use super::store::results::ResultFiles;
 use super::store::sqlite::SqliteStore;
 use super::store::Store;
@@ -68,19 +69,12 @@ pub fn app(state: AppState) -> Router {
         .with_state(state)
 }
 
-/// Opens the store in `config.data_dir` and starts the worker pool. Leases held by this
-/// node's previous run are released, so its interrupted jobs resume at once.
+/// Opens the store and the result files and starts the worker pool (see [`open_runtime`]).
+///
+/// Blocking: with a PostgreSQL store, call it outside the async runtime's threads.
 pub fn start(config: Config) -> Result<AppState, String> {
-    std::fs::create_dir_all(&config.data_dir)
-        .map_err(|e| format!("cannot create {}: {e}", config.data_dir.display()))?;
-    let store =
-        SqliteStore::open(&config.data_dir.join("jobs.sqlite3")).map_err(|e| e.to_string())?;
-    store
-        .release_worker_leases(&format!("{}-", config.node))
-        .map_err(|e| e.to_string())?;
-    let results = ResultFiles::new(&config.data_dir).map_err(|e| e.to_string())?;
     let limiter = Arc::new(RateLimiter::new(config.submit_rate, config.submit_burst));
-    let rt = Runtime::start(Arc::new(store), Arc::new(results), config);
+    let rt = open_runtime(config)?;
     let (tx, rx) = tokio::sync::watch::channel(false);
     Ok(AppState {
         rt,
@@ -88,6 +82,47 @@ pub fn start(config: Config) -> Result<AppState, String> {
         closing_tx: Arc::new(tx),
         limiter,
     })
+}
+
+/// Opens the job store — the embedded SQLite database in `config.data_dir`, or the shared
+/// PostgreSQL database of `config.store` — and the result files in `config.data_dir`, and
+/// starts `config.workers` workers (none on an API-only node). Leases held by this node's
+/// previous run are released, so its interrupted jobs resume at once. Also what a
+/// compute-only node (`contact-sim worker`) runs.
+pub fn open_runtime(config: Config) -> Result<Arc<Runtime>, String> {
+    std::fs::create_dir_all(&config.data_dir)
+        .map_err(|e| format!("cannot create {}: {e}", config.data_dir.display()))?;
+    let (store, results): (Arc<dyn Store>, ResultFiles) = match &config.store {
+        None => (
+            Arc::new(
+                SqliteStore::open(&config.data_dir.join("jobs.sqlite3"))
+                    .map_err(|e| e.to_string())?,
+            ),
+            ResultFiles::new(&config.data_dir).map_err(|e| e.to_string())?,
+        ),
+        Some(url) => (
+            Arc::new(PgStore::connect(url).map_err(|e| format!("store {}: {e}", redact(url)))?),
+            // Other nodes write into the same directory: only stale temporary files are
+            // theirs to lose.
+            ResultFiles::shared(&config.data_dir).map_err(|e| e.to_string())?,
+        ),
+    };
+    store
+        .release_worker_leases(&format!("{}-", config.node))
+        .map_err(|e| e.to_string())?;
+    Ok(Runtime::start(store, Arc::new(results), config))
+}
+
+/// A store URL without its password (for messages).
+pub fn redact(url: &str) -> String {
+    match (url.find("://"), url.rfind('@')) {
+        (Some(scheme), Some(at)) if at > scheme => {
+            let userinfo = &url[scheme + 3..at];
+            let user = userinfo.split(':').next().unwrap_or("");
+            format!("{}{user}{}", &url[..scheme + 3], &url[at..])
+        }
+        _ => url.to_string(),
+    }
 }
 
 /// Serves until `shutdown` resolves, then stops the workers (running jobs are checkpointed

@@ -81,7 +81,21 @@ impl ApiError {
 
 impl From<crate::service::store::StoreError> for ApiError {
     fn from(e: crate::service::store::StoreError) -> Self {
-        ApiError::internal(format!("store: {e}"))
+        use crate::service::store::StoreError;
+        match e {
+            // The shared database is restarting or unreachable: the client should retry
+            // (with its Idempotency-Key, a retried submission cannot create a second job).
+            StoreError::Unavailable(_) => {
+                let mut err = ApiError::new(
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    "job store unavailable",
+                    format!("store: {e}; retry shortly"),
+                );
+                err.retry_after = Some(2);
+                err
+            }
+            e => ApiError::internal(format!("store: {e}")),
+        }
     }
 }
 

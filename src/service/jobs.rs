@@ -27,8 +27,6 @@ use std::time::{Duration, Instant};
 use tokio::sync::broadcast;
 use uuid::Uuid;
 
-/// Lease of a claimed job; renewed while it runs (`lease::Keeper`) and at checkpoints.
-const LEASE_S: f64 = 30.0;
 /// A job interrupted this often in a row without a new checkpoint is dead-lettered.
 const MAX_ATTEMPTS: u32 = 3;
 const CHECKPOINT_EVERY: Duration = Duration::from_secs(1);
@@ -144,7 +142,31 @@ impl Runtime {
             );
         }
         *rt.workers.lock().unwrap() = handles;
+        if rt.config.workers > 0 {
+            // Submissions on other nodes (shared store) wake this node's idle workers.
+            let weak = Arc::downgrade(&rt);
+            let wake: super::store::Wake = Arc::new(move || match weak.upgrade() {
+                Some(rt) if !rt.shutdown.load(Ordering::SeqCst) => {
+                    rt.notify();
+                    true
+                }
+                _ => false,
+            });
+            if let Err(e) = rt.store.watch_for_work(wake) {
+                eprintln!(
+                    "contact-sim: cannot watch for new jobs (workers look every {:.1} s): {e}",
+                    rt.idle_wait().as_secs_f64()
+                );
+            }
+        }
         rt
+    }
+
+    /// How long an idle worker waits before looking for claimable jobs again when nobody
+    /// woke it: new jobs wake it at once (the API here, or the store's notifications), so
+    /// this only bounds how late a dead worker's job is noticed after its lease expired.
+    fn idle_wait(&self) -> Duration {
+        Duration::from_secs_f64((self.config.lease_s / 3.0).clamp(0.05, 10.0))
     }
 
     /// Wakes idle workers (a job was enqueued).
@@ -222,13 +244,13 @@ impl Runtime {
 
     fn worker_loop(self: Arc<Self>, name: &str) {
         while !self.shutdown.load(Ordering::SeqCst) {
-            match self.store.claim(name, LEASE_S, MAX_ATTEMPTS) {
+            match self.store.claim(name, self.config.lease_s, MAX_ATTEMPTS) {
                 Ok(Some(job)) => self.run(job, name),
                 Ok(None) => {
                     let (m, cv) = &self.wake;
                     let guard = m.lock().unwrap();
                     let seen = *guard;
-                    let _ = cv.wait_timeout_while(guard, Duration::from_millis(500), |v| {
+                    let _ = cv.wait_timeout_while(guard, self.idle_wait(), |v| {
                         *v == seen && !self.shutdown.load(Ordering::SeqCst)
                     });
                 }
@@ -253,13 +275,13 @@ impl Runtime {
             },
         );
         self.running.fetch_add(1, Ordering::SeqCst);
-        let keeper = super::lease::Keeper::start(self.store.clone(), id, worker, LEASE_S);
+        let keeper =
+            super::lease::Keeper::start(self.store.clone(), id, worker, self.config.lease_s);
         let outcome = if is_study(&job.scene) {
             self.execute_study(&job, worker, &cancel)
         } else {
             self.execute(&job, worker, &cancel)
         };
-        drop(keeper);
         let final_status = match outcome {
             Ok(Outcome::Succeeded) => Some((JobStatus::Succeeded, None)),
             Ok(Outcome::Cancelled) => Some((JobStatus::Cancelled, None)),
@@ -275,10 +297,18 @@ impl Runtime {
             .unwrap_or(job.progress);
         self.running.fetch_sub(1, Ordering::SeqCst);
         if let Some((status, error)) = final_status {
-            let _ = self.store.set_progress(id, progress);
-            if let Err(e) = self.store.finish(id, status, error) {
-                eprintln!("contact-sim: cannot record the end of job {id}: {e}");
+            // The lease is kept until the end is recorded: were the store unreachable for
+            // longer than a lease, another worker would otherwise compute the job again.
+            let _ = self.with_store_retry(|| self.store.set_progress(id, progress));
+            match self.with_store_retry(|| self.store.finish(id, status, error.clone())) {
+                Ok(()) => eprintln!(
+                    "contact-sim: {worker}: job {id} {} (attempt {})",
+                    status.as_str(),
+                    job.attempt
+                ),
+                Err(e) => eprintln!("contact-sim: cannot record the end of job {id}: {e}"),
             }
+            drop(keeper);
             self.publish(
                 id,
                 JobEvent {
@@ -291,6 +321,26 @@ impl Runtime {
             );
         }
         self.channels.lock().unwrap().remove(&id);
+    }
+
+    /// Runs an idempotent store operation, retrying while the store is unavailable (a
+    /// shared database restarting) with a backoff up to 5 s, until it succeeds, fails for
+    /// another reason, or the server shuts down.
+    fn with_store_retry<T>(
+        &self,
+        mut op: impl FnMut() -> Result<T, StoreError>,
+    ) -> Result<T, StoreError> {
+        let mut backoff = Duration::from_millis(100);
+        loop {
+            match op() {
+                Err(StoreError::Unavailable(e)) if !self.shutdown.load(Ordering::SeqCst) => {
+                    eprintln!("contact-sim: store unavailable ({e}); retrying in {backoff:?}");
+                    std::thread::sleep(backoff);
+                    backoff = (backoff * 2).min(Duration::from_secs(5));
+                }
+                other => return other,
+            }
+        }
     }
 
     fn execute(
@@ -315,6 +365,10 @@ impl Runtime {
             .resume(id, &mut sim)
             .map_err(|e| problem_json(500, "checkpoint unreadable", &e))?
         {
+            eprintln!(
+                "contact-sim: {worker}: job {id} resumed from step {} (attempt {})",
+                sim.state.step, job.attempt
+            );
             reports = resumed;
             if let Some(e) = estimator.as_mut() {
                 e.catch_up(sim.state.step, rows)
@@ -329,8 +383,7 @@ impl Runtime {
                 return Ok(Outcome::Cancelled);
             }
             if self.shutdown.load(Ordering::SeqCst) {
-                self.checkpoint(id, &sim, &reports, estimator.as_ref())
-                    .map_err(|e| problem_json(500, "checkpoint failed", &e.to_string()))?;
+                self.checkpoint(id, &sim, &reports, estimator.as_ref())?;
                 return Ok(Outcome::Interrupted);
             }
             let r = sim.step().map_err(|e| solve_problem(&e))?;
@@ -357,9 +410,8 @@ impl Runtime {
             self.running_progress(id, progress);
             if last_checkpoint.elapsed() >= CHECKPOINT_EVERY && !sim.finished() {
                 last_checkpoint = Instant::now();
-                self.checkpoint(id, &sim, &reports, estimator.as_ref())
-                    .map_err(|e| problem_json(500, "checkpoint failed", &e.to_string()))?;
-                match self.store.heartbeat(id, worker, LEASE_S) {
+                self.checkpoint(id, &sim, &reports, estimator.as_ref())?;
+                match self.store.heartbeat(id, worker, self.config.lease_s) {
                     Ok(true) => {}
                     Ok(false) => {
                         // Cancelled meanwhile, or the lease went to another worker.
@@ -412,7 +464,7 @@ impl Runtime {
             if beat.elapsed() >= CHECKPOINT_EVERY {
                 *beat = Instant::now();
                 let _ = self.store.set_progress(id, p);
-                if let Ok(false) = self.store.heartbeat(id, worker, LEASE_S) {
+                if let Ok(false) = self.store.heartbeat(id, worker, self.config.lease_s) {
                     lost_lease.store(true, Ordering::SeqCst);
                     return ControlFlow::Break(());
                 }
@@ -457,9 +509,29 @@ impl Runtime {
         }
     }
 
+    /// [`Self::save_checkpoint`]; a store that is unreachable just now (shared database
+    /// restarting) skips this checkpoint — the job goes on and the next one is tried a
+    /// second later — while any other failure fails the job.
+    fn checkpoint(
+        &self,
+        id: Uuid,
+        sim: &Simulation,
+        reports: &[StepReport],
+        estimator: Option<&ErrorEstimator>,
+    ) -> Result<(), serde_json::Value> {
+        match self.save_checkpoint(id, sim, reports, estimator) {
+            Ok(()) => Ok(()),
+            Err(StoreError::Unavailable(e)) => {
+                eprintln!("contact-sim: checkpoint of {id} skipped, store unavailable: {e}");
+                Ok(())
+            }
+            Err(e) => Err(problem_json(500, "checkpoint failed", &e.to_string())),
+        }
+    }
+
     /// Saves the per-step reports, then (u, ζ, step) in the store. A crash between the two
     /// leaves more reports than the checkpoint step; `resume` truncates them.
-    fn checkpoint(
+    fn save_checkpoint(
         &self,
         id: Uuid,
         sim: &Simulation,
@@ -487,7 +559,10 @@ impl Runtime {
     /// Restores the last checkpoint, if any; returns the reports and error-estimate rows up
     /// to it.
     fn resume(&self, id: Uuid, sim: &mut Simulation) -> Result<Option<Resumed>, String> {
-        let Some((step, bytes)) = self.store.load_checkpoint(id).map_err(|e| e.to_string())? else {
+        let Some((step, bytes)) = self
+            .with_store_retry(|| self.store.load_checkpoint(id))
+            .map_err(|e| e.to_string())?
+        else {
             return Ok(None);
         };
         let state = decode_state(&bytes).map_err(|e| e.to_string())?;

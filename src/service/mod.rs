@@ -16,10 +16,19 @@ use std::path::PathBuf;
 /// Service settings (CLI flags of `contact-sim serve`).
 #[derive(Debug, Clone)]
 pub struct Config {
+    /// Result files (and the embedded store's database). With a shared store, a directory
+    /// every node mounts at the same contents.
     pub data_dir: PathBuf,
+    /// `postgres://…`: the shared job store of many nodes; None: the embedded SQLite store
+    /// in `data_dir` (single node, no server needed).
+    pub store: Option<String>,
+    /// Seconds a claimed job's lease lasts; a dead worker's job is claimed again this long
+    /// after its last renewal (renewed every third of it while the job runs).
+    pub lease_s: f64,
     /// Worker threads (jobs run in parallel, each sequentially).
     pub workers: usize,
-    /// Prefix of this node's worker names (leases of a previous run are released at start).
+    /// Prefix of this node's worker names (leases of a previous run are released at start,
+    /// so it must differ between nodes sharing a store).
     pub node: String,
     /// Maximum number of queued jobs; beyond it POST /jobs answers 503.
     pub queue_capacity: usize,
@@ -46,6 +55,8 @@ impl Default for Config {
     fn default() -> Self {
         Config {
             data_dir: PathBuf::from("./data"),
+            store: None,
+            lease_s: 30.0,
             workers: std::thread::available_parallelism().map_or(2, |n| n.get()),
             node: "local".into(),
             queue_capacity: 1000,

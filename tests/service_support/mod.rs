@@ -4,6 +4,8 @@
 //! the resident memory of a process.
 #![allow(dead_code)]
 
+pub mod postgres;
+
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader, Read, Write};
@@ -25,10 +27,27 @@ impl Proc {
     /// Starts `contact-sim serve --addr 127.0.0.1:0 --data-dir DIR ARGS…` and waits for its
     /// "listening on http://ADDR" line.
     pub fn start(data_dir: &Path, args: &[&str]) -> Proc {
+        let mut full = vec!["serve", "--addr", "127.0.0.1:0", "--data-dir"];
+        let dir = data_dir.to_str().expect("UTF-8 path");
+        full.push(dir);
+        full.extend_from_slice(args);
+        Proc::spawn(&full, "listening on http://")
+    }
+
+    /// Starts a compute-only node, `contact-sim worker --data-dir DIR ARGS…`, and waits for
+    /// its start-up line (`addr` is meaningless for it).
+    pub fn worker(data_dir: &Path, args: &[&str]) -> Proc {
+        let mut full = vec!["worker", "--data-dir"];
+        let dir = data_dir.to_str().expect("UTF-8 path");
+        full.push(dir);
+        full.extend_from_slice(args);
+        Proc::spawn(&full, "worker node ")
+    }
+
+    /// Runs `contact-sim ARGS…` and waits for the stderr line containing `ready`; what
+    /// follows `ready` up to a space is parsed as the HTTP address if it is one.
+    fn spawn(args: &[&str], ready: &str) -> Proc {
         let mut child = Command::new(env!("CARGO_BIN_EXE_contact-sim"))
-            .arg("serve")
-            .args(["--addr", "127.0.0.1:0", "--data-dir"])
-            .arg(data_dir)
             .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
@@ -39,12 +58,13 @@ impl Proc {
         let (tx, rx) = std::sync::mpsc::channel();
         let log = Arc::new(Mutex::new(String::new()));
         let log2 = log.clone();
+        let ready = ready.to_string();
         std::thread::spawn(move || {
             let mut tx = Some(tx);
             for line in BufReader::new(stderr).lines() {
                 let Ok(line) = line else { break };
                 if let Some(t) = tx.as_ref() {
-                    if let Some(rest) = line.split("listening on http://").nth(1) {
+                    if let Some(rest) = line.split(ready.as_str()).nth(1) {
                         let addr = rest.split_whitespace().next().unwrap_or("").to_string();
                         let _ = t.send(addr);
                         tx = None;
@@ -57,13 +77,24 @@ impl Proc {
             }
         });
         let addr = match rx.recv_timeout(Duration::from_secs(60)) {
-            Ok(a) => a.parse().expect("address"),
+            Ok(a) => a.parse().unwrap_or(SocketAddr::from(([0, 0, 0, 0], 0))),
             Err(_) => {
                 let _ = child.kill();
-                panic!("the server did not start: {}", log.lock().unwrap().as_str());
+                panic!(
+                    "contact-sim {args:?} did not start: {}",
+                    log.lock().unwrap().as_str()
+                );
             }
         };
         Proc { child, addr, log }
+    }
+
+    /// SIGTERM (a graceful stop), then reap.
+    pub fn terminate(mut self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status();
+        let _ = self.child.wait();
     }
 
     pub fn pid(&self) -> u32 {

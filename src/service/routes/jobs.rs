@@ -72,6 +72,7 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
         "error": rec.error,
         "attempt": rec.attempt,
         "worker": rec.worker,
+        "last_checkpoint_step": rec.last_checkpoint_step,
         "scene_hash": rec.scene_hash,
         "links": links,
     })
@@ -390,7 +391,7 @@ pub async fn list(
     };
     let cursor = q.get("cursor").cloned();
     if let Some(c) = &cursor {
-        if crate::service::store::sqlite::parse_cursor(c).is_none() {
+        if crate::service::store::parse_cursor(c).is_none() {
             return Err(ApiError::bad_request(format!("invalid cursor {c:?}")));
         }
     }
@@ -509,10 +510,12 @@ pub async fn events(
     let first = JobEvent::from_record(&rec);
     let mut closing = state.closing.clone();
     let store = state.store().clone();
+    let rt = state.rt.clone();
     let stream = async_stream(
         move |tx: tokio::sync::mpsc::Sender<Result<Event, Infallible>>| async move {
             let done = first.status.is_finished();
             let _ = tx.send(Ok(to_event(&first))).await;
+            let mut last = first;
             if done {
                 return;
             }
@@ -521,6 +524,7 @@ pub async fn events(
                     ev = rx.recv() => match ev {
                         Ok(ev) => {
                             let fin = ev.status.is_finished();
+                            last = ev.clone();
                             if tx.send(Ok(to_event(&ev))).await.is_err() || fin {
                                 return;
                             }
@@ -529,15 +533,23 @@ pub async fn events(
                         Err(tokio::sync::broadcast::error::RecvError::Closed) => break,
                     },
                     _ = closing.changed() => return,
-                    // Safety net for events published before the worker registered the channel
-                    // (e.g. a queued job cancelled): poll the record now and then.
+                    // The record now and then: a job run by another node (shared store)
+                    // publishes nothing here, and an event may have been published before
+                    // the channel existed (e.g. a queued job cancelled).
                     _ = tokio::time::sleep(Duration::from_secs(2)) => {
                         let s = store.clone();
                         if let Ok(Ok(Some(r))) = tokio::task::spawn_blocking(move || s.get(id)).await {
+                            let ev = JobEvent::from_record(&r);
                             if r.status.is_finished() {
-                                let ev = JobEvent::from_record(&r);
                                 let _ = tx.send(Ok(to_event(&ev))).await;
                                 return;
+                            }
+                            let moved = (ev.status, ev.step) != (last.status, last.step);
+                            if moved && rt.live_progress(id).is_none() {
+                                if tx.send(Ok(to_event(&ev))).await.is_err() {
+                                    return;
+                                }
+                                last = ev;
                             }
                         }
                     }

@@ -1,12 +1,17 @@
 //! The durable job store behind a narrow interface: enqueue, claim with a lease, heartbeat,
 //! progress, checkpoint, finish, fetch. The embedded default is SQLite in the data directory
 //! ([`sqlite::SqliteStore`]); results (summary, stored steps) are files written atomically
-//! ([`results::ResultFiles`]). A shared PostgreSQL backend can implement the same trait.
+//! ([`results::ResultFiles`]). Many nodes share one PostgreSQL database instead
+//! ([`postgres::PgStore`]) and a result directory on a shared filesystem.
 //!
 //! All methods are blocking (call them from worker threads or `spawn_blocking`).
 
+pub mod postgres;
 pub mod results;
+mod row;
 pub mod sqlite;
+
+pub use row::parse_cursor;
 
 use serde::{Deserialize, Serialize};
 use uuid::Uuid;
@@ -119,7 +124,15 @@ pub enum StoreError {
     Io(#[from] std::io::Error),
     #[error("corrupt record: {0}")]
     Corrupt(String),
+    /// The database cannot be reached (down, restarting, connection lost). Transient: the
+    /// operation may be retried; whether a failed mutation took effect is unknown.
+    #[error("database unavailable: {0}")]
+    Unavailable(String),
 }
+
+/// Wakes a process's idle workers; returns false once nobody needs waking any more (the
+/// watcher then stops).
+pub type Wake = std::sync::Arc<dyn Fn() -> bool + Send + Sync>;
 
 /// A page of jobs, newest first.
 #[derive(Debug, Clone)]
@@ -174,6 +187,20 @@ pub trait Store: Send + Sync + 'static {
     /// Latest finished job with this scene hash that succeeded (repeat requests answered
     /// from the store).
     fn find_succeeded_by_hash(&self, scene_hash: &str) -> Result<Option<JobRecord>, StoreError>;
+    /// Makes the running jobs of workers whose name starts with `worker_prefix` claimable
+    /// at once (their lease is set to 0). A restarted node calls this at start with its own
+    /// worker-name prefix: its previous process's workers are dead, so there is no point
+    /// waiting for their leases to expire. The claim still counts as a new attempt. An
+    /// empty prefix releases every running job (single node only). Returns the number of
+    /// jobs released.
+    fn release_worker_leases(&self, worker_prefix: &str) -> Result<usize, StoreError>;
+    /// Calls `wake` whenever another process may have made a job claimable (a submission
+    /// on another node), until `wake` returns false. A backend only ever written by this
+    /// process (SQLite: the API wakes its own workers) does nothing.
+    fn watch_for_work(&self, wake: Wake) -> Result<(), StoreError> {
+        let _ = wake;
+        Ok(())
+    }
 }
 
 /// Current Unix time in seconds.

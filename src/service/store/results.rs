@@ -60,8 +60,12 @@ fn sync_dir(dir: &Path) -> io::Result<()> {
     }
 }
 
-/// Removes the temporary files left in one job directory.
-fn remove_temp_files(dir: &Path) -> io::Result<()> {
+/// Age beyond which a temporary file in a shared result directory is certainly abandoned
+/// (a write takes from its creation to its rename milliseconds, seconds at worst).
+const STALE_TEMP: std::time::Duration = std::time::Duration::from_secs(3600);
+
+/// Removes the temporary files at least `min_age` old left in one job directory.
+fn remove_temp_files(dir: &Path, min_age: std::time::Duration) -> io::Result<()> {
     let entries = match fs::read_dir(dir) {
         Ok(e) => e,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
@@ -73,7 +77,14 @@ fn remove_temp_files(dir: &Path) -> io::Result<()> {
             .file_name()
             .to_str()
             .is_some_and(|n| n.starts_with(TEMP_PREFIX));
-        if is_temp && entry.file_type()?.is_file() {
+        let old_enough = || -> io::Result<bool> {
+            if min_age.is_zero() {
+                return Ok(true);
+            }
+            let modified = entry.metadata()?.modified()?;
+            Ok(modified.elapsed().is_ok_and(|age| age >= min_age))
+        };
+        if is_temp && entry.file_type()?.is_file() && old_enough()? {
             match fs::remove_file(entry.path()) {
                 Err(e) if e.kind() != io::ErrorKind::NotFound => return Err(e),
                 _ => {}
@@ -94,6 +105,17 @@ impl ResultFiles {
     /// interrupted write in any job directory (only directories named like a UUID are
     /// looked at; anything else in `results/` is left alone).
     pub fn new(data_dir: &Path) -> io::Result<ResultFiles> {
+        ResultFiles::open(data_dir, std::time::Duration::ZERO)
+    }
+
+    /// As [`ResultFiles::new`] for a directory shared by several nodes (e.g. over NFS):
+    /// another node may be writing right now, so only temporary files older than an hour
+    /// are removed.
+    pub fn shared(data_dir: &Path) -> io::Result<ResultFiles> {
+        ResultFiles::open(data_dir, STALE_TEMP)
+    }
+
+    fn open(data_dir: &Path, min_temp_age: std::time::Duration) -> io::Result<ResultFiles> {
         let root = data_dir.join("results");
         fs::create_dir_all(&root)?;
         for entry in fs::read_dir(&root)? {
@@ -104,7 +126,7 @@ impl ResultFiles {
                 .and_then(|n| Uuid::try_parse(n).ok().filter(|u| u.to_string() == n))
                 .is_some();
             if is_job_dir && entry.file_type()?.is_dir() {
-                remove_temp_files(&entry.path())?;
+                remove_temp_files(&entry.path(), min_temp_age)?;
             }
         }
         Ok(ResultFiles { root })

@@ -42,6 +42,10 @@ use std::time::Duration;
 use rusqlite::{params, Connection, OptionalExtension, Params, Row, TransactionBehavior};
 use uuid::Uuid;
 
+use super::row::{
+    abandoned_error, check_lease, into_page, json_text, page_bounds, status_counts, to_i64,
+    to_usize, RawJob,
+};
 use super::{now, Enqueued, JobRecord, JobStatus, NewJob, Page, Progress, Store, StoreError};
 
 /// Schema migrations; entry `i` brings the database from `user_version` `i` to `i + 1`.
@@ -112,68 +116,6 @@ impl From<rusqlite::Error> for StoreError {
     }
 }
 
-/// Parses a list cursor produced by [`Store::list`] (`"s<seq>"`, seq > 0).
-///
-/// Cursors are opaque to clients; the API should call this to reject a malformed cursor
-/// with a 400 before calling `list`, which treats an unparsable cursor as "past the end"
-/// and returns an empty page.
-pub fn parse_cursor(s: &str) -> Option<i64> {
-    let digits = s.strip_prefix('s')?;
-    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    digits.parse::<i64>().ok().filter(|&v| v > 0)
-}
-
-fn make_cursor(seq: i64) -> String {
-    format!("s{seq}")
-}
-
-fn to_i64(v: usize, what: &str) -> Result<i64, StoreError> {
-    i64::try_from(v).map_err(|_| StoreError::Db(format!("{what} {v} out of range")))
-}
-
-fn to_usize(v: i64, what: &str) -> Result<usize, StoreError> {
-    usize::try_from(v).map_err(|_| StoreError::Corrupt(format!("{what} = {v}")))
-}
-
-fn check_lease(lease_s: f64) -> Result<(), StoreError> {
-    if lease_s.is_finite() && lease_s >= 0.0 {
-        Ok(())
-    } else {
-        Err(StoreError::Db(format!(
-            "invalid lease duration {lease_s} s"
-        )))
-    }
-}
-
-fn json_text(v: &serde_json::Value) -> Result<String, StoreError> {
-    serde_json::to_string(v).map_err(|e| StoreError::Db(format!("cannot serialise JSON: {e}")))
-}
-
-/// A `jobs` row as read, before validation.
-struct RawJob {
-    id: String,
-    status: String,
-    scene: String,
-    scene_hash: String,
-    idempotency_key: Option<String>,
-    request_hash: Option<String>,
-    created_at: f64,
-    started_at: Option<f64>,
-    finished_at: Option<f64>,
-    step: i64,
-    steps: i64,
-    last_residual: Option<f64>,
-    error: Option<String>,
-    cancel_requested: i64,
-    attempt: i64,
-    worker: Option<String>,
-    lease_until: Option<f64>,
-    checkpoint_step: Option<i64>,
-    seq: i64,
-}
-
 impl RawJob {
     fn from_row(r: &Row<'_>) -> rusqlite::Result<RawJob> {
         Ok(RawJob {
@@ -190,57 +132,12 @@ impl RawJob {
             steps: r.get(10)?,
             last_residual: r.get(11)?,
             error: r.get(12)?,
-            cancel_requested: r.get(13)?,
+            cancel_requested: r.get::<_, i64>(13)? != 0,
             attempt: r.get(14)?,
             worker: r.get(15)?,
             lease_until: r.get(16)?,
             checkpoint_step: r.get(17)?,
             seq: r.get(18)?,
-        })
-    }
-
-    /// Validates and converts; any malformed value is [`StoreError::Corrupt`].
-    fn into_record(self) -> Result<JobRecord, StoreError> {
-        let id = Uuid::parse_str(&self.id)
-            .map_err(|e| StoreError::Corrupt(format!("job id {:?}: {e}", self.id)))?;
-        let status = JobStatus::parse(&self.status)
-            .ok_or_else(|| StoreError::Corrupt(format!("job {id}: status {:?}", self.status)))?;
-        let scene = serde_json::from_str(&self.scene)
-            .map_err(|e| StoreError::Corrupt(format!("job {id}: scene JSON: {e}")))?;
-        let error = match self.error {
-            Some(text) => Some(
-                serde_json::from_str(&text)
-                    .map_err(|e| StoreError::Corrupt(format!("job {id}: error JSON: {e}")))?,
-            ),
-            None => None,
-        };
-        let attempt = u32::try_from(self.attempt)
-            .map_err(|_| StoreError::Corrupt(format!("job {id}: attempt = {}", self.attempt)))?;
-        let last_checkpoint_step = match self.checkpoint_step {
-            Some(s) => Some(to_usize(s, "checkpoint_step")?),
-            None => None,
-        };
-        Ok(JobRecord {
-            id,
-            status,
-            scene,
-            scene_hash: self.scene_hash,
-            idempotency_key: self.idempotency_key,
-            request_hash: self.request_hash,
-            created_at: self.created_at,
-            started_at: self.started_at,
-            finished_at: self.finished_at,
-            progress: Progress {
-                step: to_usize(self.step, "step")?,
-                steps: to_usize(self.steps, "steps")?,
-                last_residual: self.last_residual,
-            },
-            error,
-            cancel_requested: self.cancel_requested != 0,
-            attempt,
-            worker: self.worker,
-            lease_until: self.lease_until,
-            last_checkpoint_step,
         })
     }
 }
@@ -331,24 +228,6 @@ impl SqliteStore {
         self.conn.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Makes the running jobs of workers whose name starts with `worker_prefix` claimable
-    /// at once (sets their `lease_until` to 0). A restarted single-node server calls this
-    /// at start with its own worker-name prefix: the previous process's workers are dead,
-    /// so there is no point waiting for their leases to expire. The claim still counts as
-    /// a new attempt. An empty prefix releases every running job (single node only).
-    /// Returns the number of jobs released.
-    pub fn release_worker_leases(&self, worker_prefix: &str) -> Result<usize, StoreError> {
-        let conn = self.lock();
-        // substr/length instead of LIKE: the prefix may contain '%' or '_'.
-        let n = conn.execute(
-            "UPDATE jobs SET lease_until = 0
-             WHERE status = 'running' AND worker IS NOT NULL
-               AND substr(worker, 1, length(?1)) = ?1",
-            params![worker_prefix],
-        )?;
-        Ok(n)
-    }
-
     fn claim_at(
         &self,
         worker: &str,
@@ -393,17 +272,7 @@ impl SqliteStore {
             // keeps progressing finishes eventually, however often the server is killed.
             // Only attempts in a row without progress count towards `max_attempts`.
             if !progressed && stalls >= i64::from(max_attempts) {
-                let error = serde_json::json!({
-                    "type": "about:blank",
-                    "title": "job abandoned",
-                    "status": 500,
-                    "detail": format!(
-                        "the job was started {attempt} times; its worker stopped renewing the \
-                         lease before finishing (crash, kill or hang) {stalls} times in a row \
-                         without saving a new checkpoint (max_attempts = {max_attempts}); it \
-                         is not retried again"
-                    ),
-                });
+                let error = abandoned_error(attempt, stalls, max_attempts);
                 tx.execute(
                     "UPDATE jobs SET status = 'failed', finished_at = ?2, error = ?3,
                             lease_until = NULL, checkpoint = NULL, checkpoint_step = NULL
@@ -583,23 +452,12 @@ impl Store for SqliteStore {
         cursor: Option<&str>,
         limit: usize,
     ) -> Result<Page, StoreError> {
-        let before = match cursor {
-            None => i64::MAX,
-            Some(c) => match parse_cursor(c) {
-                Some(seq) => seq,
-                None => {
-                    return Ok(Page {
-                        jobs: Vec::new(),
-                        next: None,
-                    })
-                }
-            },
+        let Some((before, fetch)) = page_bounds(cursor, limit) else {
+            return Ok(Page {
+                jobs: Vec::new(),
+                next: None,
+            });
         };
-        let limit = limit.max(1);
-        // One more than asked tells whether another page follows.
-        let fetch = i64::try_from(limit)
-            .unwrap_or(i64::MAX - 1)
-            .saturating_add(1);
         let conn = self.lock();
         let raws: Vec<RawJob> = match status {
             Some(s) => {
@@ -619,19 +477,7 @@ impl Store for SqliteStore {
             }
         };
         drop(conn);
-        let more = raws.len() > limit;
-        let mut jobs = Vec::with_capacity(raws.len().min(limit));
-        let mut last_seq = None;
-        for raw in raws.into_iter().take(limit) {
-            last_seq = Some(raw.seq);
-            jobs.push(raw.into_record()?);
-        }
-        let next = if more {
-            last_seq.map(make_cursor)
-        } else {
-            None
-        };
-        Ok(Page { jobs, next })
+        into_page(raws, limit)
     }
 
     /// In one immediate transaction, takes the oldest job (lowest `seq`) that is either
@@ -755,16 +601,19 @@ impl Store for SqliteStore {
         let rows: Vec<(String, i64)> = stmt
             .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))?
             .collect::<rusqlite::Result<_>>()?;
-        let mut counts: Vec<(JobStatus, usize)> = JobStatus::ALL.iter().map(|&s| (s, 0)).collect();
-        for (status, n) in rows {
-            let s = JobStatus::parse(&status)
-                .ok_or_else(|| StoreError::Corrupt(format!("status {status:?}")))?;
-            let n = to_usize(n, "count")?;
-            if let Some(slot) = counts.iter_mut().find(|(k, _)| *k == s) {
-                slot.1 = n;
-            }
-        }
-        Ok(counts)
+        status_counts(rows)
+    }
+
+    /// `substr`/`length` rather than LIKE: the prefix may contain `%` or `_`.
+    fn release_worker_leases(&self, worker_prefix: &str) -> Result<usize, StoreError> {
+        let conn = self.lock();
+        let n = conn.execute(
+            "UPDATE jobs SET lease_until = 0
+             WHERE status = 'running' AND worker IS NOT NULL
+               AND substr(worker, 1, length(?1)) = ?1",
+            params![worker_prefix],
+        )?;
+        Ok(n)
     }
 
     /// The succeeded job with this scene hash that finished last (ties: the newest), None
@@ -785,6 +634,7 @@ impl Store for SqliteStore {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::service::store::parse_cursor;
     use std::collections::HashSet;
     use std::path::PathBuf;
     use std::sync::Arc;

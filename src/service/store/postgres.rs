@@ -1,0 +1,760 @@
+//! The shared job store: one PostgreSQL database for many nodes (API nodes and worker
+//! nodes), so that a sweep or a fine study can use more than one machine.
+//!
+//! # Design
+//!
+//! * **Jobs are rows of a state machine** (`queued → running → succeeded | failed |
+//!   cancelled`) with `attempt`, `worker`, `lease_until` and `checkpoint_step`; the
+//!   checkpoint blob lives in its own table (`checkpoints`), so the heartbeats that rewrite a
+//!   job row every few seconds never copy it.
+//! * **Claiming is `SELECT … FOR UPDATE SKIP LOCKED`** on the oldest claimable row: workers
+//!   of any number of processes never wait on each other's claims and never claim the same
+//!   row (the row lock is held until the claiming transaction commits). The dead-letter and
+//!   cancel rules are the SQLite store's (see [`Store::claim`]).
+//! * **One clock.** Leases and timestamps use the database server's clock
+//!   (`clock_timestamp()`), so nodes with skewed clocks still agree on whose lease expired.
+//! * **Wake-ups by LISTEN/NOTIFY.** A submission runs `NOTIFY contact_sim_jobs` inside its
+//!   transaction (delivered at commit); every worker node keeps one connection that
+//!   `LISTEN`s and wakes its idle workers ([`Store::watch_for_work`]). Idle workers otherwise
+//!   only look again when a lease could have expired (see `jobs::Runtime`), not in a loop.
+//! * **Reconnection.** A lost connection (database restarted, network) is reported as
+//!   [`StoreError::Unavailable`] and dropped; the next call connects again. Reads are retried
+//!   once on a fresh connection; mutations are not (their outcome is unknown), callers decide:
+//!   the worker retries idempotent ones (finish, checkpoint) and the API answers 503 with
+//!   `Retry-After` (a client retrying with its `Idempotency-Key` cannot create a second job).
+//! * **Versioned migrations** in [`MIGRATIONS`], recorded in `contact_sim_schema` and
+//!   applied at connect under a session advisory lock, so nodes starting together migrate
+//!   once; a database migrated by a newer build is refused.
+//!
+//! All calls block (the `postgres` crate drives `tokio-postgres` on a private runtime):
+//! call them from worker threads or `spawn_blocking`, never from an async task.
+
+use std::sync::{Mutex, MutexGuard};
+use std::time::Duration;
+
+use postgres::error::SqlState;
+use postgres::fallible_iterator::FallibleIterator;
+use postgres::{Client, Config, GenericClient, NoTls, Row};
+use uuid::Uuid;
+
+use super::row::{
+    abandoned_error, check_lease, into_page, json_text, page_bounds, status_counts, to_i64,
+    to_usize, RawJob,
+};
+use super::{Enqueued, JobRecord, JobStatus, NewJob, Page, Progress, Store, StoreError, Wake};
+
+/// Schema migrations; entry `i` brings the schema from version `i` to `i + 1`.
+/// Append only: never edit a released migration.
+const MIGRATIONS: &[&str] = &[
+    // Version 1: jobs and their checkpoints.
+    "
+    CREATE TABLE jobs (
+        id               uuid PRIMARY KEY,
+        seq              bigint GENERATED ALWAYS AS IDENTITY UNIQUE,
+        status           text NOT NULL
+                         CHECK (status IN ('queued', 'running', 'succeeded', 'failed', 'cancelled')),
+        scene            text NOT NULL,
+        scene_hash       text NOT NULL,
+        idempotency_key  text UNIQUE,
+        request_hash     text,
+        created_at       float8 NOT NULL,
+        started_at       float8,
+        finished_at      float8,
+        step             bigint NOT NULL DEFAULT 0,
+        steps            bigint NOT NULL DEFAULT 0,
+        last_residual    float8,
+        error            text,
+        cancel_requested boolean NOT NULL DEFAULT false,
+        attempt          integer NOT NULL DEFAULT 0,
+        worker           text,
+        lease_until      float8,
+        checkpoint_step  bigint,
+        -- Dead-lettering counts only interrupted attempts that made no progress: the
+        -- checkpoint step the job was last claimed at, and the claims in a row without a
+        -- new checkpoint.
+        claim_step       bigint,
+        stalls           integer NOT NULL DEFAULT 0
+    );
+    CREATE INDEX jobs_status_seq ON jobs (status, seq);
+    CREATE INDEX jobs_claimable ON jobs (seq) WHERE status IN ('queued', 'running');
+    CREATE INDEX jobs_scene_hash ON jobs (scene_hash);
+
+    CREATE TABLE checkpoints (
+        job   uuid PRIMARY KEY REFERENCES jobs (id) ON DELETE CASCADE,
+        step  bigint NOT NULL,
+        state bytea NOT NULL
+    );
+    ",
+];
+
+/// Key of the session advisory lock held while migrating ("contact" in ASCII).
+const MIGRATION_LOCK: i64 = 0x0063_6f6e_7461_6374;
+
+/// The notification channel of new work.
+const CHANNEL: &str = "contact_sim_jobs";
+
+/// Columns of a [`JobRecord`] (plus `seq`), in the order [`raw_job`] reads them.
+const COLS: &str = "id, status, scene, scene_hash, idempotency_key, request_hash, created_at, \
+     started_at, finished_at, step, steps, last_residual, error, cancel_requested, attempt, \
+     worker, lease_until, checkpoint_step, seq";
+
+/// The database server's time in Unix seconds.
+const NOW_S: &str = "extract(epoch from clock_timestamp())::float8";
+
+/// How long a connection attempt may take before the store reports the database unavailable.
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
+
+fn raw_job(r: &Row) -> Result<RawJob, postgres::Error> {
+    Ok(RawJob {
+        id: r.try_get::<_, Uuid>(0)?.to_string(),
+        status: r.try_get(1)?,
+        scene: r.try_get(2)?,
+        scene_hash: r.try_get(3)?,
+        idempotency_key: r.try_get(4)?,
+        request_hash: r.try_get(5)?,
+        created_at: r.try_get(6)?,
+        started_at: r.try_get(7)?,
+        finished_at: r.try_get(8)?,
+        step: r.try_get(9)?,
+        steps: r.try_get(10)?,
+        last_residual: r.try_get(11)?,
+        error: r.try_get(12)?,
+        cancel_requested: r.try_get(13)?,
+        attempt: i64::from(r.try_get::<_, i32>(14)?),
+        worker: r.try_get(15)?,
+        lease_until: r.try_get(16)?,
+        checkpoint_step: r.try_get(17)?,
+        seq: r.try_get(18)?,
+    })
+}
+
+/// Whether the error means "the database is not reachable right now" rather than "this
+/// statement is wrong": no server error code (I/O, closed connection, connect failure), or a
+/// code of class 08 (connection exception) or 57P (operator intervention: shutdown, restart).
+fn is_unavailable(e: &postgres::Error) -> bool {
+    match e.code() {
+        None => e.as_db_error().is_none(),
+        Some(code) => {
+            let c = code.code();
+            c.starts_with("08") || c.starts_with("57P")
+        }
+    }
+}
+
+fn classify(e: postgres::Error) -> StoreError {
+    if is_unavailable(&e) {
+        StoreError::Unavailable(e.to_string())
+    } else if e.code() == Some(&SqlState::UNDEFINED_TABLE) {
+        StoreError::Db(format!("{e} (is the schema migrated?)"))
+    } else {
+        StoreError::Db(e.to_string())
+    }
+}
+
+/// Reads at most one job matching `where_clause` (a constant SQL fragment from this file,
+/// never user input; values go through `params`).
+fn select_one(
+    c: &mut impl GenericClient,
+    where_clause: &str,
+    params: &[&(dyn postgres::types::ToSql + Sync)],
+) -> Result<Option<RawJob>, postgres::Error> {
+    let sql = format!("SELECT {COLS} FROM jobs WHERE {where_clause} LIMIT 1");
+    c.query_opt(sql.as_str(), params)?
+        .map(|r| raw_job(&r))
+        .transpose()
+}
+
+/// Applies the pending migrations, each in its own transaction, under the advisory lock.
+fn migrate(client: &mut Client) -> Result<(), StoreError> {
+    client
+        .execute("SELECT pg_advisory_lock($1)", &[&MIGRATION_LOCK])
+        .map_err(classify)?;
+    let result = (|| {
+        client
+            .batch_execute(
+                "CREATE TABLE IF NOT EXISTS contact_sim_schema (
+                     version    integer PRIMARY KEY,
+                     applied_at timestamptz NOT NULL DEFAULT now()
+                 )",
+            )
+            .map_err(classify)?;
+        let current: i32 = client
+            .query_one(
+                "SELECT COALESCE(MAX(version), 0) FROM contact_sim_schema",
+                &[],
+            )
+            .map_err(classify)?
+            .get(0);
+        let current = usize::try_from(current)
+            .map_err(|_| StoreError::Corrupt(format!("schema version {current}")))?;
+        if current > MIGRATIONS.len() {
+            return Err(StoreError::Corrupt(format!(
+                "database schema version {current} is newer than this build supports ({})",
+                MIGRATIONS.len()
+            )));
+        }
+        for (i, sql) in MIGRATIONS.iter().enumerate().skip(current) {
+            let version = i32::try_from(i + 1).expect("few migrations");
+            let mut tx = client.transaction().map_err(classify)?;
+            tx.batch_execute(sql).map_err(classify)?;
+            tx.execute(
+                "INSERT INTO contact_sim_schema (version) VALUES ($1)",
+                &[&version],
+            )
+            .map_err(classify)?;
+            tx.commit().map_err(classify)?;
+        }
+        Ok(())
+    })();
+    // Also released when the session ends, should this fail.
+    let _ = client.execute("SELECT pg_advisory_unlock($1)", &[&MIGRATION_LOCK]);
+    result
+}
+
+/// The PostgreSQL-backed [`Store`]. See the module documentation for the design.
+pub struct PgStore {
+    config: Config,
+    /// One connection per process, shared by the API and the workers; None after a
+    /// connection was lost (the next call connects again).
+    conn: Mutex<Option<Client>>,
+}
+
+impl std::fmt::Debug for PgStore {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PgStore").finish_non_exhaustive()
+    }
+}
+
+impl PgStore {
+    /// Connects to `url` (`postgres://user@host:port/db`, or the key=value form), applies
+    /// pending migrations and returns the store. Fails if the database cannot be reached.
+    pub fn connect(url: &str) -> Result<PgStore, StoreError> {
+        let mut config: Config = url
+            .parse()
+            .map_err(|e| StoreError::Db(format!("invalid PostgreSQL URL: {e}")))?;
+        config.connect_timeout(CONNECT_TIMEOUT);
+        if config.get_application_name().is_none() {
+            config.application_name("contact-sim");
+        }
+        let mut client = config.connect(NoTls).map_err(classify)?;
+        migrate(&mut client)?;
+        Ok(PgStore {
+            config,
+            conn: Mutex::new(Some(client)),
+        })
+    }
+
+    /// The schema version of the database (number of migrations applied).
+    pub fn schema_version(&self) -> Result<usize, StoreError> {
+        self.read(|c| {
+            let v: i32 = c
+                .query_one(
+                    "SELECT COALESCE(MAX(version), 0) FROM contact_sim_schema",
+                    &[],
+                )?
+                .get(0);
+            Ok(v)
+        })
+        .and_then(|v| usize::try_from(v).map_err(|_| StoreError::Corrupt(format!("version {v}"))))
+    }
+
+    /// The connection (see `SqliteStore::lock` on poisoning: a panicking holder's open
+    /// transaction was rolled back when it was dropped).
+    fn lock(&self) -> MutexGuard<'_, Option<Client>> {
+        self.conn.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Runs `f` on the connection, connecting first if there is none. A connection-level
+    /// failure drops the connection and is [`StoreError::Unavailable`].
+    fn run<T>(
+        &self,
+        f: impl FnOnce(&mut Client) -> Result<T, StoreError>,
+    ) -> Result<T, StoreError> {
+        let mut guard = self.lock();
+        if guard.as_ref().is_none_or(|c| c.is_closed()) {
+            *guard = None;
+            *guard = Some(self.config.connect(NoTls).map_err(classify)?);
+        }
+        let client = guard.as_mut().expect("connected above");
+        let result = f(client);
+        if matches!(result, Err(StoreError::Unavailable(_))) || client.is_closed() {
+            *guard = None;
+        }
+        result
+    }
+
+    /// Like [`Self::run`] for a closure whose only errors are the database's.
+    fn exec<T>(
+        &self,
+        f: impl FnOnce(&mut Client) -> Result<T, postgres::Error>,
+    ) -> Result<T, StoreError> {
+        self.run(|c| f(c).map_err(classify))
+    }
+
+    /// A read-only operation: retried once on a fresh connection if the first connection
+    /// turned out to be dead (e.g. the first call after a database restart).
+    fn read<T>(
+        &self,
+        f: impl Fn(&mut Client) -> Result<T, postgres::Error>,
+    ) -> Result<T, StoreError> {
+        match self.exec(&f) {
+            Err(StoreError::Unavailable(_)) => self.exec(&f),
+            other => other,
+        }
+    }
+}
+
+/// Listens on [`CHANNEL`] on its own connection and calls `wake` for every notification,
+/// after every (re)connection (notifications sent while disconnected are lost, so the
+/// workers must look for themselves), and once a minute regardless. Stops when `wake`
+/// returns false.
+fn listen(config: Config, wake: Wake) {
+    let mut backoff = Duration::from_millis(100);
+    loop {
+        let mut client = match config.connect(NoTls) {
+            Ok(c) => c,
+            Err(e) => {
+                eprintln!("contact-sim: job notifications: cannot connect: {e}");
+                std::thread::sleep(backoff);
+                backoff = (backoff * 2).min(Duration::from_secs(5));
+                continue;
+            }
+        };
+        if let Err(e) = client.batch_execute(&format!("LISTEN {CHANNEL}")) {
+            eprintln!("contact-sim: job notifications: LISTEN failed: {e}");
+            std::thread::sleep(backoff);
+            continue;
+        }
+        backoff = Duration::from_millis(100);
+        if !wake() {
+            return;
+        }
+        let mut idle = 0u32;
+        loop {
+            // A short timeout so that a dead connection is noticed.
+            let got = {
+                let mut n = client.notifications();
+                let mut it = n.timeout_iter(Duration::from_secs(1));
+                it.next()
+            };
+            match got {
+                Ok(Some(_)) => {
+                    idle = 0;
+                    if !wake() {
+                        return;
+                    }
+                }
+                Err(e) => {
+                    eprintln!("contact-sim: job notifications: connection lost: {e}");
+                    break;
+                }
+                Ok(None) => {
+                    idle += 1;
+                    if client.is_closed() {
+                        break;
+                    }
+                    if idle >= 60 {
+                        idle = 0;
+                        // A cheap round trip also detects a half-open connection.
+                        if client.batch_execute("SELECT 1").is_err() || !wake() {
+                            break;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl PgStore {
+    fn claim_in(
+        client: &mut Client,
+        worker: &str,
+        lease_s: f64,
+        max_attempts: u32,
+    ) -> Result<Option<RawJob>, postgres::Error> {
+        let mut tx = client.transaction()?;
+        // Each iteration either returns or moves the candidate to a final status.
+        loop {
+            let Some(row) = tx.query_opt(
+                format!(
+                    "SELECT id, attempt, cancel_requested, stalls,
+                            COALESCE(checkpoint_step, -1) > COALESCE(claim_step, -1)
+                     FROM jobs
+                     WHERE status IN ('queued', 'running')
+                       AND ((status = 'queued' AND NOT cancel_requested)
+                            OR (status = 'running' AND COALESCE(lease_until, 0) < {NOW_S}))
+                     ORDER BY seq LIMIT 1
+                     FOR UPDATE SKIP LOCKED"
+                )
+                .as_str(),
+                &[],
+            )?
+            else {
+                tx.commit()?;
+                return Ok(None);
+            };
+            let id: Uuid = row.try_get(0)?;
+            let attempt = i64::from(row.try_get::<_, i32>(1)?);
+            let cancel_requested: bool = row.try_get(2)?;
+            let stalls = i64::from(row.try_get::<_, i32>(3)?);
+            let progressed: bool = row.try_get(4)?;
+            if cancel_requested {
+                // A running job whose worker died after a cancel request.
+                tx.execute(
+                    format!(
+                        "UPDATE jobs SET status = 'cancelled', finished_at = {NOW_S},
+                                lease_until = NULL, checkpoint_step = NULL
+                         WHERE id = $1"
+                    )
+                    .as_str(),
+                    &[&id],
+                )?;
+                tx.execute("DELETE FROM checkpoints WHERE job = $1", &[&id])?;
+                continue;
+            }
+            if !progressed && stalls >= i64::from(max_attempts) {
+                let error = abandoned_error(attempt, stalls, max_attempts).to_string();
+                tx.execute(
+                    format!(
+                        "UPDATE jobs SET status = 'failed', finished_at = {NOW_S}, error = $2,
+                                lease_until = NULL, checkpoint_step = NULL
+                         WHERE id = $1"
+                    )
+                    .as_str(),
+                    &[&id, &error],
+                )?;
+                tx.execute("DELETE FROM checkpoints WHERE job = $1", &[&id])?;
+                continue;
+            }
+            let stalls = i32::try_from(if progressed { 1 } else { stalls + 1 }).unwrap_or(i32::MAX);
+            let raw = tx.query_one(
+                format!(
+                    "UPDATE jobs SET status = 'running', worker = $2, lease_until = {NOW_S} + $3,
+                            attempt = attempt + 1, started_at = COALESCE(started_at, {NOW_S}),
+                            stalls = $4, claim_step = checkpoint_step
+                     WHERE id = $1
+                     RETURNING {COLS}"
+                )
+                .as_str(),
+                &[&id, &worker, &lease_s, &stalls],
+            )?;
+            let raw = raw_job(&raw)?;
+            tx.commit()?;
+            return Ok(Some(raw));
+        }
+    }
+}
+
+impl Store for PgStore {
+    /// As [`super::sqlite::SqliteStore`]'s: one transaction looks up the idempotency key
+    /// and inserts; a concurrent insert with the same key (unique constraint) is answered
+    /// with the job that won. Notifies the worker nodes at commit.
+    fn enqueue(&self, job: NewJob) -> Result<Enqueued, StoreError> {
+        let scene = json_text(&job.scene)?;
+        let steps = to_i64(job.steps, "steps")?;
+        let raw = self.run(|c| {
+            let mut tx = c.transaction().map_err(classify)?;
+            if let Some(key) = &job.idempotency_key {
+                if let Some(existing) =
+                    select_one(&mut tx, "idempotency_key = $1", &[key]).map_err(classify)?
+                {
+                    return Ok((false, existing));
+                }
+            }
+            let id = Uuid::new_v4();
+            let inserted = tx
+                .query_opt(
+                    format!(
+                        "INSERT INTO jobs (id, status, scene, scene_hash, idempotency_key,
+                                           request_hash, created_at, steps)
+                         VALUES ($1, 'queued', $2, $3, $4, $5, {NOW_S}, $6)
+                         ON CONFLICT (idempotency_key) DO NOTHING
+                         RETURNING {COLS}"
+                    )
+                    .as_str(),
+                    &[
+                        &id,
+                        &scene,
+                        &job.scene_hash,
+                        &job.idempotency_key,
+                        &job.request_hash,
+                        &steps,
+                    ],
+                )
+                .map_err(classify)?;
+            let result = match inserted {
+                Some(row) => (true, raw_job(&row).map_err(classify)?),
+                None => {
+                    // Lost a race for the key: the winner's row is committed now.
+                    tx.rollback().map_err(classify)?;
+                    let key = job.idempotency_key.as_ref().expect("conflict needs a key");
+                    let existing = select_one(c, "idempotency_key = $1", &[key])
+                        .map_err(classify)?
+                        .ok_or_else(|| StoreError::Db("idempotency key vanished".into()))?;
+                    return Ok((false, existing));
+                }
+            };
+            tx.batch_execute(&format!("NOTIFY {CHANNEL}"))
+                .map_err(classify)?;
+            tx.commit().map_err(classify)?;
+            Ok(result)
+        })?;
+        let (new, raw) = raw;
+        let record = raw.into_record()?;
+        Ok(if new {
+            Enqueued::New(record)
+        } else if record.request_hash == job.request_hash {
+            Enqueued::Existing(record)
+        } else {
+            Enqueued::KeyConflict(record)
+        })
+    }
+
+    fn get(&self, id: Uuid) -> Result<Option<JobRecord>, StoreError> {
+        self.read(|c| select_one(c, "id = $1", &[&id]))?
+            .map(RawJob::into_record)
+            .transpose()
+    }
+
+    /// Newest first by `seq`, with the SQLite store's opaque cursors.
+    fn list(
+        &self,
+        status: Option<JobStatus>,
+        cursor: Option<&str>,
+        limit: usize,
+    ) -> Result<Page, StoreError> {
+        let Some((before, fetch)) = page_bounds(cursor, limit) else {
+            return Ok(Page {
+                jobs: Vec::new(),
+                next: None,
+            });
+        };
+        let status = status.map(JobStatus::as_str);
+        let raws = self.read(|c| {
+            c.query(
+                format!(
+                    "SELECT {COLS} FROM jobs
+                     WHERE ($1::text IS NULL OR status = $1) AND seq < $2
+                     ORDER BY seq DESC LIMIT $3"
+                )
+                .as_str(),
+                &[&status, &before, &fetch],
+            )?
+            .iter()
+            .map(raw_job)
+            .collect::<Result<Vec<_>, _>>()
+        })?;
+        into_page(raws, limit)
+    }
+
+    /// `FOR UPDATE SKIP LOCKED` on the oldest claimable row; otherwise the rules of
+    /// [`Store::claim`] (dead letter after `max_attempts` claims in a row without a new
+    /// checkpoint, expired cancel-requested jobs become cancelled).
+    fn claim(
+        &self,
+        worker: &str,
+        lease_s: f64,
+        max_attempts: u32,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        check_lease(lease_s)?;
+        self.exec(|c| PgStore::claim_in(c, worker, lease_s, max_attempts))?
+            .map(RawJob::into_record)
+            .transpose()
+    }
+
+    fn heartbeat(&self, id: Uuid, worker: &str, lease_s: f64) -> Result<bool, StoreError> {
+        check_lease(lease_s)?;
+        let cancel_requested: Option<bool> = self.exec(|c| {
+            Ok(c.query_opt(
+                format!(
+                    "UPDATE jobs SET lease_until = {NOW_S} + $3
+                     WHERE id = $1 AND status = 'running' AND worker = $2
+                     RETURNING cancel_requested"
+                )
+                .as_str(),
+                &[&id, &worker, &lease_s],
+            )?
+            .map(|r| r.get(0)))
+        })?;
+        Ok(cancel_requested == Some(false))
+    }
+
+    /// A NaN residual is stored as NULL, as in SQLite.
+    fn set_progress(&self, id: Uuid, progress: Progress) -> Result<(), StoreError> {
+        let step = to_i64(progress.step, "step")?;
+        let steps = to_i64(progress.steps, "steps")?;
+        let residual = progress.last_residual.filter(|r| !r.is_nan());
+        self.exec(|c| {
+            c.execute(
+                "UPDATE jobs SET step = $2, steps = $3, last_residual = $4 WHERE id = $1",
+                &[&id, &step, &steps, &residual],
+            )
+        })?;
+        Ok(())
+    }
+
+    /// One statement: the job row's step and the blob change together, and only while the
+    /// job is running (a late checkpoint must not resurrect a finished job's).
+    fn checkpoint(&self, id: Uuid, step: usize, state: &[u8]) -> Result<(), StoreError> {
+        let step = to_i64(step, "checkpoint step")?;
+        self.exec(|c| {
+            c.execute(
+                "WITH j AS (
+                     UPDATE jobs SET checkpoint_step = $2, step = $2
+                     WHERE id = $1 AND status = 'running'
+                     RETURNING id
+                 )
+                 INSERT INTO checkpoints (job, step, state) SELECT id, $2, $3 FROM j
+                 ON CONFLICT (job) DO UPDATE SET step = excluded.step, state = excluded.state",
+                &[&id, &step, &state],
+            )
+        })?;
+        Ok(())
+    }
+
+    fn load_checkpoint(&self, id: Uuid) -> Result<Option<(usize, Vec<u8>)>, StoreError> {
+        let row: Option<(i64, Vec<u8>)> = self.read(|c| {
+            Ok(c.query_opt(
+                "SELECT k.step, k.state FROM checkpoints k JOIN jobs j ON j.id = k.job
+                 WHERE k.job = $1 AND j.checkpoint_step = k.step",
+                &[&id],
+            )?
+            .map(|r| (r.get(0), r.get(1))))
+        })?;
+        match row {
+            Some((step, blob)) => Ok(Some((to_usize(step, "checkpoint step")?, blob))),
+            None => Ok(None),
+        }
+    }
+
+    /// The first final status wins (a no-op for an absent or finished job), so a worker may
+    /// repeat a `finish` whose outcome it did not learn.
+    fn finish(
+        &self,
+        id: Uuid,
+        status: JobStatus,
+        error: Option<serde_json::Value>,
+    ) -> Result<(), StoreError> {
+        if !status.is_finished() {
+            return Err(StoreError::Db(format!(
+                "finish: {} is not a final status",
+                status.as_str()
+            )));
+        }
+        let error = error.as_ref().map(json_text).transpose()?;
+        self.exec(|c| {
+            let mut tx = c.transaction()?;
+            let n = tx.execute(
+                format!(
+                    "UPDATE jobs SET status = $2, finished_at = {NOW_S}, error = $3,
+                            lease_until = NULL, checkpoint_step = NULL
+                     WHERE id = $1 AND status NOT IN ('succeeded', 'failed', 'cancelled')"
+                )
+                .as_str(),
+                &[&id, &status.as_str(), &error],
+            )?;
+            if n > 0 {
+                tx.execute("DELETE FROM checkpoints WHERE job = $1", &[&id])?;
+            }
+            tx.commit()
+        })
+    }
+
+    fn request_cancel(&self, id: Uuid) -> Result<Option<JobRecord>, StoreError> {
+        self.exec(|c| {
+            let mut tx = c.transaction()?;
+            let status: Option<String> = tx
+                .query_opt("SELECT status FROM jobs WHERE id = $1 FOR UPDATE", &[&id])?
+                .map(|r| r.get(0));
+            match status.as_deref() {
+                None => return Ok(None),
+                Some("queued") => {
+                    tx.execute(
+                        format!(
+                            "UPDATE jobs SET status = 'cancelled', cancel_requested = true,
+                                    finished_at = {NOW_S}
+                             WHERE id = $1"
+                        )
+                        .as_str(),
+                        &[&id],
+                    )?;
+                }
+                Some("running") => {
+                    tx.execute(
+                        "UPDATE jobs SET cancel_requested = true WHERE id = $1",
+                        &[&id],
+                    )?;
+                }
+                Some(_) => {}
+            }
+            let job = select_one(&mut tx, "id = $1", &[&id])?;
+            tx.commit()?;
+            Ok(job)
+        })?
+        .map(RawJob::into_record)
+        .transpose()
+    }
+
+    fn delete(&self, id: Uuid) -> Result<bool, StoreError> {
+        let n = self.exec(|c| {
+            c.execute(
+                "DELETE FROM jobs
+                 WHERE id = $1 AND status IN ('succeeded', 'failed', 'cancelled')",
+                &[&id],
+            )
+        })?;
+        Ok(n > 0)
+    }
+
+    fn counts(&self) -> Result<Vec<(JobStatus, usize)>, StoreError> {
+        let rows = self.read(|c| {
+            Ok(
+                c.query("SELECT status, COUNT(*) FROM jobs GROUP BY status", &[])?
+                    .iter()
+                    .map(|r| (r.get(0), r.get(1)))
+                    .collect(),
+            )
+        })?;
+        status_counts(rows)
+    }
+
+    fn find_succeeded_by_hash(&self, scene_hash: &str) -> Result<Option<JobRecord>, StoreError> {
+        self.read(|c| {
+            let sql = format!(
+                "SELECT {COLS} FROM jobs WHERE scene_hash = $1 AND status = 'succeeded'
+                 ORDER BY finished_at DESC, seq DESC LIMIT 1"
+            );
+            c.query_opt(sql.as_str(), &[&scene_hash])?
+                .map(|r| raw_job(&r))
+                .transpose()
+        })?
+        .map(RawJob::into_record)
+        .transpose()
+    }
+
+    /// `left(worker, length(prefix)) = prefix` rather than LIKE: the prefix may contain `%`
+    /// or `_`.
+    fn release_worker_leases(&self, worker_prefix: &str) -> Result<usize, StoreError> {
+        let n = self.exec(|c| {
+            c.execute(
+                "UPDATE jobs SET lease_until = 0
+                 WHERE status = 'running' AND worker IS NOT NULL
+                   AND left(worker, length($1)) = $1",
+                &[&worker_prefix],
+            )
+        })?;
+        usize::try_from(n).map_err(|_| StoreError::Db(format!("{n} rows")))
+    }
+
+    /// Starts a thread with its own connection that LISTENs for submissions (see
+    /// [`listen`]); it reconnects by itself after the database restarts.
+    fn watch_for_work(&self, wake: Wake) -> Result<(), StoreError> {
+        let config = self.config.clone();
+        std::thread::Builder::new()
+            .name("pg-listen".into())
+            .spawn(move || listen(config, wake))
+            .map_err(StoreError::Io)?;
+        Ok(())
+    }
+}
