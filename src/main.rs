@@ -394,10 +394,14 @@ fn cmd_worker(config: Config) -> ExitCode {
         Err(e) => return fail(1, &e),
     };
     eprintln!(
-        "contact-sim {} worker node {} ({} workers, results in {})",
+        "contact-sim {} worker node {} ({} workers, store {}, results in {})",
         env!("CARGO_PKG_VERSION"),
         config.node,
         config.workers,
+        config
+            .store
+            .as_deref()
+            .map_or_else(String::new, service::app::redact),
         config.data_dir.display()
     );
     match tokio::runtime::Builder::new_current_thread()
@@ -433,10 +437,15 @@ fn cmd_serve(addr: &str, config: Config) -> ExitCode {
             Err(e) => return fail(1, &format!("cannot listen on {addr}: {e}")),
         };
         eprintln!(
-            "contact-sim {} listening on http://{} (data in {}, {} workers)",
+            "contact-sim {} listening on http://{} (data in {}, store {}, node {}, {} workers)",
             env!("CARGO_PKG_VERSION"),
             listener.local_addr().map(|a| a.to_string()).unwrap_or_default(),
             config.data_dir.display(),
+            config
+                .store
+                .as_deref()
+                .map_or_else(|| "embedded SQLite".into(), service::app::redact),
+            config.node,
             config.workers
         );
         let shutdown = async {

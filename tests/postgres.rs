@@ -18,10 +18,9 @@ use contact_sim::output::stored::decode_step;
 use contact_sim::service::store::postgres::PgStore;
 use contact_sim::service::store::{Enqueued, JobStatus, NewJob, Progress, Store, StoreError};
 use serde_json::{json, Value};
-use service_support::postgres::Postgres;
+use service_support::postgres::*;
 use service_support::*;
 use std::collections::{HashMap, HashSet};
-use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 fn new_job(n: usize, key: Option<&str>) -> NewJob {
@@ -279,118 +278,6 @@ fn pg_store_contract() {
     assert!(err.to_string().contains("newer"), "{err}");
 }
 
-/// One node's command-line flags on the shared store.
-fn node_args<'a>(url: &'a str, node: &'a str, lease: &'a str) -> Vec<&'a str> {
-    vec![
-        "--store",
-        url,
-        "--node",
-        node,
-        "--lease-seconds",
-        lease,
-        "--workers",
-        "1",
-    ]
-}
-
-/// An API-only node (no workers) on the shared store.
-fn api_node(data: &std::path::Path, url: &str) -> Proc {
-    Proc::start(
-        data,
-        &[
-            "--store",
-            url,
-            "--node",
-            "api",
-            "--workers",
-            "0",
-            "--submit-rate",
-            "0",
-        ],
-    )
-}
-
-/// Submits `scene` with an idempotency key, retrying while the service is unavailable
-/// (connection refused, 503 during a database restart); returns the job id.
-fn submit(addr: SocketAddr, scene: &Value, key: &str) -> String {
-    let body = scene.to_string();
-    let t = Instant::now();
-    loop {
-        let r = try_http(
-            addr,
-            "POST",
-            "/jobs",
-            &[
-                ("Content-Type", "application/json"),
-                ("Idempotency-Key", key),
-            ],
-            body.as_bytes(),
-            Duration::from_secs(30),
-        );
-        match r {
-            Ok(r) if r.status == 202 || r.status == 200 => {
-                return r.json()["id"].as_str().unwrap().to_string()
-            }
-            Ok(r) if r.status == 503 => {}
-            Ok(r) => panic!("submission {key}: {} {}", r.status, r.text()),
-            Err(_) => {}
-        }
-        assert!(
-            t.elapsed() < Duration::from_secs(120),
-            "submission {key} never accepted"
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    }
-}
-
-/// GET that retries while the service is unavailable.
-fn get_retrying(addr: SocketAddr, path: &str) -> Resp {
-    let t = Instant::now();
-    loop {
-        match try_http(addr, "GET", path, &[], b"", Duration::from_secs(30)) {
-            Ok(r) if r.status != 503 => return r,
-            _ => {}
-        }
-        assert!(
-            t.elapsed() < Duration::from_secs(120),
-            "GET {path} unavailable"
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    }
-}
-
-/// Waits until every job is finished; returns the final records.
-fn wait_all(addr: SocketAddr, ids: &[String], timeout: Duration) -> Vec<Value> {
-    let t = Instant::now();
-    ids.iter()
-        .map(|id| loop {
-            let j = get_retrying(addr, &format!("/jobs/{id}")).json();
-            if ["succeeded", "failed", "cancelled"].contains(&j["status"].as_str().unwrap_or("")) {
-                break j;
-            }
-            assert!(t.elapsed() < timeout, "job {id} stuck: {j}");
-            std::thread::sleep(Duration::from_millis(100));
-        })
-        .collect()
-}
-
-/// How often each job id was reported finished ("job <id> succeeded") in the nodes' logs.
-fn completions(nodes: &[&Proc]) -> HashMap<String, usize> {
-    let mut n = HashMap::new();
-    for p in nodes {
-        for line in p.log.lock().unwrap().lines() {
-            if let Some(rest) = line.split(": job ").nth(1) {
-                let mut words = rest.split_whitespace();
-                let (id, what) = (words.next().unwrap_or(""), words.next().unwrap_or(""));
-                if what == "succeeded" {
-                    *n.entry(id.to_string()).or_default() += 1;
-                }
-            }
-        }
-    }
-    n
-}
-
 /// A job of about 0.1 s: paper-convergence at h = 1/8 over 40 steps, 4 of them stored.
 fn job_scene(name: &str) -> Value {
     long_scene(name, 8, 40, 4)
@@ -405,9 +292,24 @@ fn three_workers_one_api() {
     let dir = TempDir::new("pg-three");
     let data = dir.0.join("shared");
     let api = api_node(&data, &url);
+    // A 30 s lease: idle workers look for expired leases only every 10 s, so a job picked up
+    // sooner was announced to them (LISTEN/NOTIFY), not found by polling.
     let workers: Vec<Proc> = (0..3)
-        .map(|i| Proc::worker(&data, &node_args(&url, &format!("w{i}"), "3")))
+        .map(|i| Proc::worker(&data, &node_args(&url, &format!("w{i}"), "30")))
         .collect();
+    std::thread::sleep(Duration::from_millis(500));
+    for i in 0..3 {
+        let t = Instant::now();
+        let id = submit(api.addr, &job_scene(&format!("probe-{i}")), &format!("probe-{i}"));
+        let f = &wait_all(api.addr, &[id], Duration::from_secs(60))[0];
+        let latency = t.elapsed();
+        assert_eq!(f["status"], "succeeded");
+        assert!(
+            latency < Duration::from_secs(3),
+            "an idle cluster took {latency:?} to run a 10 ms job: workers were not woken"
+        );
+        std::thread::sleep(Duration::from_millis(300));
+    }
     let t0 = Instant::now();
     let ids: Vec<String> = (0..50)
         .map(|i| {
@@ -445,7 +347,7 @@ fn three_workers_one_api() {
     for id in &ids {
         assert_eq!(done.get(id), Some(&1), "job {id} completions");
     }
-    assert_eq!(done.len(), 50);
+    assert_eq!(done.len(), 53);
     assert!(completions(&[&api]).is_empty());
     // Spread: each of the three workers ran a share.
     assert_eq!(per_worker.len(), 3, "{per_worker:?}");

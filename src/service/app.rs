@@ -121,7 +121,18 @@ pub fn redact(url: &str) -> String {
             let user = userinfo.split(':').next().unwrap_or("");
             format!("{}{user}{}", &url[..scheme + 3], &url[at..])
         }
-        _ => url.to_string(),
+        // The key=value form.
+        _ => url
+            .split_whitespace()
+            .map(|kv| {
+                if kv.starts_with("password=") {
+                    "password=***"
+                } else {
+                    kv
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(" "),
     }
 }
 
@@ -150,6 +161,21 @@ pub async fn serve(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn store_urls_are_shown_without_passwords() {
+        use super::redact;
+        assert_eq!(
+            redact("postgres://sim:s3cret@db:5432/jobs"),
+            "postgres://sim@db:5432/jobs"
+        );
+        assert_eq!(redact("postgres://sim@db/jobs"), "postgres://sim@db/jobs");
+        assert_eq!(redact("postgres://db/jobs"), "postgres://db/jobs");
+        assert_eq!(
+            redact("host=db user=sim password=s3cret dbname=jobs"),
+            "host=db user=sim password=*** dbname=jobs"
+        );
+    }
+
     /// api/openapi.yaml documents exactly the routes of `app()`.
     #[test]
     fn openapi_lists_every_route() {

@@ -6,9 +6,13 @@
 //! Without the binaries, [`Postgres::start`] returns None (the caller skips) unless `CI` is
 //! set, in which case it panics: CI must not pass by skipping.
 
-use std::net::TcpListener;
+use super::{try_http, Proc, Resp};
+use serde_json::Value;
+use std::collections::HashMap;
+use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::{Duration, Instant};
 
 pub struct Postgres {
     bin: PathBuf,
@@ -204,3 +208,118 @@ impl Drop for Postgres {
         let _ = std::fs::remove_dir_all(&self.dir);
     }
 }
+
+// Nodes of a cluster on one shared store.
+
+/// One node's command-line flags on the shared store.
+pub fn node_args<'a>(url: &'a str, node: &'a str, lease: &'a str) -> Vec<&'a str> {
+    vec![
+        "--store",
+        url,
+        "--node",
+        node,
+        "--lease-seconds",
+        lease,
+        "--workers",
+        "1",
+    ]
+}
+
+/// An API-only node (no workers) on the shared store.
+pub fn api_node(data: &std::path::Path, url: &str) -> Proc {
+    Proc::start(
+        data,
+        &[
+            "--store",
+            url,
+            "--node",
+            "api",
+            "--workers",
+            "0",
+            "--submit-rate",
+            "0",
+        ],
+    )
+}
+
+/// Submits `scene` with an idempotency key, retrying while the service is unavailable
+/// (connection refused, 503 during a database restart); returns the job id.
+pub fn submit(addr: SocketAddr, scene: &Value, key: &str) -> String {
+    let body = scene.to_string();
+    let t = Instant::now();
+    loop {
+        let r = try_http(
+            addr,
+            "POST",
+            "/jobs",
+            &[
+                ("Content-Type", "application/json"),
+                ("Idempotency-Key", key),
+            ],
+            body.as_bytes(),
+            Duration::from_secs(30),
+        );
+        match r {
+            Ok(r) if r.status == 202 || r.status == 200 => {
+                return r.json()["id"].as_str().unwrap().to_string()
+            }
+            Ok(r) if r.status == 503 => {}
+            Ok(r) => panic!("submission {key}: {} {}", r.status, r.text()),
+            Err(_) => {}
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(120),
+            "submission {key} never accepted"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// GET that retries while the service is unavailable.
+pub fn get_retrying(addr: SocketAddr, path: &str) -> Resp {
+    let t = Instant::now();
+    loop {
+        match try_http(addr, "GET", path, &[], b"", Duration::from_secs(30)) {
+            Ok(r) if r.status != 503 => return r,
+            _ => {}
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(120),
+            "GET {path} unavailable"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// Waits until every job is finished; returns the final records.
+pub fn wait_all(addr: SocketAddr, ids: &[String], timeout: Duration) -> Vec<Value> {
+    let t = Instant::now();
+    ids.iter()
+        .map(|id| loop {
+            let j = get_retrying(addr, &format!("/jobs/{id}")).json();
+            if ["succeeded", "failed", "cancelled"].contains(&j["status"].as_str().unwrap_or("")) {
+                break j;
+            }
+            assert!(t.elapsed() < timeout, "job {id} stuck: {j}");
+            std::thread::sleep(Duration::from_millis(100));
+        })
+        .collect()
+}
+
+/// How often each job id was reported finished ("job <id> succeeded") in the nodes' logs.
+pub fn completions(nodes: &[&Proc]) -> HashMap<String, usize> {
+    let mut n = HashMap::new();
+    for p in nodes {
+        for line in p.log.lock().unwrap().lines() {
+            if let Some(rest) = line.split(": job ").nth(1) {
+                let mut words = rest.split_whitespace();
+                let (id, what) = (words.next().unwrap_or(""), words.next().unwrap_or(""));
+                if what == "succeeded" {
+                    *n.entry(id.to_string()).or_default() += 1;
+                }
+            }
+        }
+    }
+    n
+}
+

@@ -338,6 +338,34 @@ mod tests {
     }
 
     #[test]
+    fn a_shared_directory_keeps_other_nodes_fresh_temp_files() {
+        let d = TempDir::new();
+        let files = ResultFiles::new(&d.0).unwrap();
+        let id = Uuid::new_v4();
+        files.write_atomic(id, "a.bin", b"a").unwrap();
+        let dir = d.0.join("results").join(id.to_string());
+        // Another node's write in flight, and one abandoned two hours ago.
+        let fresh = dir.join(format!("{TEMP_PREFIX}b.bin-1"));
+        let stale = dir.join(format!("{TEMP_PREFIX}c.bin-2"));
+        fs::write(&fresh, b"partial").unwrap();
+        fs::write(&stale, b"partial").unwrap();
+        let old = std::time::SystemTime::now() - std::time::Duration::from_secs(7200);
+        File::options()
+            .write(true)
+            .open(&stale)
+            .unwrap()
+            .set_modified(old)
+            .unwrap();
+        ResultFiles::shared(&d.0).unwrap();
+        assert!(fresh.exists(), "a starting node removed another node's write in flight");
+        assert!(!stale.exists(), "an abandoned temporary file was kept");
+        // A single node's own directory: every temporary file is its own, left by a crash.
+        ResultFiles::new(&d.0).unwrap();
+        assert!(!fresh.exists());
+        assert_eq!(files.read(id, "a.bin").unwrap().unwrap(), b"a");
+    }
+
+    #[test]
     fn overwrite_is_whole_and_temp_files_are_hidden_and_cleaned() {
         let dir = TempDir::new();
         let files = ResultFiles::new(&dir.0).unwrap();
