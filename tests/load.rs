@@ -12,8 +12,7 @@ mod service_support;
 use serde_json::Value;
 use service_support::*;
 use std::collections::{HashMap, HashSet};
-use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpStream};
+use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -35,36 +34,9 @@ struct Tally {
     statuses: HashMap<u16, usize>,
 }
 
-/// Opens the event stream of `id`, reads events for at most `for_`, and returns how many
-/// it saw (the stream ends by itself once the job is finished).
+/// How many events the stream of `id` delivered within `for_`.
 fn sse(a: SocketAddr, id: &str, for_: Duration) -> Result<usize, String> {
-    let mut s = TcpStream::connect(a).map_err(|e| e.to_string())?;
-    s.set_read_timeout(Some(Duration::from_millis(200))).ok();
-    s.write_all(
-        format!("GET /jobs/{id}/events HTTP/1.1\r\nHost: t\r\nAccept: text/event-stream\r\n\r\n")
-            .as_bytes(),
-    )
-    .map_err(|e| e.to_string())?;
-    let t = Instant::now();
-    let mut got = Vec::new();
-    let mut buf = [0u8; 4096];
-    while t.elapsed() < for_ {
-        match s.read(&mut buf) {
-            Ok(0) => break,
-            Ok(n) => got.extend_from_slice(&buf[..n]),
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) => {}
-            Err(e) => return Err(e.to_string()),
-        }
-    }
-    let text = String::from_utf8_lossy(&got);
-    if !text.starts_with("HTTP/1.1 200") {
-        return Err(format!("events: {text}"));
-    }
-    Ok(text.matches("\nevent: ").count())
+    Ok(sse_text(a, id, for_)?.matches("\nevent: ").count())
 }
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {

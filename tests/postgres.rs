@@ -300,7 +300,11 @@ fn three_workers_one_api() {
     std::thread::sleep(Duration::from_millis(500));
     for i in 0..3 {
         let t = Instant::now();
-        let id = submit(api.addr, &job_scene(&format!("probe-{i}")), &format!("probe-{i}"));
+        let id = submit(
+            api.addr,
+            &job_scene(&format!("probe-{i}")),
+            &format!("probe-{i}"),
+        );
         let f = &wait_all(api.addr, &[id], Duration::from_secs(60))[0];
         let latency = t.elapsed();
         assert_eq!(f["status"], "succeeded");
@@ -420,6 +424,18 @@ fn kill_9_worker_mid_job() {
     let mut straight_scene = scene.clone();
     straight_scene["name"] = json!("straight");
     let straight = submit(api.addr, &straight_scene, "straight");
+    // Its progress reaches a client of the API node, which does not run it: the event
+    // stream follows the stored progress (checkpoints every second, read every 2 s).
+    let events = sse_text(api.addr, &straight, Duration::from_millis(4500)).unwrap();
+    let steps: HashSet<u64> = events
+        .split("event: progress\ndata: ")
+        .skip(1)
+        .filter_map(|e| serde_json::from_str::<Value>(e.lines().next()?).ok()?["step"].as_u64())
+        .collect();
+    assert!(
+        steps.len() >= 2,
+        "no progress from another node's job: {events}"
+    );
     let g = &wait_all(
         api.addr,
         std::slice::from_ref(&straight),

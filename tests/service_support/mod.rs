@@ -353,6 +353,38 @@ pub fn post_json(addr: SocketAddr, path: &str, body: &Value) -> Resp {
     )
 }
 
+/// Opens the event stream of `id`, reads it for at most `for_` (the stream ends by itself
+/// once the job is finished), and returns the response text.
+pub fn sse_text(a: SocketAddr, id: &str, for_: Duration) -> Result<String, String> {
+    let mut s = TcpStream::connect(a).map_err(|e| e.to_string())?;
+    s.set_read_timeout(Some(Duration::from_millis(200))).ok();
+    s.write_all(
+        format!("GET /jobs/{id}/events HTTP/1.1\r\nHost: t\r\nAccept: text/event-stream\r\n\r\n")
+            .as_bytes(),
+    )
+    .map_err(|e| e.to_string())?;
+    let t = Instant::now();
+    let mut got = Vec::new();
+    let mut buf = [0u8; 4096];
+    while t.elapsed() < for_ {
+        match s.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => got.extend_from_slice(&buf[..n]),
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
+            Err(e) => return Err(e.to_string()),
+        }
+    }
+    let text = String::from_utf8_lossy(&got).into_owned();
+    if !text.starts_with("HTTP/1.1 200") {
+        return Err(format!("events: {text}"));
+    }
+    Ok(text)
+}
+
 /// Asserts a problem+json error with this status.
 pub fn assert_problem(r: &Resp, status: u16) -> Value {
     assert_eq!(r.status, status, "{}", r.text());

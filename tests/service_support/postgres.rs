@@ -322,4 +322,3 @@ pub fn completions(nodes: &[&Proc]) -> HashMap<String, usize> {
     }
     n
 }
-

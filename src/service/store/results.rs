@@ -357,7 +357,10 @@ mod tests {
             .set_modified(old)
             .unwrap();
         ResultFiles::shared(&d.0).unwrap();
-        assert!(fresh.exists(), "a starting node removed another node's write in flight");
+        assert!(
+            fresh.exists(),
+            "a starting node removed another node's write in flight"
+        );
         assert!(!stale.exists(), "an abandoned temporary file was kept");
         // A single node's own directory: every temporary file is its own, left by a crash.
         ResultFiles::new(&d.0).unwrap();
