@@ -353,6 +353,33 @@ fn three_workers_one_api() {
     }
     assert_eq!(done.len(), 53);
     assert!(completions(&[&api]).is_empty());
+    // A job running on a worker node is cancelled through the API node (the worker sees the
+    // request at its next lease renewal or checkpoint, about once a second).
+    let long = submit(api.addr, &long_scene("to-cancel", 64, 4000, 2), "to-cancel");
+    let t = Instant::now();
+    while get(api.addr, &format!("/jobs/{long}")).json()["status"] != "running" {
+        assert!(t.elapsed() < Duration::from_secs(30), "never started");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let c = http(api.addr, "POST", &format!("/jobs/{long}/cancel"), &[], b"");
+    assert!(c.status < 300, "{}", c.text());
+    let t = Instant::now();
+    let f = &wait_all(
+        api.addr,
+        std::slice::from_ref(&long),
+        Duration::from_secs(30),
+    )[0];
+    assert_eq!(f["status"], "cancelled", "{f}");
+    assert!(
+        t.elapsed() < Duration::from_secs(10),
+        "cancel took {:?}",
+        t.elapsed()
+    );
+    let health = get(api.addr, "/healthz").json();
+    assert_eq!(
+        (health["store"].as_str(), health["workers"].as_u64()),
+        (Some("postgres"), Some(0))
+    );
     // Spread: each of the three workers ran a share.
     assert_eq!(per_worker.len(), 3, "{per_worker:?}");
     for (w, n) in &per_worker {
@@ -493,7 +520,7 @@ fn database_restart_under_load() {
     let data = dir.0.join("shared");
     let api = api_node(&data, &url);
     let workers: Vec<Proc> = (0..3)
-        .map(|i| Proc::worker(&data, &node_args(&url, &format!("r{i}"), "5")))
+        .map(|i| Proc::worker(&data, &node_args(&url, &format!("r{i}"), "30")))
         .collect();
     let addr = api.addr;
     let n_jobs = 36;
@@ -527,10 +554,28 @@ fn database_restart_under_load() {
     for id in &ids {
         assert_eq!(done.get(id), Some(&1), "job {id} completions: {done:?}");
     }
+    // The workers' notification connections came back too: with a 30 s lease they would
+    // otherwise look for work only every 10 s.
+    for i in 0..3 {
+        let t = Instant::now();
+        let id = submit(
+            addr,
+            &job_scene(&format!("after-{i}")),
+            &format!("after-{i}"),
+        );
+        let f = &wait_all(addr, &[id], Duration::from_secs(60))[0];
+        assert_eq!(f["status"], "succeeded");
+        assert!(
+            t.elapsed() < Duration::from_secs(3),
+            "a job after the restarts waited {:?}: workers not woken",
+            t.elapsed()
+        );
+    }
     let reconnects: usize = workers
         .iter()
         .map(|w| w.log.lock().unwrap().matches("unavailable").count())
         .sum();
+    assert!(reconnects > 0, "the workers never saw the database go away");
     eprintln!(
         "database restarts: {n_jobs} jobs submitted across two restarts, all succeeded once; \
          {reconnects} store-unavailable retries logged by the workers"

@@ -33,9 +33,13 @@ pub async fn preset(Path(name): Path<String>) -> Result<Json<Value>, ApiError> {
 pub async fn healthz(State(state): State<AppState>) -> Result<Json<Value>, ApiError> {
     let store = state.store().clone();
     super::blocking(move || Ok(store.counts()?)).await?;
-    Ok(Json(
-        json!({"status": "ok", "workers": state.rt.config.workers, "version": env!("CARGO_PKG_VERSION")}),
-    ))
+    Ok(Json(json!({
+        "status": "ok",
+        "workers": state.rt.config.workers,
+        "node": state.rt.config.node,
+        "store": if state.rt.config.store.is_some() { "postgres" } else { "sqlite" },
+        "version": env!("CARGO_PKG_VERSION"),
+    })))
 }
 
 pub async fn metrics(State(state): State<AppState>) -> Result<Response, ApiError> {

@@ -101,6 +101,10 @@ const COLS: &str = "id, status, scene, scene_hash, idempotency_key, request_hash
 /// The database server's time in Unix seconds.
 const NOW_S: &str = "extract(epoch from clock_timestamp())::float8";
 
+/// Longest a statement may run (ms): every one here is a few indexed row operations or one
+/// checkpoint blob.
+const STATEMENT_TIMEOUT_MS: u64 = 30_000;
+
 /// How long a connection attempt may take before the store reports the database unavailable.
 const CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
 
@@ -233,6 +237,16 @@ impl PgStore {
             .parse()
             .map_err(|e| StoreError::Db(format!("invalid PostgreSQL URL: {e}")))?;
         config.connect_timeout(CONNECT_TIMEOUT);
+        // A database that stops answering without closing the connection (a network
+        // partition) must not hold the store's connection, and every caller behind it,
+        // forever: TCP keepalives notice a dead peer, the statement timeout a stuck one.
+        config.keepalives(true);
+        config.keepalives_idle(Duration::from_secs(10));
+        let options = match config.get_options() {
+            Some(o) => format!("{o} -c statement_timeout={STATEMENT_TIMEOUT_MS}"),
+            None => format!("-c statement_timeout={STATEMENT_TIMEOUT_MS}"),
+        };
+        config.options(&options);
         if config.get_application_name().is_none() {
             config.application_name("contact-sim");
         }
