@@ -426,6 +426,12 @@ fn cmd_serve(addr: &str, config: Config) -> ExitCode {
         Ok(rt) => rt,
         Err(e) => return fail(1, &format!("cannot start the async runtime: {e}")),
     };
+    if config.workers == 0 && config.store.is_none() {
+        eprintln!(
+            "contact-sim: warning: --workers 0 with the embedded store: jobs are accepted but \
+             nothing runs them (an API-only node needs a shared --store and worker nodes)"
+        );
+    }
     // Opening a PostgreSQL store blocks: not on the runtime's threads.
     let state = match service::app::start(config.clone()) {
         Ok(s) => s,

@@ -4,7 +4,7 @@
 //! # Design
 //!
 //! * **Jobs are rows of a state machine** (`queued → running → succeeded | failed |
-//!   cancelled`) with `attempt`, `worker`, `lease_until` and `checkpoint_step`; the
+//!   cancelled`) with `attempt`, `worker_id`, `lease_until` and `last_checkpoint_step`; the
 //!   checkpoint blob lives in its own table (`checkpoints`), so the heartbeats that rewrite a
 //!   job row every few seconds never copy it.
 //! * **Claiming is `SELECT … FOR UPDATE SKIP LOCKED`** on the oldest claimable row: workers
@@ -66,9 +66,9 @@ const MIGRATIONS: &[&str] = &[
         error            text,
         cancel_requested boolean NOT NULL DEFAULT false,
         attempt          integer NOT NULL DEFAULT 0,
-        worker           text,
+        worker_id        text,
         lease_until      float8,
-        checkpoint_step  bigint,
+        last_checkpoint_step bigint,
         -- Dead-lettering counts only interrupted attempts that made no progress: the
         -- checkpoint step the job was last claimed at, and the claims in a row without a
         -- new checkpoint.
@@ -96,7 +96,7 @@ const CHANNEL: &str = "contact_sim_jobs";
 /// Columns of a [`JobRecord`] (plus `seq`), in the order [`raw_job`] reads them.
 const COLS: &str = "id, status, scene, scene_hash, idempotency_key, request_hash, created_at, \
      started_at, finished_at, step, steps, last_residual, error, cancel_requested, attempt, \
-     worker, lease_until, checkpoint_step, seq";
+     worker_id, lease_until, last_checkpoint_step, seq";
 
 /// The database server's time in Unix seconds.
 const NOW_S: &str = "extract(epoch from clock_timestamp())::float8";
@@ -393,7 +393,7 @@ impl PgStore {
             let Some(row) = tx.query_opt(
                 format!(
                     "SELECT id, attempt, cancel_requested, stalls,
-                            COALESCE(checkpoint_step, -1) > COALESCE(claim_step, -1)
+                            COALESCE(last_checkpoint_step, -1) > COALESCE(claim_step, -1)
                      FROM jobs
                      WHERE status IN ('queued', 'running')
                        AND ((status = 'queued' AND NOT cancel_requested)
@@ -418,7 +418,7 @@ impl PgStore {
                 tx.execute(
                     format!(
                         "UPDATE jobs SET status = 'cancelled', finished_at = {NOW_S},
-                                lease_until = NULL, checkpoint_step = NULL
+                                lease_until = NULL, last_checkpoint_step = NULL
                          WHERE id = $1"
                     )
                     .as_str(),
@@ -432,7 +432,7 @@ impl PgStore {
                 tx.execute(
                     format!(
                         "UPDATE jobs SET status = 'failed', finished_at = {NOW_S}, error = $2,
-                                lease_until = NULL, checkpoint_step = NULL
+                                lease_until = NULL, last_checkpoint_step = NULL
                          WHERE id = $1"
                     )
                     .as_str(),
@@ -444,9 +444,9 @@ impl PgStore {
             let stalls = i32::try_from(if progressed { 1 } else { stalls + 1 }).unwrap_or(i32::MAX);
             let raw = tx.query_one(
                 format!(
-                    "UPDATE jobs SET status = 'running', worker = $2, lease_until = {NOW_S} + $3,
+                    "UPDATE jobs SET status = 'running', worker_id = $2, lease_until = {NOW_S} + $3,
                             attempt = attempt + 1, started_at = COALESCE(started_at, {NOW_S}),
-                            stalls = $4, claim_step = checkpoint_step
+                            stalls = $4, claim_step = last_checkpoint_step
                      WHERE id = $1
                      RETURNING {COLS}"
                 )
@@ -583,7 +583,7 @@ impl Store for PgStore {
             Ok(c.query_opt(
                 format!(
                     "UPDATE jobs SET lease_until = {NOW_S} + $3
-                     WHERE id = $1 AND status = 'running' AND worker = $2
+                     WHERE id = $1 AND status = 'running' AND worker_id = $2
                      RETURNING cancel_requested"
                 )
                 .as_str(),
@@ -615,7 +615,7 @@ impl Store for PgStore {
         self.exec(|c| {
             c.execute(
                 "WITH j AS (
-                     UPDATE jobs SET checkpoint_step = $2, step = $2
+                     UPDATE jobs SET last_checkpoint_step = $2, step = $2
                      WHERE id = $1 AND status = 'running'
                      RETURNING id
                  )
@@ -631,7 +631,7 @@ impl Store for PgStore {
         let row: Option<(i64, Vec<u8>)> = self.read(|c| {
             Ok(c.query_opt(
                 "SELECT k.step, k.state FROM checkpoints k JOIN jobs j ON j.id = k.job
-                 WHERE k.job = $1 AND j.checkpoint_step = k.step",
+                 WHERE k.job = $1 AND j.last_checkpoint_step = k.step",
                 &[&id],
             )?
             .map(|r| (r.get(0), r.get(1))))
@@ -662,7 +662,7 @@ impl Store for PgStore {
             let n = tx.execute(
                 format!(
                     "UPDATE jobs SET status = $2, finished_at = {NOW_S}, error = $3,
-                            lease_until = NULL, checkpoint_step = NULL
+                            lease_until = NULL, last_checkpoint_step = NULL
                      WHERE id = $1 AND status NOT IN ('succeeded', 'failed', 'cancelled')"
                 )
                 .as_str(),
@@ -747,14 +747,14 @@ impl Store for PgStore {
         .transpose()
     }
 
-    /// `left(worker, length(prefix)) = prefix` rather than LIKE: the prefix may contain `%`
+    /// `left(worker_id, length(prefix)) = prefix` rather than LIKE: the prefix may contain `%`
     /// or `_`.
     fn release_worker_leases(&self, worker_prefix: &str) -> Result<usize, StoreError> {
         let n = self.exec(|c| {
             c.execute(
                 "UPDATE jobs SET lease_until = 0
-                 WHERE status = 'running' AND worker IS NOT NULL
-                   AND left(worker, length($1)) = $1",
+                 WHERE status = 'running' AND worker_id IS NOT NULL
+                   AND left(worker_id, length($1)) = $1",
                 &[&worker_prefix],
             )
         })?;
