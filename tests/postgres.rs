@@ -278,6 +278,17 @@ fn pg_store_contract() {
     assert!(err.to_string().contains("newer"), "{err}");
 }
 
+/// `sha-256=:<base64>:` of `bytes` (RFC 9530), computed independently of the server.
+fn sha256_digest_header(bytes: &[u8]) -> String {
+    use base64::Engine as _;
+    use sha2::Digest as _;
+    let d = sha2::Sha256::digest(bytes);
+    format!(
+        "sha-256=:{}:",
+        base64::engine::general_purpose::STANDARD.encode(d)
+    )
+}
+
 /// A job of about 0.1 s: paper-convergence at h = 1/8 over 40 steps, 4 of them stored.
 fn job_scene(name: &str) -> Value {
     long_scene(name, 8, 40, 4)
@@ -338,6 +349,11 @@ fn three_workers_one_api() {
         let id = f["id"].as_str().unwrap();
         let s = get(api.addr, &format!("/jobs/{id}/summary"));
         assert_eq!(s.status, 200, "{}", s.text());
+        assert_eq!(
+            s.header("repr-digest").map(str::to_string),
+            Some(sha256_digest_header(&s.body)),
+            "content hash of the summary"
+        );
         assert_eq!(s.json()["steps"].as_array().unwrap().len(), 40);
         let last = get(
             api.addr,

@@ -76,10 +76,24 @@ async fn result_file(
     .await
 }
 
+/// A stored result file as the response, with its SHA-256 as `Repr-Digest` (RFC 9530) and
+/// as the `ETag`, so a client can check what it downloaded from whichever node wrote it.
+/// (Stored steps carry their own checksum; the views streamed from them are derived.)
 fn with_type(bytes: Vec<u8>, content_type: &'static str) -> Response {
+    use base64::Engine as _;
+    use sha2::{Digest, Sha256};
+    let digest = Sha256::digest(&bytes);
+    let b64 = base64::engine::general_purpose::STANDARD.encode(digest);
+    let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
     let mut r = bytes.into_response();
-    r.headers_mut()
-        .insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+    let h = r.headers_mut();
+    h.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+    if let Ok(v) = HeaderValue::from_str(&format!("sha-256=:{b64}:")) {
+        h.insert("repr-digest", v);
+    }
+    if let Ok(v) = HeaderValue::from_str(&format!("\"{hex}\"")) {
+        h.insert(header::ETAG, v);
+    }
     r
 }
 
