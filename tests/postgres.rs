@@ -597,3 +597,91 @@ fn database_restart_under_load() {
          {reconnects} store-unavailable retries logged by the workers"
     );
 }
+
+#[test]
+fn paused_worker_loses_its_job_and_does_not_finish_it() {
+    let Some(pg) = Postgres::start("pause") else {
+        return;
+    };
+    let url = pg.url();
+    let dir = TempDir::new("pg-pause");
+    let data = dir.0.join("shared");
+    let api = api_node(&data, &url);
+    let nodes: HashMap<String, Proc> = ["a", "b"]
+        .iter()
+        .map(|n| (n.to_string(), Proc::worker(&data, &node_args(&url, n, "2"))))
+        .collect();
+    let scene = long_scene("paused", 64, 1600, 8);
+    let id = submit(api.addr, &scene, "paused");
+    let t = Instant::now();
+    let holder = loop {
+        let j = get(api.addr, &format!("/jobs/{id}")).json();
+        if let (Some(w), Some(c)) = (j["worker"].as_str(), j["last_checkpoint_step"].as_u64()) {
+            if c >= 2 {
+                break w.split('-').next().unwrap().to_string();
+            }
+        }
+        assert!(t.elapsed() < Duration::from_secs(60), "no checkpoint: {j}");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let signal = |sig: &str| {
+        let pid = nodes[&holder].pid().to_string();
+        assert!(std::process::Command::new("kill")
+            .args([sig, &pid])
+            .status()
+            .unwrap()
+            .success());
+    };
+    // The holder hangs (SIGSTOP): its lease runs out and the other node takes the job over.
+    signal("-STOP");
+    let t = Instant::now();
+    loop {
+        let j = get(api.addr, &format!("/jobs/{id}")).json();
+        if j["attempt"] == 2 {
+            break;
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(30),
+            "never taken over: {j}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // It wakes up mid-step: it must notice and stop, not finish the job a second time.
+    signal("-CONT");
+    let f = &wait_all(
+        api.addr,
+        std::slice::from_ref(&id),
+        Duration::from_secs(180),
+    )[0];
+    assert_eq!(f["status"], "succeeded", "{f}");
+    let other = if holder == "a" { "b" } else { "a" };
+    assert_eq!(f["worker"].as_str(), Some(format!("{other}-w0").as_str()));
+    let t = Instant::now();
+    let stale = &nodes[&holder];
+    while !stale
+        .log
+        .lock()
+        .unwrap()
+        .contains("taken over by another worker")
+    {
+        assert!(
+            t.elapsed() < Duration::from_secs(10),
+            "the paused worker did not notice: {}",
+            stale.log.lock().unwrap()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let done = completions(&nodes.values().collect::<Vec<_>>());
+    assert_eq!(done.get(&id), Some(&1), "completions {done:?}");
+    // The result is the uninterrupted one.
+    let p = contact_sim::scene::validate(&scene).unwrap();
+    let inproc = contact_sim::run::run(p, Default::default(), |_, _| {
+        std::ops::ControlFlow::Continue(())
+    })
+    .unwrap();
+    let s = get(api.addr, &format!("/jobs/{id}/summary")).json();
+    assert_eq!(
+        s["final"]["w_V"].as_f64().unwrap().to_bits(),
+        inproc.final_.unwrap().w_v.to_bits()
+    );
+}

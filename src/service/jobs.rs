@@ -323,6 +323,28 @@ impl Runtime {
         self.channels.lock().unwrap().remove(&id);
     }
 
+    /// Renews the lease; `Some` if the job is no longer this worker's to compute: cancelled
+    /// meanwhile, or (its lease having expired) claimed by another worker. A store that
+    /// cannot be reached keeps the job going (the lease keeper retries).
+    fn lost(&self, id: Uuid, worker: &str) -> Option<Outcome> {
+        match self.store.heartbeat(id, worker, self.config.lease_s) {
+            Ok(true) => None,
+            Ok(false) => {
+                let rec = self.store.get(id).ok().flatten();
+                Some(if rec.is_some_and(|r| r.cancel_requested) {
+                    Outcome::Cancelled
+                } else {
+                    eprintln!("contact-sim: {worker}: job {id} was taken over by another worker; stopping");
+                    Outcome::Interrupted
+                })
+            }
+            Err(e) => {
+                eprintln!("contact-sim: heartbeat of {id} failed: {e}");
+                None
+            }
+        }
+    }
+
     /// Runs an idempotent store operation, retrying while the store is unavailable (a
     /// shared database restarting) with a backoff up to 5 s, until it succeeds, fails for
     /// another reason, or the server shuts down.
@@ -383,6 +405,9 @@ impl Runtime {
                 return Ok(Outcome::Cancelled);
             }
             if self.shutdown.load(Ordering::SeqCst) {
+                if let Some(stop) = self.lost(id, worker) {
+                    return Ok(stop);
+                }
                 self.checkpoint(id, &sim, &reports, estimator.as_ref())?;
                 return Ok(Outcome::Interrupted);
             }
@@ -410,21 +435,18 @@ impl Runtime {
             self.running_progress(id, progress);
             if last_checkpoint.elapsed() >= CHECKPOINT_EVERY && !sim.finished() {
                 last_checkpoint = Instant::now();
-                self.checkpoint(id, &sim, &reports, estimator.as_ref())?;
-                match self.store.heartbeat(id, worker, self.config.lease_s) {
-                    Ok(true) => {}
-                    Ok(false) => {
-                        // Cancelled meanwhile, or the lease went to another worker.
-                        let rec = self.store.get(id).ok().flatten();
-                        return Ok(if rec.is_some_and(|r| r.cancel_requested) {
-                            Outcome::Cancelled
-                        } else {
-                            Outcome::Interrupted
-                        });
-                    }
-                    Err(e) => eprintln!("contact-sim: heartbeat of {id} failed: {e}"),
+                // Ownership first: a worker that lost the job must not overwrite the
+                // checkpoint of the worker that holds it now.
+                if let Some(stop) = self.lost(id, worker) {
+                    return Ok(stop);
                 }
+                self.checkpoint(id, &sim, &reports, estimator.as_ref())?;
             }
+        }
+        // A worker that was paused (not killed) past its lease may find the job taken over
+        // by another: it must not complete it a second time.
+        if let Some(stop) = self.lost(id, worker) {
+            return Ok(stop);
         }
         let mut summary = Summary::new(&sim, reports, solve_start.elapsed().as_secs_f64());
         summary.error_estimate = estimator.map(ErrorEstimator::finish);
