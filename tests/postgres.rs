@@ -685,3 +685,46 @@ fn paused_worker_loses_its_job_and_does_not_finish_it() {
         inproc.final_.unwrap().w_v.to_bits()
     );
 }
+
+#[test]
+fn a_node_started_before_the_database_waits_for_it() {
+    let Some(pg) = Postgres::start("late") else {
+        return;
+    };
+    pg.stop("fast");
+    let url = pg.url();
+    let dir = TempDir::new("pg-late");
+    let data = dir.0.join("shared");
+    let t = Instant::now();
+    let worker = std::thread::scope(|s| {
+        s.spawn(|| {
+            std::thread::sleep(Duration::from_secs(2));
+            pg.start_again();
+        });
+        Proc::worker(&data, &node_args(&url, "early", "30"))
+    });
+    assert!(t.elapsed() >= Duration::from_secs(2));
+    assert!(worker
+        .log
+        .lock()
+        .unwrap()
+        .contains("waiting for the database"));
+    // And it works: a job submitted through an API node runs on it.
+    let api = api_node(&data, &url);
+    let id = submit(api.addr, &job_scene("late"), "late");
+    let f = &wait_all(api.addr, &[id], Duration::from_secs(60))[0];
+    assert_eq!(
+        (f["status"].as_str(), f["worker"].as_str()),
+        (Some("succeeded"), Some("early-w0"))
+    );
+    // A TLS requirement is a configuration error, reported at once rather than waited on.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_contact-sim"))
+        .args(["worker", "--data-dir"])
+        .arg(&data)
+        .args(["--store", &format!("{url}?sslmode=require")])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("TLS is not supported"), "{err}");
+}

@@ -8,7 +8,7 @@ use super::routes::{client, jobs, misc, results};
 use super::store::postgres::PgStore;
 use super::store::results::ResultFiles;
 use super::store::sqlite::SqliteStore;
-use super::store::Store;
+use super::store::{Store, StoreError};
 use super::Config;
 use axum::extract::DefaultBodyLimit;
 use axum::http::StatusCode;
@@ -101,7 +101,7 @@ pub fn open_runtime(config: Config) -> Result<Arc<Runtime>, String> {
             ResultFiles::new(&config.data_dir).map_err(|e| e.to_string())?,
         ),
         Some(url) => (
-            Arc::new(PgStore::connect(url).map_err(|e| format!("store {}: {e}", redact(url)))?),
+            Arc::new(connect_waiting(url).map_err(|e| format!("store {}: {e}", redact(url)))?),
             // Other nodes write into the same directory: only stale temporary files are
             // theirs to lose.
             ResultFiles::shared(&config.data_dir).map_err(|e| e.to_string())?,
@@ -111,6 +111,26 @@ pub fn open_runtime(config: Config) -> Result<Arc<Runtime>, String> {
         .release_worker_leases(&format!("{}-", config.node))
         .map_err(|e| e.to_string())?;
     Ok(Runtime::start(store, Arc::new(results), config))
+}
+
+/// Connects to the shared store, waiting up to a minute for a database that is not up yet
+/// (nodes and database started together, e.g. as containers); other errors at once.
+fn connect_waiting(url: &str) -> Result<PgStore, StoreError> {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let mut backoff = std::time::Duration::from_millis(250);
+    loop {
+        match PgStore::connect(url) {
+            Err(StoreError::Unavailable(e)) if std::time::Instant::now() < deadline => {
+                eprintln!(
+                    "contact-sim: waiting for the database at {} ({e})",
+                    redact(url)
+                );
+                std::thread::sleep(backoff);
+                backoff = (backoff * 2).min(std::time::Duration::from_secs(5));
+            }
+            other => return other,
+        }
+    }
 }
 
 /// A store URL without its password (for messages).

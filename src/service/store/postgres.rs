@@ -146,7 +146,12 @@ fn is_unavailable(e: &postgres::Error) -> bool {
 }
 
 fn classify(e: postgres::Error) -> StoreError {
-    if is_unavailable(&e) {
+    if e.to_string().contains("TLS") {
+        // Not transient: this build connects without TLS.
+        StoreError::Db(format!(
+            "{e}: TLS is not supported; connect over a private network (sslmode=disable or prefer)"
+        ))
+    } else if is_unavailable(&e) {
         StoreError::Unavailable(e.to_string())
     } else if e.code() == Some(&SqlState::UNDEFINED_TABLE) {
         StoreError::Db(format!("{e} (is the schema migrated?)"))
