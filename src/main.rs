@@ -1,6 +1,6 @@
 //! The `contact-sim` command line: a thin front end over the library.
 
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
 use contact_sim::scene::{self, presets, Overrides};
 use contact_sim::service::{self, Config};
 use contact_sim::solve::SolverSettings;
@@ -22,6 +22,42 @@ struct Cli {
     command: Option<Command>,
 }
 
+/// How a node joins the job store (flags of `serve` and `worker`).
+#[derive(Args)]
+struct NodeArgs {
+    /// Job store: a `postgres://user@host/db` URL shared by many nodes, or omitted for
+    /// the embedded SQLite database in the data directory (single node).
+    #[arg(long)]
+    store: Option<String>,
+    /// This node's name, the prefix of its worker names; a restarted node with the same
+    /// name takes its interrupted jobs back at once. Must differ between live nodes
+    /// (default: "local" for the embedded store, host-pid for a shared one).
+    #[arg(long)]
+    node: Option<String>,
+    /// Seconds a job's lease lasts: a dead worker's job is claimed by another this long
+    /// after its last renewal.
+    #[arg(long = "lease-seconds", default_value_t = 30.0)]
+    lease_seconds: f64,
+}
+
+impl NodeArgs {
+    /// Sets the store, node name and lease of `config`; an error names the bad flag.
+    fn apply(self, config: Config) -> Result<Config, String> {
+        let seconds = self.lease_seconds;
+        if !(seconds.is_finite() && (0.3..=86_400.0).contains(&seconds)) {
+            return Err(format!(
+                "--lease-seconds {seconds}: must be between 0.3 and 86400"
+            ));
+        }
+        Ok(Config {
+            node: node_name(self.node, self.store.is_some()),
+            store: self.store,
+            lease_s: seconds,
+            ..config
+        })
+    }
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Run the HTTP job service (the default).
@@ -35,19 +71,8 @@ enum Command {
         /// Worker threads (default: number of cores; 0: an API-only node).
         #[arg(long)]
         workers: Option<usize>,
-        /// Job store: a `postgres://user@host/db` URL shared by many nodes, or omitted for
-        /// the embedded SQLite database in the data directory (single node).
-        #[arg(long)]
-        store: Option<String>,
-        /// This node's name, the prefix of its worker names; a restarted node with the same
-        /// name takes its interrupted jobs back at once. Must differ between live nodes
-        /// (default: "local" for the embedded store, host-pid for a shared one).
-        #[arg(long)]
-        node: Option<String>,
-        /// Seconds a job's lease lasts: a dead worker's job is claimed by another this long
-        /// after its last renewal.
-        #[arg(long = "lease-seconds", default_value_t = 30.0)]
-        lease_seconds: f64,
+        #[command(flatten)]
+        node: NodeArgs,
         /// Maximum queued jobs before POST /jobs answers 503.
         #[arg(long = "queue-capacity", default_value_t = 1000)]
         queue_capacity: usize,
@@ -86,19 +111,8 @@ enum Command {
         /// Worker threads (default: number of cores).
         #[arg(long)]
         workers: Option<usize>,
-        /// Job store: a `postgres://user@host/db` URL shared by many nodes, or omitted for
-        /// the embedded SQLite database in the data directory (single node).
-        #[arg(long)]
-        store: Option<String>,
-        /// This node's name, the prefix of its worker names; a restarted node with the same
-        /// name takes its interrupted jobs back at once. Must differ between live nodes
-        /// (default: "local" for the embedded store, host-pid for a shared one).
-        #[arg(long)]
-        node: Option<String>,
-        /// Seconds a job's lease lasts: a dead worker's job is claimed by another this long
-        /// after its last renewal.
-        #[arg(long = "lease-seconds", default_value_t = 30.0)]
-        lease_seconds: f64,
+        #[command(flatten)]
+        node: NodeArgs,
     },
     /// Run a scene (a JSON file or a preset) and print the summary JSON.
     Run {
@@ -183,9 +197,11 @@ fn main() -> ExitCode {
         submit_rate: 10.0,
         submit_burst: 50,
         header_timeout: 30.0,
-        store: None,
-        node: None,
-        lease_seconds: 30.0,
+        node: NodeArgs {
+            store: None,
+            node: None,
+            lease_seconds: 30.0,
+        },
     });
     match command {
         Command::Serve {
@@ -201,20 +217,12 @@ fn main() -> ExitCode {
             submit_rate,
             submit_burst,
             header_timeout,
-            store,
             node,
-            lease_seconds,
         } => {
             let defaults = Config::default();
             let config = Config {
                 data_dir,
                 workers: workers.unwrap_or(defaults.workers),
-                node: node_name(node, store.is_some()),
-                store,
-                lease_s: match lease(lease_seconds) {
-                    Ok(s) => s,
-                    Err(e) => return fail(2, &e),
-                },
                 queue_capacity,
                 max_nodes,
                 max_steps,
@@ -230,34 +238,32 @@ fn main() -> ExitCode {
                 },
                 ..defaults
             };
-            cmd_serve(&addr, config)
+            match node.apply(config) {
+                Ok(config) => cmd_serve(&addr, config),
+                Err(e) => fail(2, &e),
+            }
         }
         Command::Worker {
             data_dir,
             workers,
-            store,
             node,
-            lease_seconds,
         } => {
-            let Some(store) = store else {
+            if node.store.is_none() {
                 return fail(
                     2,
                     "a worker node needs the shared store: --store postgres://user@host/db",
                 );
-            };
+            }
             let defaults = Config::default();
             let config = Config {
                 data_dir,
                 workers: workers.unwrap_or(defaults.workers).max(1),
-                node: node_name(node, true),
-                store: Some(store),
-                lease_s: match lease(lease_seconds) {
-                    Ok(s) => s,
-                    Err(e) => return fail(2, &e),
-                },
                 ..defaults
             };
-            cmd_worker(config)
+            match node.apply(config) {
+                Ok(config) => cmd_worker(config),
+                Err(e) => fail(2, &e),
+            }
         }
         Command::Run {
             scene,
@@ -353,16 +359,6 @@ fn node_name(node: Option<String>, shared: bool) -> String {
             "local".into()
         }
     })
-}
-
-fn lease(seconds: f64) -> Result<f64, String> {
-    if seconds.is_finite() && (0.3..=86_400.0).contains(&seconds) {
-        Ok(seconds)
-    } else {
-        Err(format!(
-            "--lease-seconds {seconds}: must be between 0.3 and 86400"
-        ))
-    }
 }
 
 /// Resolves on SIGINT (Ctrl-C) or SIGTERM (what `docker stop` and service managers send).

@@ -737,22 +737,8 @@ fn slow_and_silent_clients_are_disconnected() {
     let until_closed = |mut s: std::net::TcpStream| -> (Duration, Vec<u8>) {
         s.set_read_timeout(Some(Duration::from_millis(100)))
             .unwrap();
-        let t = start;
-        let mut got = Vec::new();
-        let mut buf = [0u8; 1024];
-        while t.elapsed() < Duration::from_secs(10) {
-            match s.read(&mut buf) {
-                Ok(0) => break,
-                Ok(n) => got.extend_from_slice(&buf[..n]),
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                    ) => {}
-                Err(_) => break,
-            }
-        }
-        (t.elapsed(), got)
+        let (got, _) = read_until_closed(&mut s, start + Duration::from_secs(10));
+        (start.elapsed(), got)
     };
     // Silent: connects and sends nothing.
     let silent = std::net::TcpStream::connect(a).unwrap();

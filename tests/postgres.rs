@@ -21,6 +21,7 @@ use serde_json::{json, Value};
 use service_support::postgres::*;
 use service_support::*;
 use std::collections::{HashMap, HashSet};
+use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 fn new_job(n: usize, key: Option<&str>) -> NewJob {
@@ -294,37 +295,106 @@ fn job_scene(name: &str) -> Value {
     long_scene(name, 8, 40, 4)
 }
 
-#[test]
-fn three_workers_one_api() {
-    let Some(pg) = Postgres::start("three") else {
-        return;
-    };
-    let url = pg.url();
-    let dir = TempDir::new("pg-three");
-    let data = dir.0.join("shared");
-    let api = api_node(&data, &url);
-    // A 30 s lease: idle workers look for expired leases only every 10 s, so a job picked up
-    // sooner was announced to them (LISTEN/NOTIFY), not found by polling.
-    let workers: Vec<Proc> = (0..3)
-        .map(|i| Proc::worker(&data, &node_args(&url, &format!("w{i}"), "30")))
-        .collect();
-    std::thread::sleep(Duration::from_millis(500));
+/// A database, a result directory shared by the nodes, and an API-only node on them
+/// (dropped in this order: the node, the directory, the database).
+struct Cluster {
+    api: Proc,
+    data: std::path::PathBuf,
+    url: String,
+    _dir: TempDir,
+    pg: Postgres,
+}
+
+impl Cluster {
+    /// None (skip) without PostgreSQL, see [`Postgres::start`].
+    fn start(tag: &str) -> Option<Cluster> {
+        let pg = Postgres::start(tag)?;
+        let url = pg.url();
+        let dir = TempDir::new(&format!("pg-{tag}"));
+        let data = dir.0.join("shared");
+        let api = api_node(&data, &url);
+        Some(Cluster {
+            api,
+            data,
+            url,
+            _dir: dir,
+            pg,
+        })
+    }
+
+    /// A worker process with one worker thread.
+    fn worker(&self, node: &str, lease_s: &str) -> Proc {
+        Proc::worker(&self.data, &node_args(&self.url, node, lease_s))
+    }
+}
+
+/// Runs three tiny jobs one after the other, each of which must be done within 3 s: with
+/// a 30 s lease idle workers look for work only every 10 s, so that is only met when the
+/// submission woke them (LISTEN/NOTIFY).
+fn assert_woken_promptly(addr: SocketAddr, tag: &str) {
     for i in 0..3 {
         let t = Instant::now();
         let id = submit(
-            api.addr,
-            &job_scene(&format!("probe-{i}")),
-            &format!("probe-{i}"),
+            addr,
+            &job_scene(&format!("{tag}-{i}")),
+            &format!("{tag}-{i}"),
         );
-        let f = &wait_all(api.addr, &[id], Duration::from_secs(60))[0];
+        let f = &wait_all(addr, &[id], Duration::from_secs(60))[0];
         let latency = t.elapsed();
         assert_eq!(f["status"], "succeeded");
         assert!(
             latency < Duration::from_secs(3),
-            "an idle cluster took {latency:?} to run a 10 ms job: workers were not woken"
+            "{tag}: a 10 ms job took {latency:?} on an idle cluster: workers were not woken"
         );
         std::thread::sleep(Duration::from_millis(300));
     }
+}
+
+/// Waits until job `id` has a checkpoint past step 1 and returns the node computing it
+/// (the part of its worker name before `-w`) and that checkpoint step.
+fn wait_for_checkpoint(addr: SocketAddr, id: &str) -> (String, u64) {
+    let t = Instant::now();
+    loop {
+        let j = get(addr, &format!("/jobs/{id}")).json();
+        if let (Some(w), Some(c)) = (j["worker"].as_str(), j["last_checkpoint_step"].as_u64()) {
+            if c >= 2 {
+                return (w.split('-').next().unwrap().to_string(), c);
+            }
+        }
+        assert!(
+            j["status"] != "succeeded",
+            "the job finished before it could be interrupted"
+        );
+        assert!(t.elapsed() < Duration::from_secs(60), "no checkpoint: {j}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// The job's w_V at T equals an in-process run's of `scene`, bit for bit.
+fn assert_w_v_of_in_process_run(addr: SocketAddr, id: &str, scene: &Value) {
+    let p = contact_sim::scene::validate(scene).unwrap();
+    let inproc = contact_sim::run::run(p, Default::default(), |_, _| {
+        std::ops::ControlFlow::Continue(())
+    })
+    .unwrap();
+    let s = get(addr, &format!("/jobs/{id}/summary")).json();
+    assert_eq!(
+        s["final"]["w_V"].as_f64().unwrap().to_bits(),
+        inproc.final_.unwrap().w_v.to_bits()
+    );
+}
+
+#[test]
+fn three_workers_one_api() {
+    let Some(cluster) = Cluster::start("three") else {
+        return;
+    };
+    let api = &cluster.api;
+    let workers: Vec<Proc> = (0..3)
+        .map(|i| cluster.worker(&format!("w{i}"), "30"))
+        .collect();
+    std::thread::sleep(Duration::from_millis(500));
+    assert_woken_promptly(api.addr, "probe");
     let t0 = Instant::now();
     let ids: Vec<String> = (0..50)
         .map(|i| {
@@ -368,7 +438,7 @@ fn three_workers_one_api() {
         assert_eq!(done.get(id), Some(&1), "job {id} completions");
     }
     assert_eq!(done.len(), 53);
-    assert!(completions(&[&api]).is_empty());
+    assert!(completions(&[api]).is_empty());
     // A job running on a worker node is cancelled through the API node (the worker sees the
     // request at its next lease renewal or checkpoint, about once a second).
     let long = submit(api.addr, &long_scene("to-cancel", 64, 4000, 2), "to-cancel");
@@ -409,37 +479,20 @@ fn three_workers_one_api() {
 
 #[test]
 fn kill_9_worker_mid_job() {
-    let Some(pg) = Postgres::start("kill") else {
+    let Some(cluster) = Cluster::start("kill") else {
         return;
     };
-    let url = pg.url();
-    let dir = TempDir::new("pg-kill");
-    let data = dir.0.join("shared");
-    let api = api_node(&data, &url);
+    let (api, data) = (&cluster.api, &cluster.data);
     let mut nodes: HashMap<String, Proc> = ["a", "b"]
         .iter()
-        .map(|n| (n.to_string(), Proc::worker(&data, &node_args(&url, n, "2"))))
+        .map(|n| (n.to_string(), cluster.worker(n, "2")))
         .collect();
     // Several seconds of work with checkpoints every second and slipping friction (the warm
     // starts matter for bit-for-bit resumption).
     let scene = long_scene("interrupted", 64, 1600, 8);
     let id = submit(api.addr, &scene, "interrupted");
     // Wait for a checkpoint a few steps in, then kill the node running the job.
-    let t = Instant::now();
-    let (holder, checkpoint) = loop {
-        let j = get(api.addr, &format!("/jobs/{id}")).json();
-        if let (Some(w), Some(c)) = (j["worker"].as_str(), j["last_checkpoint_step"].as_u64()) {
-            if c >= 2 {
-                break (w.split('-').next().unwrap().to_string(), c);
-            }
-        }
-        assert!(
-            j["status"] != "succeeded",
-            "the job finished before it could be killed"
-        );
-        assert!(t.elapsed() < Duration::from_secs(60), "no checkpoint: {j}");
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let (holder, checkpoint) = wait_for_checkpoint(api.addr, &id);
     nodes.remove(&holder).unwrap().kill9();
     let survivor = nodes.values().next().unwrap();
     let f = &wait_all(
@@ -510,16 +563,7 @@ fn kill_9_worker_mid_job() {
     assert_eq!(bits(&x.u), bits(&y.u), "u at T");
     assert_eq!(bits(&x.w), bits(&y.w), "w at T");
     assert_eq!(bits(&x.zeta), bits(&y.zeta), "ζ at T");
-    let p = contact_sim::scene::validate(&scene).unwrap();
-    let inproc = contact_sim::run::run(p, Default::default(), |_, _| {
-        std::ops::ControlFlow::Continue(())
-    })
-    .unwrap();
-    let s = get(api.addr, &format!("/jobs/{id}/summary")).json();
-    assert_eq!(
-        s["final"]["w_V"].as_f64().unwrap().to_bits(),
-        inproc.final_.unwrap().w_v.to_bits()
-    );
+    assert_w_v_of_in_process_run(api.addr, &id, &scene);
     eprintln!(
         "kill -9: node {holder} killed after checkpoint {checkpoint}; node {other} resumed at \
          step {resumed_at}; final fields equal bit for bit"
@@ -528,17 +572,13 @@ fn kill_9_worker_mid_job() {
 
 #[test]
 fn database_restart_under_load() {
-    let Some(pg) = Postgres::start("restart") else {
+    let Some(cluster) = Cluster::start("restart") else {
         return;
     };
-    let url = pg.url();
-    let dir = TempDir::new("pg-restart");
-    let data = dir.0.join("shared");
-    let api = api_node(&data, &url);
     let workers: Vec<Proc> = (0..3)
-        .map(|i| Proc::worker(&data, &node_args(&url, &format!("r{i}"), "30")))
+        .map(|i| cluster.worker(&format!("r{i}"), "30"))
         .collect();
-    let addr = api.addr;
+    let addr = cluster.api.addr;
     let n_jobs = 36;
     // Submissions go on while the database restarts (retried with their keys).
     let submitter = std::thread::spawn(move || {
@@ -552,10 +592,10 @@ fn database_restart_under_load() {
             .collect::<Vec<String>>()
     });
     std::thread::sleep(Duration::from_millis(800));
-    pg.restart("fast");
+    cluster.pg.restart("fast");
     std::thread::sleep(Duration::from_millis(1200));
     // A crash of the database server this time (recovery from its WAL at start).
-    pg.restart("immediate");
+    cluster.pg.restart("immediate");
     let ids = submitter.join().unwrap();
     assert_eq!(ids.iter().collect::<HashSet<_>>().len(), n_jobs);
     let finals = wait_all(addr, &ids, Duration::from_secs(300));
@@ -570,23 +610,8 @@ fn database_restart_under_load() {
     for id in &ids {
         assert_eq!(done.get(id), Some(&1), "job {id} completions: {done:?}");
     }
-    // The workers' notification connections came back too: with a 30 s lease they would
-    // otherwise look for work only every 10 s.
-    for i in 0..3 {
-        let t = Instant::now();
-        let id = submit(
-            addr,
-            &job_scene(&format!("after-{i}")),
-            &format!("after-{i}"),
-        );
-        let f = &wait_all(addr, &[id], Duration::from_secs(60))[0];
-        assert_eq!(f["status"], "succeeded");
-        assert!(
-            t.elapsed() < Duration::from_secs(3),
-            "a job after the restarts waited {:?}: workers not woken",
-            t.elapsed()
-        );
-    }
+    // The workers' notification connections came back too.
+    assert_woken_promptly(addr, "after-restarts");
     let reconnects: usize = workers
         .iter()
         .map(|w| w.log.lock().unwrap().matches("unavailable").count())
@@ -600,30 +625,17 @@ fn database_restart_under_load() {
 
 #[test]
 fn paused_worker_loses_its_job_and_does_not_finish_it() {
-    let Some(pg) = Postgres::start("pause") else {
+    let Some(cluster) = Cluster::start("pause") else {
         return;
     };
-    let url = pg.url();
-    let dir = TempDir::new("pg-pause");
-    let data = dir.0.join("shared");
-    let api = api_node(&data, &url);
+    let api = &cluster.api;
     let nodes: HashMap<String, Proc> = ["a", "b"]
         .iter()
-        .map(|n| (n.to_string(), Proc::worker(&data, &node_args(&url, n, "2"))))
+        .map(|n| (n.to_string(), cluster.worker(n, "2")))
         .collect();
     let scene = long_scene("paused", 64, 1600, 8);
     let id = submit(api.addr, &scene, "paused");
-    let t = Instant::now();
-    let holder = loop {
-        let j = get(api.addr, &format!("/jobs/{id}")).json();
-        if let (Some(w), Some(c)) = (j["worker"].as_str(), j["last_checkpoint_step"].as_u64()) {
-            if c >= 2 {
-                break w.split('-').next().unwrap().to_string();
-            }
-        }
-        assert!(t.elapsed() < Duration::from_secs(60), "no checkpoint: {j}");
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let (holder, _) = wait_for_checkpoint(api.addr, &id);
     let signal = |sig: &str| {
         let pid = nodes[&holder].pid().to_string();
         assert!(std::process::Command::new("kill")
@@ -674,16 +686,7 @@ fn paused_worker_loses_its_job_and_does_not_finish_it() {
     let done = completions(&nodes.values().collect::<Vec<_>>());
     assert_eq!(done.get(&id), Some(&1), "completions {done:?}");
     // The result is the uninterrupted one.
-    let p = contact_sim::scene::validate(&scene).unwrap();
-    let inproc = contact_sim::run::run(p, Default::default(), |_, _| {
-        std::ops::ControlFlow::Continue(())
-    })
-    .unwrap();
-    let s = get(api.addr, &format!("/jobs/{id}/summary")).json();
-    assert_eq!(
-        s["final"]["w_V"].as_f64().unwrap().to_bits(),
-        inproc.final_.unwrap().w_v.to_bits()
-    );
+    assert_w_v_of_in_process_run(api.addr, &id, &scene);
 }
 
 #[test]

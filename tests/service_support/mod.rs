@@ -353,6 +353,30 @@ pub fn post_json(addr: SocketAddr, path: &str, body: &Value) -> Resp {
     )
 }
 
+/// Reads from `s` until the peer closes it, `deadline` passes, or a read fails (the error
+/// is returned with what was read). `s` needs a short read timeout so that the deadline is
+/// checked.
+pub fn read_until_closed(
+    s: &mut TcpStream,
+    deadline: Instant,
+) -> (Vec<u8>, Option<std::io::Error>) {
+    let mut got = Vec::new();
+    let mut buf = [0u8; 4096];
+    while Instant::now() < deadline {
+        match s.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => got.extend_from_slice(&buf[..n]),
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
+            Err(e) => return (got, Some(e)),
+        }
+    }
+    (got, None)
+}
+
 /// Opens the event stream of `id`, reads it for at most `for_` (the stream ends by itself
 /// once the job is finished), and returns the response text.
 pub fn sse_text(a: SocketAddr, id: &str, for_: Duration) -> Result<String, String> {
@@ -363,20 +387,9 @@ pub fn sse_text(a: SocketAddr, id: &str, for_: Duration) -> Result<String, Strin
             .as_bytes(),
     )
     .map_err(|e| e.to_string())?;
-    let t = Instant::now();
-    let mut got = Vec::new();
-    let mut buf = [0u8; 4096];
-    while t.elapsed() < for_ {
-        match s.read(&mut buf) {
-            Ok(0) => break,
-            Ok(n) => got.extend_from_slice(&buf[..n]),
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) => {}
-            Err(e) => return Err(e.to_string()),
-        }
+    let (got, error) = read_until_closed(&mut s, Instant::now() + for_);
+    if let Some(e) = error {
+        return Err(e.to_string());
     }
     let text = String::from_utf8_lossy(&got).into_owned();
     if !text.starts_with("HTTP/1.1 200") {

@@ -39,7 +39,7 @@ use uuid::Uuid;
 
 use super::row::{
     abandoned_error, check_lease, into_page, json_text, page_bounds, status_counts, to_i64,
-    to_usize, RawJob,
+    to_usize, RawJob, FINISHED,
 };
 use super::{Enqueued, JobRecord, JobStatus, NewJob, Page, Progress, Store, StoreError, Wake};
 
@@ -86,6 +86,9 @@ const MIGRATIONS: &[&str] = &[
     );
     ",
 ];
+
+/// The number of migrations applied.
+const SCHEMA_VERSION: &str = "SELECT COALESCE(MAX(version), 0) FROM contact_sim_schema";
 
 /// Key of the session advisory lock held while migrating ("contact" in ASCII).
 const MIGRATION_LOCK: i64 = 0x0063_6f6e_7461_6374;
@@ -188,10 +191,7 @@ fn migrate(client: &mut Client) -> Result<(), StoreError> {
             )
             .map_err(classify)?;
         let current: i32 = client
-            .query_one(
-                "SELECT COALESCE(MAX(version), 0) FROM contact_sim_schema",
-                &[],
-            )
+            .query_one(SCHEMA_VERSION, &[])
             .map_err(classify)?
             .get(0);
         let current = usize::try_from(current)
@@ -266,12 +266,7 @@ impl PgStore {
     /// The schema version of the database (number of migrations applied).
     pub fn schema_version(&self) -> Result<usize, StoreError> {
         self.read(|c| {
-            let v: i32 = c
-                .query_one(
-                    "SELECT COALESCE(MAX(version), 0) FROM contact_sim_schema",
-                    &[],
-                )?
-                .get(0);
+            let v: i32 = c.query_one(SCHEMA_VERSION, &[])?.get(0);
             Ok(v)
         })
         .and_then(|v| usize::try_from(v).map_err(|_| StoreError::Corrupt(format!("version {v}"))))
@@ -668,7 +663,7 @@ impl Store for PgStore {
                 format!(
                     "UPDATE jobs SET status = $2, finished_at = {NOW_S}, error = $3,
                             lease_until = NULL, last_checkpoint_step = NULL
-                     WHERE id = $1 AND status NOT IN ('succeeded', 'failed', 'cancelled')"
+                     WHERE id = $1 AND status NOT IN {FINISHED}"
                 )
                 .as_str(),
                 &[&id, &status.as_str(), &error],
@@ -718,8 +713,7 @@ impl Store for PgStore {
     fn delete(&self, id: Uuid) -> Result<bool, StoreError> {
         let n = self.exec(|c| {
             c.execute(
-                "DELETE FROM jobs
-                 WHERE id = $1 AND status IN ('succeeded', 'failed', 'cancelled')",
+                format!("DELETE FROM jobs WHERE id = $1 AND status IN {FINISHED}").as_str(),
                 &[&id],
             )
         })?;

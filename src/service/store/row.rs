@@ -113,6 +113,9 @@ impl RawJob {
     }
 }
 
+/// SQL list of the final statuses (the same in both dialects).
+pub(super) const FINISHED: &str = "('succeeded', 'failed', 'cancelled')";
+
 /// The problem+json error of a dead-lettered job (see [`super::Store::claim`]).
 pub(super) fn abandoned_error(attempt: i64, stalls: i64, max_attempts: u32) -> serde_json::Value {
     serde_json::json!({

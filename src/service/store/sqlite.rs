@@ -44,7 +44,7 @@ use uuid::Uuid;
 
 use super::row::{
     abandoned_error, check_lease, into_page, json_text, page_bounds, status_counts, to_i64,
-    to_usize, RawJob,
+    to_usize, RawJob, FINISHED,
 };
 use super::{now, Enqueued, JobRecord, JobStatus, NewJob, Page, Progress, Store, StoreError};
 
@@ -99,9 +99,6 @@ const MIGRATIONS: &[&str] = &[
 const COLS: &str = "id, status, scene, scene_hash, idempotency_key, request_hash, created_at, \
      started_at, finished_at, step, steps, last_residual, error, cancel_requested, attempt, \
      worker, lease_until, checkpoint_step, seq";
-
-/// SQL list of the final statuses.
-const FINISHED: &str = "('succeeded', 'failed', 'cancelled')";
 
 impl From<rusqlite::Error> for StoreError {
     fn from(e: rusqlite::Error) -> StoreError {
