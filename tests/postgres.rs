@@ -326,6 +326,48 @@ impl Cluster {
     fn worker(&self, node: &str, lease_s: &str) -> Proc {
         Proc::worker(&self.data, &node_args(&self.url, node, lease_s))
     }
+
+    /// Starts worker nodes "a" and "b" (2 s leases) and submits `name`: several seconds of
+    /// work with slipping friction (the warm starts matter for bit-for-bit resumption);
+    /// returns once the job has a checkpoint a few steps in.
+    fn long_job_on_two_nodes(&self, name: &str) -> LongJobOnTwoNodes {
+        let nodes: HashMap<String, Proc> = ["a", "b"]
+            .iter()
+            .map(|n| (n.to_string(), self.worker(n, "2")))
+            .collect();
+        let scene = long_scene(name, 64, 1600, 8);
+        let id = submit(self.api.addr, &scene, name);
+        let (holder, checkpoint) = wait_for_checkpoint(self.api.addr, &id);
+        LongJobOnTwoNodes {
+            nodes,
+            scene,
+            id,
+            holder,
+            checkpoint,
+        }
+    }
+}
+
+/// See [`Cluster::long_job_on_two_nodes`].
+struct LongJobOnTwoNodes {
+    /// The worker processes by node name.
+    nodes: HashMap<String, Proc>,
+    scene: Value,
+    id: String,
+    /// The node computing the job when its checkpoint was seen.
+    holder: String,
+    /// That checkpoint's step.
+    checkpoint: u64,
+}
+
+/// Waits for job `id` to succeed and checks that the node other than `holder` (of "a" and
+/// "b") finished it; returns the job resource.
+fn finished_by_the_other_node(addr: SocketAddr, id: &str, holder: &str) -> Value {
+    let f = wait_all(addr, &[id.to_string()], Duration::from_secs(180)).remove(0);
+    assert_eq!(f["status"], "succeeded", "{f}");
+    let other = if holder == "a" { "b" } else { "a" };
+    assert_eq!(f["worker"].as_str(), Some(format!("{other}-w0").as_str()));
+    f
 }
 
 /// Runs three tiny jobs one after the other, each of which must be done within 3 s: with
@@ -483,27 +525,18 @@ fn kill_9_worker_mid_job() {
         return;
     };
     let (api, data) = (&cluster.api, &cluster.data);
-    let mut nodes: HashMap<String, Proc> = ["a", "b"]
-        .iter()
-        .map(|n| (n.to_string(), cluster.worker(n, "2")))
-        .collect();
-    // Several seconds of work with checkpoints every second and slipping friction (the warm
-    // starts matter for bit-for-bit resumption).
-    let scene = long_scene("interrupted", 64, 1600, 8);
-    let id = submit(api.addr, &scene, "interrupted");
-    // Wait for a checkpoint a few steps in, then kill the node running the job.
-    let (holder, checkpoint) = wait_for_checkpoint(api.addr, &id);
+    let LongJobOnTwoNodes {
+        mut nodes,
+        scene,
+        id,
+        holder,
+        checkpoint,
+    } = cluster.long_job_on_two_nodes("interrupted");
+    // Kill the node running the job.
     nodes.remove(&holder).unwrap().kill9();
     let survivor = nodes.values().next().unwrap();
-    let f = &wait_all(
-        api.addr,
-        std::slice::from_ref(&id),
-        Duration::from_secs(180),
-    )[0];
-    assert_eq!(f["status"], "succeeded", "{f}");
+    let f = finished_by_the_other_node(api.addr, &id, &holder);
     assert_eq!(f["attempt"], 2, "{f}");
-    let other = if holder == "a" { "b" } else { "a" };
-    assert_eq!(f["worker"].as_str(), Some(format!("{other}-w0").as_str()));
     // Resumed from a checkpoint at or after the one seen before the kill, not from scratch.
     let log = survivor.log.lock().unwrap().clone();
     let resumed_at: u64 = log
@@ -565,8 +598,9 @@ fn kill_9_worker_mid_job() {
     assert_eq!(bits(&x.zeta), bits(&y.zeta), "ζ at T");
     assert_w_v_of_in_process_run(api.addr, &id, &scene);
     eprintln!(
-        "kill -9: node {holder} killed after checkpoint {checkpoint}; node {other} resumed at \
-         step {resumed_at}; final fields equal bit for bit"
+        "kill -9: node {holder} killed after checkpoint {checkpoint}; worker {} resumed at \
+         step {resumed_at}; final fields equal bit for bit",
+        f["worker"]
     );
 }
 
@@ -629,13 +663,13 @@ fn paused_worker_loses_its_job_and_does_not_finish_it() {
         return;
     };
     let api = &cluster.api;
-    let nodes: HashMap<String, Proc> = ["a", "b"]
-        .iter()
-        .map(|n| (n.to_string(), cluster.worker(n, "2")))
-        .collect();
-    let scene = long_scene("paused", 64, 1600, 8);
-    let id = submit(api.addr, &scene, "paused");
-    let (holder, _) = wait_for_checkpoint(api.addr, &id);
+    let LongJobOnTwoNodes {
+        nodes,
+        scene,
+        id,
+        holder,
+        ..
+    } = cluster.long_job_on_two_nodes("paused");
     let signal = |sig: &str| {
         let pid = nodes[&holder].pid().to_string();
         assert!(std::process::Command::new("kill")
@@ -660,14 +694,7 @@ fn paused_worker_loses_its_job_and_does_not_finish_it() {
     }
     // It wakes up mid-step: it must notice and stop, not finish the job a second time.
     signal("-CONT");
-    let f = &wait_all(
-        api.addr,
-        std::slice::from_ref(&id),
-        Duration::from_secs(180),
-    )[0];
-    assert_eq!(f["status"], "succeeded", "{f}");
-    let other = if holder == "a" { "b" } else { "a" };
-    assert_eq!(f["worker"].as_str(), Some(format!("{other}-w0").as_str()));
+    finished_by_the_other_node(api.addr, &id, &holder);
     let t = Instant::now();
     let stale = &nodes[&holder];
     while !stale
