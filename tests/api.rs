@@ -584,6 +584,53 @@ fn full_queue_answers_503_with_retry_after() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A running study stops for a cancel request (`cancelled`) and for a server shutdown
+/// (left `running`, to be claimed again: neither failed nor cancelled).
+#[test]
+fn running_studies_stop_for_cancel_and_shutdown() {
+    let dir = temp_dir("study-stop");
+    let srv = Server::start(&dir, 1);
+    let a = srv.addr;
+    // Minutes of work: a reference of 2^14 steps.
+    let study = |name: &str| {
+        json!({"study": {"scene": "paper-convergence", "name": name, "h": ["1/2", "1/4"],
+                         "k": "1/16", "reference": {"h": "1/16", "k": "1/16384"}}})
+    };
+    let submit = |name: &str| {
+        let r = post_json(a, "/jobs", &study(name));
+        assert_eq!(r.status, 202, "{}", String::from_utf8_lossy(&r.body));
+        let id = r.json()["id"].as_str().unwrap().to_string();
+        wait_status(a, &id, &["running"], Duration::from_secs(60));
+        // Past the first heartbeat (about once a second).
+        std::thread::sleep(Duration::from_millis(1500));
+        id
+    };
+    let cancelled = submit("cancelled");
+    assert_eq!(
+        http(a, "POST", &format!("/jobs/{cancelled}/cancel"), &[], b"").status,
+        202
+    );
+    let done = wait_status(a, &cancelled, &["cancelled"], Duration::from_secs(10));
+    assert!(done["error"].is_null(), "{done}");
+    let progress = &done["progress"];
+    assert!(
+        progress["step"].as_u64().unwrap() < progress["steps"].as_u64().unwrap(),
+        "{done}"
+    );
+
+    let interrupted = submit("interrupted");
+    srv.stop();
+    let srv = Server::start(&dir, 0);
+    let j = get(srv.addr, &format!("/jobs/{interrupted}")).json();
+    assert_eq!(
+        (j["status"].as_str(), j["attempt"].as_u64()),
+        (Some("running"), Some(1)),
+        "{j}"
+    );
+    srv.stop();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Study jobs: submit, table as JSON and text, report SVG, no fields, the shared reference,
 /// refusal of non-nested levels; an error estimate on a simulation.
 #[test]

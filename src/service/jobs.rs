@@ -470,7 +470,8 @@ impl Runtime {
         let (plan, _) = study::parse(&job.scene["study"], "/study")
             .map_err(|e| problem_json(500, "stored study no longer validates", &e.to_string()))?;
         let last_beat = Mutex::new(Instant::now());
-        let lost_lease = AtomicBool::new(false);
+        // Why a heartbeat stopped the study (cancelled, or taken over by another worker).
+        let stopped: Mutex<Option<Outcome>> = Mutex::new(None);
         let progress = |done: usize, total: usize| {
             if cancel.load(Ordering::SeqCst) || self.shutdown.load(Ordering::SeqCst) {
                 return ControlFlow::Break(());
@@ -486,8 +487,8 @@ impl Runtime {
             if beat.elapsed() >= CHECKPOINT_EVERY {
                 *beat = Instant::now();
                 let _ = self.store.set_progress(id, p);
-                if let Ok(false) = self.store.heartbeat(id, worker, self.config.lease_s) {
-                    lost_lease.store(true, Ordering::SeqCst);
+                if let Some(stop) = self.lost(id, worker) {
+                    *stopped.lock().unwrap() = Some(stop);
                     return ControlFlow::Break(());
                 }
             }
@@ -515,17 +516,16 @@ impl Runtime {
                     .map_err(io)?;
                 Ok(Outcome::Succeeded)
             }
-            Err(StudyError::Cancelled) => {
-                if cancel.load(Ordering::SeqCst) {
-                    return Ok(Outcome::Cancelled);
-                }
-                let rec = self.store.get(id).ok().flatten();
-                Ok(if rec.is_some_and(|r| r.cancel_requested) {
-                    Outcome::Cancelled
-                } else {
-                    Outcome::Interrupted
-                })
-            }
+            Err(StudyError::Cancelled) => Ok(if cancel.load(Ordering::SeqCst) {
+                Outcome::Cancelled
+            } else {
+                // A heartbeat's verdict, or else shutting down: a cancel requested through
+                // another node meanwhile still counts.
+                let stopped = stopped.into_inner().unwrap();
+                stopped
+                    .or_else(|| self.lost(id, worker))
+                    .unwrap_or(Outcome::Interrupted)
+            }),
             Err(StudyError::Run(crate::run::RunError::Solve(e))) => Err(solve_problem(&e)),
             Err(e) => Err(problem_json(500, "study failed", &e.to_string())),
         }
