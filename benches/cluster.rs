@@ -59,9 +59,9 @@ fn main() {
         let scene = long_scene("inproc", size.n, size.steps, 4);
         let t_job = (0..3)
             .map(|_| {
-                let p = contact_sim::scene::validate(&scene).expect("valid scene");
+                let p = contact_core::scene::validate(&scene).expect("valid scene");
                 let t = Instant::now();
-                contact_sim::run::run(p, Default::default(), |_, _| {
+                contact_core::run::run(p, Default::default(), |_, _| {
                     std::ops::ControlFlow::Continue(())
                 })
                 .expect("run");

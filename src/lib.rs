@@ -1,26 +1,18 @@
-//! contact-sim: quasistatic frictional contact of a viscoelastic body with damage.
-//!
-//! The numerics is the fully discrete scheme (Problem 3.1) of W. Han, M. Jureczka, A. Ochal,
-//! "Numerical analysis of a contact problem with damage", J. Comput. Appl. Math. 377 (2020)
-//! 112886, with the discrete choices fixed in SCHEME.md. Data flows one way:
-//! scene JSON → [`scene::validate`] → [`problem::Problem`] → [`mesh`] and [`fem`] matrices →
-//! [`solve::stepper`] time steps → [`output`] summary and fields.
-//!
-//! Nothing in this library knows about HTTP.
+//! contact-sim: the job service on top of the numerical core ([`contact_core`]): routes
+//! ([`app`], [`routes`]), job execution on a worker pool off the async runtime ([`jobs`]),
+//! and the durable store ([`store`]: embedded SQLite, or PostgreSQL shared by many nodes).
 #![forbid(unsafe_code)]
 
-pub mod bench;
-pub mod fem;
-pub mod laws;
-pub mod linalg;
-pub mod mesh;
-pub mod output;
-pub mod problem;
-pub mod run;
-pub mod scene;
-pub mod service;
-pub mod solve;
-pub mod stress;
-pub mod study;
-#[cfg(test)]
-mod test_rng;
+pub mod app;
+pub mod config;
+pub mod error;
+pub mod jobs;
+pub mod lease;
+pub mod limits;
+pub mod routes;
+pub mod server;
+pub mod state;
+pub mod store;
+pub mod stream;
+
+pub use config::Config;

@@ -1,10 +1,10 @@
 //! The `contact-sim` command line: a thin front end over the library.
 
 use clap::{Args, Parser, Subcommand};
-use contact_sim::scene::{self, presets, Overrides};
-use contact_sim::service::{self, Config};
-use contact_sim::solve::SolverSettings;
-use contact_sim::{bench, run};
+use contact_core::scene::{self, presets, Overrides};
+use contact_core::solve::SolverSettings;
+use contact_core::{bench, run};
+use contact_sim::Config;
 use serde_json::Value;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -385,7 +385,7 @@ async fn shutdown_signal() {
 }
 
 fn cmd_worker(config: Config) -> ExitCode {
-    let rt = match service::app::open_runtime(config.clone()) {
+    let rt = match contact_sim::state::open_runtime(config.clone()) {
         Ok(rt) => rt,
         Err(e) => return fail(1, &e),
     };
@@ -397,7 +397,7 @@ fn cmd_worker(config: Config) -> ExitCode {
         config
             .store
             .as_deref()
-            .map_or_else(String::new, service::app::redact),
+            .map_or_else(String::new, contact_sim::state::redact),
         config.data_dir.display()
     );
     match tokio::runtime::Builder::new_current_thread()
@@ -429,7 +429,7 @@ fn cmd_serve(addr: &str, config: Config) -> ExitCode {
         );
     }
     // Opening a PostgreSQL store blocks: not on the runtime's threads.
-    let state = match service::app::start(config.clone()) {
+    let state = match contact_sim::state::start(config.clone()) {
         Ok(s) => s,
         Err(e) => return fail(1, &e),
     };
@@ -446,7 +446,7 @@ fn cmd_serve(addr: &str, config: Config) -> ExitCode {
             config
                 .store
                 .as_deref()
-                .map_or_else(|| "embedded SQLite".into(), service::app::redact),
+                .map_or_else(|| "embedded SQLite".into(), contact_sim::state::redact),
             config.node,
             config.workers
         );
@@ -454,7 +454,7 @@ fn cmd_serve(addr: &str, config: Config) -> ExitCode {
             shutdown_signal().await;
             eprintln!("contact-sim: shutting down (running jobs are checkpointed and resume at the next start)");
         };
-        match service::app::serve(listener, state, shutdown).await {
+        match contact_sim::app::serve(listener, state, shutdown).await {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => fail(1, &e.to_string()),
         }
@@ -525,7 +525,7 @@ fn cmd_run(mut doc: Value, overrides: &Overrides, out: Option<&Path>, tol: f64) 
             wrote_mesh = true;
             write(
                 dir.parent().unwrap().join("mesh.json"),
-                &contact_sim::output::fields::MeshJson::new(&sim.mesh),
+                &contact_core::output::fields::MeshJson::new(&sim.mesh),
             )?;
         }
         if sim.problem.output.stores(r.n, sim.problem.steps) {
@@ -555,7 +555,7 @@ fn cmd_study(
     threads: Option<usize>,
     report_dir: Option<&Path>,
 ) -> ExitCode {
-    use contact_sim::study;
+    use contact_core::study;
     if format != "json" && format != "text" {
         return fail(2, &format!("unknown --format {format:?} (json or text)"));
     }
@@ -619,7 +619,7 @@ fn cmd_study(
                 let json = serde_json::to_string_pretty(r).expect("JSON");
                 std::fs::write(dir.join(format!("{stem}.json")), json)?;
                 std::fs::write(dir.join(format!("{stem}.txt")), r.text_table())?;
-                let svg = contact_sim::output::report_svg::study_report(r);
+                let svg = contact_core::study::report_svg::study_report(r);
                 std::fs::write(dir.join(format!("{stem}.svg")), svg)?;
             }
             Ok(())
@@ -650,7 +650,7 @@ fn cmd_stress(quick: bool, format: &str) -> ExitCode {
     if format != "text" && format != "json" {
         return fail(2, &format!("unknown format {format:?}; use text or json"));
     }
-    let report = contact_sim::stress::run(quick);
+    let report = contact_core::stress::run(quick);
     if format == "json" {
         println!("{}", serde_json::to_string_pretty(&report).expect("JSON"));
     } else {

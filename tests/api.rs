@@ -3,7 +3,7 @@
 //! idempotency, cancellation, and restart on the same data directory with resumption from a
 //! checkpoint.
 
-use contact_sim::service::Config;
+use contact_sim::Config;
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::io::{Read, Write};
@@ -149,7 +149,7 @@ fn temp_dir(tag: &str) -> PathBuf {
 /// A scene that takes a while: paper-convergence at h = 1/16 with many small steps.
 fn long_scene(steps: usize) -> Value {
     let mut s: Value = serde_json::from_str(
-        &serde_json::to_string(&contact_sim::scene::presets::get("paper-convergence").unwrap())
+        &serde_json::to_string(&contact_core::scene::presets::get("paper-convergence").unwrap())
             .unwrap(),
     )
     .unwrap();
@@ -349,7 +349,7 @@ fn bad_input_gets_problem_json_naming_the_field() {
     let r = http(a, "POST", "/jobs", &[("Content-Type", "text/plain")], b"{}");
     assert_problem(&r, 415);
 
-    let mut scene = contact_sim::scene::presets::get("paper-exp1").unwrap();
+    let mut scene = contact_core::scene::presets::get("paper-exp1").unwrap();
     scene["material"]["viscosity"]["eta"] = json!("soft");
     scene["boundary"][1]["to"] = json!([0, 0.5]);
     let p = assert_problem(&post_json(a, "/jobs", &scene), 422);
@@ -530,8 +530,8 @@ fn restart_keeps_results_and_resumes_running_jobs_from_checkpoints() {
 
     // The same result as an uninterrupted run, bit for bit (the checkpoint carries the
     // solvers' warm starts).
-    let p = contact_sim::scene::validate(&scene).unwrap();
-    let straight = contact_sim::run::run(p, Default::default(), |_, _| {
+    let p = contact_core::scene::validate(&scene).unwrap();
+    let straight = contact_core::run::run(p, Default::default(), |_, _| {
         std::ops::ControlFlow::Continue(())
     })
     .unwrap();

@@ -9,7 +9,7 @@
 mod common;
 
 use common::server::{get, Server};
-use contact_sim::service::Config;
+use contact_sim::Config;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};

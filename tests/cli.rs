@@ -108,7 +108,7 @@ fn presets_are_listed_and_round_trip() {
         assert!(text.contains(name));
         let doc = bin().args(["preset", name]).output().unwrap();
         let v: Value = serde_json::from_slice(&doc.stdout).unwrap();
-        assert!(contact_sim::scene::validate(&v).is_ok(), "{name}");
+        assert!(contact_core::scene::validate(&v).is_ok(), "{name}");
     }
 }
 
@@ -120,7 +120,7 @@ fn readme_example_scene_validates() {
     let start = readme.find("```json\n").expect("json block") + 8;
     let end = start + readme[start..].find("```").unwrap();
     let doc: Value = serde_json::from_str(&readme[start..end]).unwrap();
-    let p = contact_sim::scene::validate(&doc).unwrap();
+    let p = contact_core::scene::validate(&doc).unwrap();
     assert_eq!((p.cells_per_unit, p.steps, p.boundary.len()), (32, 32, 4));
 }
 

@@ -9,7 +9,7 @@
 
 mod service_support;
 
-use contact_sim::output::stored::decode_step;
+use contact_core::output::stored::decode_step;
 use serde_json::Value;
 use service_support::*;
 use std::collections::{BTreeMap, HashMap};
@@ -95,7 +95,7 @@ fn kill_9_and_restart_loses_nothing() {
         for scene in new {
             let r = post_json(a, "/jobs", &scene);
             assert_eq!(r.status, 202, "{}", r.text());
-            let p = contact_sim::scene::validate(&scene).unwrap();
+            let p = contact_core::scene::validate(&scene).unwrap();
             jobs.push(Job {
                 id: r.json()["id"].as_str().unwrap().to_string(),
                 every: scene["output"]["every"].as_u64().unwrap_or(1) as usize,
@@ -228,7 +228,7 @@ fn kill_9_and_restart_loses_nothing() {
         for f in std::fs::read_dir(&dir).unwrap().flatten() {
             let name = f.file_name().to_string_lossy().into_owned();
             assert!(!name.starts_with(".tmp-"), "{}/{name}", j.id);
-            if let Some(n) = contact_sim::service::jobs::parse_step_file(&name) {
+            if let Some(n) = contact_sim::jobs::parse_step_file(&name) {
                 let fields = decode_step(&std::fs::read(f.path()).unwrap())
                     .unwrap_or_else(|e| panic!("{}/{name}: {e}", j.id));
                 assert_eq!(fields.n, n, "{}/{name}", j.id);
@@ -236,7 +236,7 @@ fn kill_9_and_restart_loses_nothing() {
             }
         }
         stored.sort_unstable();
-        let p = contact_sim::scene::validate(&j.scene).unwrap();
+        let p = contact_core::scene::validate(&j.scene).unwrap();
         let expected: Vec<usize> = (1..=j.steps)
             .filter(|&n| p.output.stores(n, j.steps))
             .collect();
@@ -254,8 +254,8 @@ fn kill_9_and_restart_loses_nothing() {
     by_interruptions
         .sort_by_key(|j| std::cmp::Reverse(interrupted.get(&j.id).copied().unwrap_or(0)));
     for j in by_interruptions.iter().take(2) {
-        let p = contact_sim::scene::validate(&j.scene).unwrap();
-        let straight = contact_sim::run::run(p, Default::default(), |_, _| {
+        let p = contact_core::scene::validate(&j.scene).unwrap();
+        let straight = contact_core::run::run(p, Default::default(), |_, _| {
             std::ops::ControlFlow::Continue(())
         })
         .unwrap();

@@ -14,9 +14,9 @@
 
 mod service_support;
 
-use contact_sim::output::stored::decode_step;
-use contact_sim::service::store::postgres::PgStore;
-use contact_sim::service::store::{Enqueued, JobStatus, NewJob, Progress, Store, StoreError};
+use contact_core::output::stored::decode_step;
+use contact_sim::store::postgres::PgStore;
+use contact_sim::store::{Enqueued, JobStatus, NewJob, Progress, Store, StoreError};
 use serde_json::{json, Value};
 use service_support::postgres::*;
 use service_support::*;
@@ -83,7 +83,7 @@ fn pg_store_contract() {
     let c = store.claim("w-a", 60.0, 3).unwrap().unwrap();
     assert_eq!((c.id, c.status, c.attempt), (r.id, JobStatus::Running, 1));
     assert_eq!(c.worker.as_deref(), Some("w-a"));
-    assert!(c.lease_until.unwrap() > contact_sim::service::store::now() + 50.0);
+    assert!(c.lease_until.unwrap() > contact_sim::store::now() + 50.0);
     assert!(store.heartbeat(r.id, "w-a", 60.0).unwrap());
     assert!(!store.heartbeat(r.id, "w-b", 60.0).unwrap());
     assert_eq!(store.claim("w-b", 60.0, 3).unwrap().unwrap().id, id2);
@@ -414,8 +414,8 @@ fn wait_for_checkpoint(addr: SocketAddr, id: &str) -> (String, u64) {
 
 /// The job's w_V at T equals an in-process run's of `scene`, bit for bit.
 fn assert_w_v_of_in_process_run(addr: SocketAddr, id: &str, scene: &Value) {
-    let p = contact_sim::scene::validate(scene).unwrap();
-    let inproc = contact_sim::run::run(p, Default::default(), |_, _| {
+    let p = contact_core::scene::validate(scene).unwrap();
+    let inproc = contact_core::run::run(p, Default::default(), |_, _| {
         std::ops::ControlFlow::Continue(())
     })
     .unwrap();
@@ -579,13 +579,11 @@ fn kill_9_worker_mid_job() {
         let mut steps: Vec<usize> = std::fs::read_dir(&dir)
             .unwrap()
             .flatten()
-            .filter_map(|e| {
-                contact_sim::service::jobs::parse_step_file(&e.file_name().to_string_lossy())
-            })
+            .filter_map(|e| contact_sim::jobs::parse_step_file(&e.file_name().to_string_lossy()))
             .collect();
         steps.sort_unstable();
         let n = *steps.last().unwrap();
-        let bytes = std::fs::read(dir.join(contact_sim::service::jobs::step_file(n))).unwrap();
+        let bytes = std::fs::read(dir.join(contact_sim::jobs::step_file(n))).unwrap();
         decode_step(&bytes).unwrap()
     };
     let (x, y) = (last_step(&id), last_step(&straight));

@@ -1,7 +1,7 @@
 //! The real service on an ephemeral port (in a thread with its own runtime) and a minimal
 //! HTTP/1.1 GET, for tests that talk to the server from outside (e.g. the browser tests).
 
-use contact_sim::service::{app, Config};
+use contact_sim::{app, Config};
 use std::collections::HashMap;
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
@@ -24,7 +24,7 @@ impl Server {
                 .build()
                 .unwrap();
             rt.block_on(async move {
-                let state = app::start(config).expect("start");
+                let state = contact_sim::state::start(config).expect("start");
                 let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
                 addr_tx.send(listener.local_addr().unwrap()).unwrap();
                 app::serve(listener, state, async move {

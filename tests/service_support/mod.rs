@@ -450,7 +450,7 @@ impl Drop for TempDir {
 
 /// A quick job: paper-exp1 at h = k = 1/4 under a unique name (no deduplication).
 pub fn small_scene(name: &str) -> Value {
-    let mut s = contact_sim::scene::presets::get("paper-exp1").unwrap();
+    let mut s = contact_core::scene::presets::get("paper-exp1").unwrap();
     s["name"] = json!(name);
     s["mesh"]["h"] = json!("1/4");
     s["time"] = json!({"t_end": 1, "k": "1/4"});
@@ -460,7 +460,7 @@ pub fn small_scene(name: &str) -> Value {
 /// A job that takes a while: paper-convergence at h = 1/`n` with `steps` steps, storing
 /// `stored` evenly spaced steps.
 pub fn long_scene(name: &str, n: usize, steps: usize, stored: usize) -> Value {
-    let mut s = contact_sim::scene::presets::get("paper-convergence").unwrap();
+    let mut s = contact_core::scene::presets::get("paper-convergence").unwrap();
     s["name"] = json!(name);
     s["mesh"]["h"] = json!(format!("1/{n}"));
     s["time"] = json!({"t_end": 1, "N": steps});

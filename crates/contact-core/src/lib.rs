@@ -1,0 +1,30 @@
+//! contact-core: the numerical core of contact-sim — quasistatic frictional contact of a
+//! viscoelastic body with damage.
+//!
+//! The numerics is the fully discrete scheme (Problem 3.1) of W. Han, M. Jureczka, A. Ochal,
+//! "Numerical analysis of a contact problem with damage", J. Comput. Appl. Math. 377 (2020)
+//! 112886, with the discrete choices written down in `docs/numerics.md`. Data flows one way:
+//! scene JSON → [`scene::validate`] → [`problem::Problem`] → [`mesh`] and [`fem`] matrices →
+//! [`solve::stepper`] time steps → [`output`] summary and fields; [`run`] drives one
+//! simulation, [`estimate`] its error bar, [`study`] convergence studies.
+//!
+//! This crate knows nothing about HTTP, storage or command lines (a CI step checks its
+//! dependency tree).
+#![forbid(unsafe_code)]
+
+pub mod bench;
+pub mod estimate;
+pub mod expr;
+pub mod fem;
+pub mod laws;
+pub mod linalg;
+pub mod mesh;
+pub mod output;
+pub mod problem;
+pub mod run;
+pub mod scene;
+pub mod solve;
+pub mod stress;
+pub mod study;
+#[cfg(test)]
+mod test_rng;

@@ -1,0 +1,185 @@
+//! The summary of a run (the CLI's stdout and `summary.json`; a stable contract):
+//! `mesh.{nodes, triangles}`, `time.steps`, `final.{t, w_V, u_V, zeta_L2, zeta_min}`,
+//! `steps[]` (the same per step plus `velocity` and `damage` solver reports), `timing`.
+
+use crate::estimate::ErrorEstimate;
+use crate::problem::{FrictionLaw, MeshPattern, Problem};
+use crate::solve::smallness::SmallnessReport;
+use crate::solve::stepper::{Simulation, StepReport};
+use crate::solve::SolverSettings;
+use serde::Serialize;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct MeshInfo {
+    pub nodes: usize,
+    pub triangles: usize,
+    pub cells_per_unit: usize,
+    pub h: f64,
+    pub pattern: &'static str,
+    /// Free velocity DOFs (interior + Γ3 tangential).
+    pub unknowns: usize,
+    pub contact_dofs: usize,
+    /// Size and factor fill of the velocity system actually factored (interior DOFs).
+    pub factor_n: usize,
+    pub factor_nnz: usize,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct TimeInfo {
+    pub t_end: f64,
+    pub k: f64,
+    pub steps: usize,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Physics {
+    pub damage: bool,
+    pub contact: bool,
+    pub friction: Option<&'static str>,
+    pub elasticity: &'static str,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct FinalNorms {
+    pub t: f64,
+    #[serde(rename = "w_V")]
+    pub w_v: f64,
+    #[serde(rename = "u_V")]
+    pub u_v: f64,
+    #[serde(rename = "zeta_L2")]
+    pub zeta_l2: f64,
+    pub zeta_min: f64,
+}
+
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct SolverStats {
+    pub velocity_max_iterations: usize,
+    pub velocity_max_residual: f64,
+    pub damage_max_iterations: usize,
+    pub damage_max_residual: f64,
+    pub damage_refactorizations: usize,
+    /// Steps in which some Γ3 node slipped (the non-smooth solver was exercised).
+    pub steps_with_slip: usize,
+    /// Steps in which a sub-problem solver used ≥ 80 % of its iteration limit.
+    pub steps_near_iteration_limit: usize,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Timing {
+    pub setup_s: f64,
+    pub solve_s: f64,
+    pub per_step_s: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    pub scene: String,
+    pub version: &'static str,
+    pub mesh: MeshInfo,
+    pub time: TimeInfo,
+    pub physics: Physics,
+    pub smallness: SmallnessReport,
+    pub solver: SolverSettings,
+    #[serde(rename = "final")]
+    pub final_: Option<FinalNorms>,
+    pub stats: SolverStats,
+    pub timing: Timing,
+    pub warnings: Vec<String>,
+    /// Estimated discretisation error (scenes with `error_estimate: true`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error_estimate: Option<ErrorEstimate>,
+    pub steps: Vec<StepReport>,
+}
+
+impl Summary {
+    pub fn new(sim: &Simulation, steps: Vec<StepReport>, solve_s: f64) -> Summary {
+        let p: &Problem = &sim.problem;
+        let (factor_n, factor_nnz) = sim.velocity_factor_size();
+        let contact = sim.dofs.n_contact() > 0;
+        let mut stats = SolverStats {
+            damage_refactorizations: sim.damage_refactorizations(),
+            ..Default::default()
+        };
+        for s in &steps {
+            stats.velocity_max_iterations =
+                stats.velocity_max_iterations.max(s.velocity.iterations);
+            stats.velocity_max_residual = stats.velocity_max_residual.max(s.velocity.residual);
+            if let Some(d) = s.damage {
+                stats.damage_max_iterations = stats.damage_max_iterations.max(d.iterations);
+                stats.damage_max_residual = stats.damage_max_residual.max(d.residual);
+            }
+            stats.steps_with_slip += (s.slip_nodes > 0) as usize;
+            let near = |r: Option<crate::solve::SolverReport>| {
+                r.is_some_and(|r| sim.settings.near_iteration_limit(r.iterations))
+            };
+            stats.steps_near_iteration_limit +=
+                usize::from(near(Some(s.velocity)) || near(s.damage));
+        }
+        let mut warnings = Vec::new();
+        if !sim.smallness.holds {
+            warnings.push(format!(
+                "smallness condition (2.31) violated: c2τ·cτ² = {:.4} ≥ m_A = {:.4}; the computed velocity is a stationary point, uniqueness is not guaranteed",
+                sim.smallness.lhs, sim.smallness.m_a
+            ));
+        }
+        Summary {
+            scene: p.name.clone(),
+            version: env!("CARGO_PKG_VERSION"),
+            mesh: MeshInfo {
+                nodes: sim.mesh.n_nodes(),
+                triangles: sim.mesh.triangles.len(),
+                cells_per_unit: p.cells_per_unit,
+                h: 1.0 / p.cells_per_unit as f64,
+                pattern: match p.pattern {
+                    MeshPattern::Diagonal => "diagonal",
+                    MeshPattern::AntiDiagonal => "anti_diagonal",
+                    MeshPattern::Cross => "cross",
+                },
+                unknowns: sim.dofs.n_free(),
+                contact_dofs: sim.dofs.n_contact(),
+                factor_n,
+                factor_nnz,
+            },
+            time: TimeInfo {
+                t_end: p.t_end,
+                k: p.k(),
+                steps: p.steps,
+            },
+            physics: Physics {
+                damage: p.damage.is_some(),
+                contact,
+                friction: contact.then_some(match p.friction {
+                    FrictionLaw::Tresca { .. } => "tresca",
+                    FrictionLaw::SlipWeakening { .. } => "slip_weakening",
+                    FrictionLaw::PiecewiseLinear { .. } => "piecewise_linear",
+                }),
+                elasticity: match p.material.elasticity {
+                    crate::problem::Elasticity::Linear { .. } => "linear",
+                    crate::problem::Elasticity::VonMises { .. } => "von_mises",
+                },
+            },
+            smallness: sim.smallness.clone(),
+            solver: sim.settings,
+            final_: steps.last().map(|s| FinalNorms {
+                t: s.t,
+                w_v: s.w_v,
+                u_v: s.u_v,
+                zeta_l2: s.zeta_l2,
+                zeta_min: s.zeta_min,
+            }),
+            stats,
+            timing: Timing {
+                setup_s: sim.setup_seconds,
+                solve_s,
+                per_step_s: if steps.is_empty() {
+                    0.0
+                } else {
+                    solve_s / steps.len() as f64
+                },
+            },
+            warnings,
+            error_estimate: None,
+            steps,
+        }
+    }
+}

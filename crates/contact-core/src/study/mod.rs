@@ -1,0 +1,393 @@
+//! Convergence studies: runs of one scene at several (h, k) compared with a finer reference
+//! run on its nested mesh (SCHEME.md): the coarse P1 fields are interpolated onto the
+//! reference mesh (exact, [`crate::fem::prolongation`]); relative errors
+//! |w − w^hk|_V / |w|_V and |ζ − ζ^hk|_Z0 / |ζ|_Z0 at t = T and their maximum over the time
+//! nodes common to both runs; observed orders between consecutive levels and a least-squares
+//! order over the ladder.
+//!
+//! - [`spec`] reads a study document (`{"scene", "h", "k", "reference"}`) into a [`Plan`];
+//! - [`levels`] runs one resolution and keeps its fields at the compared time nodes;
+//! - [`reference`] holds reference runs shared between studies of the same scene;
+//! - [`compare`] turns the runs into the error table ([`StudyResult`]);
+//! - [`report_svg`] draws a study's two plots (error against h or k, error against time);
+//! - [`presets`] are the paper's Tables 1–2.
+
+pub mod compare;
+pub mod levels;
+pub mod presets;
+pub mod reference;
+pub mod report_svg;
+pub mod spec;
+
+pub use compare::{StudyReference, StudyResult, StudyRow};
+pub use reference::ReferenceCache;
+pub use spec::{parse, Plan, Vary};
+
+use crate::problem::Problem;
+use crate::run::RunError;
+use crate::solve::stepper::Prepared;
+use crate::solve::SolverSettings;
+use levels::{LevelRun, Work};
+use reference::Reference;
+use std::collections::BTreeSet;
+use std::collections::HashMap;
+use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// Snapshots of the reference kept for the time-maximum of the errors are capped at this
+/// many bytes; above it the compared time nodes are thinned evenly (t = T is always kept).
+pub const SNAPSHOT_BUDGET_BYTES: usize = 512 << 20;
+
+#[derive(Debug, thiserror::Error)]
+pub enum StudyError {
+    #[error(transparent)]
+    Run(#[from] RunError),
+    #[error("level h = {h}, k = {k} is not nested in the reference (h = {ref_h}, k = {ref_k}): the reference mesh must refine it and its time grid must contain the level's")]
+    NotNested {
+        h: f64,
+        k: f64,
+        ref_h: f64,
+        ref_k: f64,
+    },
+    #[error("cancelled")]
+    Cancelled,
+}
+
+/// How a study is executed (not what it computes).
+#[derive(Debug, Clone, Copy)]
+pub struct Execution {
+    pub settings: SolverSettings,
+    /// Runs computed at the same time (the reference and the levels are independent until
+    /// they are compared).
+    pub threads: usize,
+}
+
+impl Default for Execution {
+    fn default() -> Self {
+        Execution {
+            settings: SolverSettings::default(),
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get().min(4)),
+        }
+    }
+}
+
+/// Total time steps a study will compute (its progress scale) if the reference is not cached.
+pub fn total_steps(plan: &Plan) -> usize {
+    plan.levels.iter().map(|l| l.1).sum::<usize>() + plan.reference.1
+}
+
+/// Runs a study. `progress(done, total)` is called after every time step of every run, from
+/// the computing threads; returning `Break` cancels the study.
+pub fn run(
+    plan: &Plan,
+    cache: &ReferenceCache,
+    exec: Execution,
+    progress: &(dyn Fn(usize, usize) -> ControlFlow<()> + Sync),
+) -> Result<StudyResult, StudyError> {
+    let mut results = run_many(std::slice::from_ref(plan), cache, exec, progress)?;
+    Ok(results.pop().expect("one study"))
+}
+
+/// Runs several studies as one schedule: the reference runs they share are computed once,
+/// and all runs (references and levels of every study) share the threads, largest first, so
+/// that the short levels fill the time a long reference takes.
+pub fn run_many(
+    plans: &[Plan],
+    cache: &ReferenceCache,
+    exec: Execution,
+    progress: &(dyn Fn(usize, usize) -> ControlFlow<()> + Sync),
+) -> Result<Vec<StudyResult>, StudyError> {
+    let started = Instant::now();
+    for plan in plans {
+        check_nested(plan)?;
+    }
+    let compared: Vec<BTreeSet<usize>> = plans.iter().map(compared_steps).collect();
+    // One slot per distinct reference, locked in key order (no deadlock between concurrent
+    // callers). Holding a slot while computing makes another study of the same reference
+    // wait for this one instead of computing it twice.
+    let mut groups: Vec<(String, Vec<usize>)> = Vec::new();
+    for (i, plan) in plans.iter().enumerate() {
+        let key = &plan.reference_key;
+        match groups.iter_mut().find(|(k, _)| !k.is_empty() && k == key) {
+            Some((_, members)) => members.push(i),
+            None => groups.push((key.clone(), vec![i])),
+        }
+    }
+    groups.sort_by(|a, b| a.0.cmp(&b.0));
+    let slots: Vec<reference::Slot> = groups.iter().map(|(k, _)| cache.slot(k)).collect();
+    let mut guards: Vec<_> = slots
+        .iter()
+        .map(|s| s.lock().unwrap_or_else(|e| e.into_inner()))
+        .collect();
+    let mut jobs: Vec<Work> = Vec::new();
+    // Per group: the cached reference, or the index of the job computing it.
+    let mut sources: Vec<Result<Arc<Reference>, usize>> = Vec::new();
+    for ((_, members), guard) in groups.iter().zip(&guards) {
+        let mut keep: BTreeSet<usize> = BTreeSet::new();
+        for &i in members {
+            keep.extend(&compared[i]);
+        }
+        match guard
+            .as_ref()
+            .filter(|r| keep.is_subset(&r.snapshot_steps()))
+        {
+            Some(r) => sources.push(Ok(r.clone())),
+            None => {
+                // The union with what an earlier study kept lets the new entry serve both.
+                if let Some(old) = guard.as_ref() {
+                    keep.extend(old.snapshot_steps());
+                }
+                sources.push(Err(jobs.len()));
+                let plan = &plans[members[0]];
+                jobs.push(Work {
+                    problem: with(&plan.base, plan.reference),
+                    keep,
+                    is_reference: true,
+                    share: Some((plan.reference_key.clone(), plan.reference.0)),
+                });
+            }
+        }
+    }
+    let mut level_jobs: Vec<Vec<usize>> = Vec::with_capacity(plans.len());
+    for (plan, compared) in plans.iter().zip(&compared) {
+        let mut idx = Vec::with_capacity(plan.levels.len());
+        for &(n, steps) in &plan.levels {
+            let ratio = plan.reference.1 / steps;
+            let keep = compared
+                .iter()
+                .filter(|&&m| m % ratio == 0)
+                .map(|&m| m / ratio)
+                .collect();
+            idx.push(jobs.len());
+            jobs.push(Work {
+                problem: with(&plan.base, (n, steps)),
+                keep,
+                is_reference: false,
+                share: Some((plan.reference_key.clone(), n)),
+            });
+        }
+        level_jobs.push(idx);
+    }
+    // Only set-ups used by two runs or more are kept (each holds a factor in memory); an
+    // empty key (an unshared reference) never identifies a physics.
+    for j in 0..jobs.len() {
+        let shared_by = |key: &(String, usize)| {
+            jobs.iter()
+                .filter(|o| o.share.as_ref() == Some(key))
+                .count()
+        };
+        if jobs[j]
+            .share
+            .as_ref()
+            .is_some_and(|k| k.0.is_empty() || shared_by(k) < 2)
+        {
+            jobs[j].share = None;
+        }
+    }
+    let total = jobs.iter().map(|j| j.problem.steps).sum::<usize>();
+    let mut done: Vec<Option<Done>> = run_all(jobs, exec, total, progress)?
+        .into_iter()
+        .map(Some)
+        .collect();
+    let mut references: Vec<(Arc<Reference>, bool)> = Vec::with_capacity(groups.len());
+    for (source, guard) in sources.into_iter().zip(guards.iter_mut()) {
+        references.push(match source {
+            Ok(r) => (r, true),
+            Err(j) => {
+                let Some(Done::Reference(r)) = done[j].take() else {
+                    unreachable!("job {j} computed a reference")
+                };
+                let r = Arc::new(r);
+                **guard = Some(r.clone());
+                (r, false)
+            }
+        });
+    }
+    drop(guards);
+    let mut results = Vec::with_capacity(plans.len());
+    for (i, plan) in plans.iter().enumerate() {
+        let g = groups
+            .iter()
+            .position(|(_, m)| m.contains(&i))
+            .expect("grouped");
+        let (reference, cached) = &references[g];
+        // Later studies of a group reuse the reference the first one computed.
+        let cached = *cached || groups[g].1[0] != i;
+        let runs: Vec<LevelRun> = level_jobs[i]
+            .iter()
+            .map(|&j| match done[j].take() {
+                Some(Done::Level(r)) => r,
+                _ => unreachable!("job {j} ran a level"),
+            })
+            .collect();
+        results.push(compare::tabulate(
+            plan,
+            reference,
+            cached,
+            &runs,
+            &compared[i],
+            exec.threads,
+            started.elapsed().as_secs_f64(),
+        ));
+    }
+    Ok(results)
+}
+
+fn check_nested(plan: &Plan) -> Result<(), StudyError> {
+    let (ref_n, ref_steps) = plan.reference;
+    for &(n, steps) in &plan.levels {
+        if n == 0 || steps == 0 || ref_n % n != 0 || ref_steps % steps != 0 {
+            return Err(StudyError::NotNested {
+                h: 1.0 / n as f64,
+                k: plan.base.t_end / steps as f64,
+                ref_h: 1.0 / ref_n as f64,
+                ref_k: plan.base.t_end / ref_steps as f64,
+            });
+        }
+    }
+    Ok(())
+}
+
+fn with(base: &Problem, (n, steps): (usize, usize)) -> Problem {
+    Problem {
+        cells_per_unit: n,
+        steps,
+        ..base.clone()
+    }
+}
+
+/// The reference steps at which errors are compared: every node of the reference grid that
+/// is also a node of some level, thinned evenly to fit [`SNAPSHOT_BUDGET_BYTES`].
+fn compared_steps(plan: &Plan) -> BTreeSet<usize> {
+    let (ref_n, ref_steps) = plan.reference;
+    let mut all = BTreeSet::new();
+    for &(_, steps) in &plan.levels {
+        let ratio = ref_steps / steps.max(1);
+        all.extend((1..=steps).map(|m| m * ratio));
+    }
+    let (nx, ny) = with(&plan.base, (ref_n, ref_steps)).cells();
+    // ζ per node and three strain components per triangle (see reference::Reference).
+    let per_snapshot = ((nx + 1) * (ny + 1) + 2 * nx * ny * 3) * 8;
+    let fit = (SNAPSHOT_BUDGET_BYTES / per_snapshot.max(1)).max(1);
+    if all.len() <= fit {
+        return all;
+    }
+    let stride = all.len().div_ceil(fit);
+    let v: Vec<usize> = all.into_iter().collect();
+    let last = *v.last().expect("non-empty");
+    let mut thinned: BTreeSet<usize> = v.into_iter().rev().step_by(stride).collect();
+    thinned.insert(last);
+    thinned
+}
+
+/// A finished run.
+enum Done {
+    Level(LevelRun),
+    Reference(Reference),
+}
+
+/// Runs the jobs on `exec.threads` threads, largest first, and returns them in input order.
+fn run_all(
+    jobs: Vec<Work>,
+    exec: Execution,
+    total: usize,
+    progress: &(dyn Fn(usize, usize) -> ControlFlow<()> + Sync),
+) -> Result<Vec<Done>, StudyError> {
+    let mut order: Vec<usize> = (0..jobs.len()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(jobs[i].cost()));
+    let next = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
+    let stop = AtomicBool::new(false);
+    let results: Vec<Mutex<Option<Result<Done, StudyError>>>> =
+        jobs.iter().map(|_| Mutex::new(None)).collect();
+    let mut setups: HashMap<&(String, usize), Mutex<Option<Prepared>>> = HashMap::new();
+    for key in jobs.iter().filter_map(|j| j.share.as_ref()) {
+        setups.entry(key).or_insert_with(|| Mutex::new(None));
+    }
+    let tick = || {
+        let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+        if stop.load(Ordering::Relaxed) || progress(d, total).is_break() {
+            stop.store(true, Ordering::Relaxed);
+            return ControlFlow::Break(());
+        }
+        ControlFlow::Continue(())
+    };
+    let worker = || loop {
+        let i = next.fetch_add(1, Ordering::SeqCst);
+        let Some(&j) = order.get(i) else { break };
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+        // A reference's norms are computed here, on the computing thread, while the other
+        // threads may still be running levels.
+        let slot = jobs[j].share.as_ref().and_then(|k| setups.get(k));
+        let r = levels::run_level(&jobs[j], exec.settings, &tick, slot).map(|run| {
+            if jobs[j].is_reference {
+                Done::Reference(Reference::new(run))
+            } else {
+                Done::Level(run)
+            }
+        });
+        if r.is_err() {
+            stop.store(true, Ordering::Relaxed);
+        }
+        *results[j].lock().unwrap() = Some(r);
+    };
+    let threads = exec.threads.clamp(1, jobs.len().max(1));
+    std::thread::scope(|s| {
+        for _ in 1..threads {
+            s.spawn(worker);
+        }
+        worker();
+    });
+    let mut out = Vec::with_capacity(jobs.len());
+    let mut first_error = None;
+    for r in results {
+        match r.into_inner().unwrap() {
+            Some(Ok(run)) => out.push(run),
+            Some(Err(e)) => {
+                // A solver failure explains the others' cancellation better than "cancelled".
+                if first_error.is_none() || matches!(first_error, Some(StudyError::Cancelled)) {
+                    first_error = Some(e);
+                }
+            }
+            None => first_error = first_error.or(Some(StudyError::Cancelled)),
+        }
+    }
+    match first_error {
+        Some(e) => Err(e),
+        None => Ok(out),
+    }
+}
+
+/// Runs every `(cells_per_unit, steps)` level of `base` and the reference, without a shared
+/// cache or progress reporting (library callers and tests).
+pub fn run_ladder(
+    base: &Problem,
+    levels: &[(usize, usize)],
+    reference: (usize, usize),
+) -> Result<StudyResult, StudyError> {
+    let vary = if levels.windows(2).all(|w| w[0].1 == w[1].1) {
+        Vary::H
+    } else if levels.windows(2).all(|w| w[0].0 == w[1].0) {
+        Vary::K
+    } else {
+        Vary::Both
+    };
+    let plan = Plan {
+        name: base.name.clone(),
+        base: base.clone(),
+        levels: levels.to_vec(),
+        reference,
+        vary,
+        reference_key: String::new(),
+    };
+    run(
+        &plan,
+        &ReferenceCache::new(0),
+        Execution::default(),
+        &|_, _| ControlFlow::Continue(()),
+    )
+}

@@ -1,0 +1,103 @@
+//! The router and the server: `app(state)` returns the Router (tests call it on an ephemeral
+//! port), `serve` runs it with the worker pool until shutdown.
+
+use crate::error::ApiError;
+use crate::limits;
+use crate::routes::{client, jobs, misc, results};
+use crate::state::AppState;
+use axum::extract::DefaultBodyLimit;
+use axum::http::StatusCode;
+use axum::routing::{get, post};
+use axum::{middleware, Router};
+
+pub fn app(state: AppState) -> Router {
+    let limit = state.rt.config.max_body_bytes;
+    let limiter = state.limiter.clone();
+    Router::new()
+        .route("/jobs", post(jobs::submit).get(jobs::list))
+        .route("/jobs/{id}", get(jobs::get_job).delete(jobs::delete_job))
+        .route("/jobs/{id}/cancel", post(jobs::cancel))
+        .route("/jobs/{id}/events", get(jobs::events))
+        .route("/jobs/{id}/summary", get(results::summary))
+        .route("/jobs/{id}/mesh", get(results::mesh))
+        .route("/jobs/{id}/fields", get(results::fields))
+        .route("/jobs/{id}/fields/{file}", get(results::vtu))
+        .route("/jobs/{id}/result.pvd", get(results::pvd))
+        .route("/jobs/{id}/archive.tar", get(results::archive))
+        .route("/jobs/{id}/report.svg", get(results::report))
+        .route("/presets", get(misc::presets))
+        .route("/presets/{name}", get(misc::preset))
+        .route("/healthz", get(misc::healthz))
+        .route("/metrics", get(misc::metrics))
+        .route("/openapi.yaml", get(misc::openapi))
+        .route("/", get(client::index))
+        .route("/client/{file}", get(client::file))
+        .fallback(|| async { ApiError::not_found("no such route; see GET /openapi.yaml") })
+        .method_not_allowed_fallback(|| async {
+            ApiError::new(
+                StatusCode::METHOD_NOT_ALLOWED,
+                "method not allowed",
+                "see GET /openapi.yaml for the methods of each route",
+            )
+        })
+        .layer(DefaultBodyLimit::max(limit))
+        .layer(middleware::from_fn_with_state(limiter, limits::rate_limit))
+        .layer(middleware::from_fn(limits::problem_json_errors))
+        .with_state(state)
+}
+
+/// Serves until `shutdown` resolves, then stops the workers (running jobs are checkpointed
+/// and resume at the next start).
+pub async fn serve(
+    listener: tokio::net::TcpListener,
+    state: AppState,
+    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
+    let rt = state.rt.clone();
+    let closing = state.closing_tx.clone();
+    let signal = async move {
+        shutdown.await;
+        let _ = closing.send(true);
+    };
+    // Peer addresses reach the handlers (per-client submission rate); slow clients are
+    // disconnected after the header timeout.
+    let header_timeout = state.rt.config.header_timeout;
+    let r = crate::server::run(listener, app(state), header_timeout, signal).await;
+    tokio::task::spawn_blocking(move || rt.shutdown())
+        .await
+        .ok();
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    /// api/openapi.yaml documents exactly the routes of `app()`.
+    #[test]
+    fn openapi_lists_every_route() {
+        let src = include_str!("app.rs");
+        let routes: Vec<&str> = src
+            .split(".route(\"")
+            .skip(1)
+            .map(|s| s.split('"').next().unwrap())
+            .collect();
+        assert!(routes.len() >= 14);
+        let spec = crate::routes::misc::OPENAPI;
+        let documented: Vec<&str> = spec
+            .lines()
+            .filter(|l| l.starts_with("  /") && l.ends_with(':'))
+            .map(|l| l.trim().trim_end_matches(':'))
+            .collect();
+        for r in &routes {
+            assert!(
+                documented.contains(r),
+                "route {r} missing from api/openapi.yaml"
+            );
+        }
+        for d in &documented {
+            assert!(
+                routes.contains(d),
+                "api/openapi.yaml documents {d}, which the router lacks"
+            );
+        }
+    }
+}

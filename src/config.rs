@@ -1,0 +1,63 @@
+//! Service settings: what `contact-sim serve` and `contact-sim worker` configure.
+
+use std::path::PathBuf;
+
+/// Service settings (CLI flags of `contact-sim serve`).
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Result files (and the embedded store's database). With a shared store, a directory
+    /// every node mounts at the same contents.
+    pub data_dir: PathBuf,
+    /// `postgres://…`: the shared job store of many nodes; None: the embedded SQLite store
+    /// in `data_dir` (single node, no server needed).
+    pub store: Option<String>,
+    /// Seconds a claimed job's lease lasts; a dead worker's job is claimed again this long
+    /// after its last renewal (renewed every third of it while the job runs).
+    pub lease_s: f64,
+    /// Worker threads (jobs run in parallel, each sequentially).
+    pub workers: usize,
+    /// Prefix of this node's worker names (leases of a previous run are released at start,
+    /// so it must differ between nodes sharing a store).
+    pub node: String,
+    /// Maximum number of queued jobs; beyond it POST /jobs answers 503.
+    pub queue_capacity: usize,
+    /// Per-job limits, enforced at validation.
+    pub max_nodes: usize,
+    pub max_steps: usize,
+    pub max_stored_bytes: u64,
+    /// Request body limit in bytes.
+    pub max_body_bytes: usize,
+    /// Runs of one study computed at the same time (its reference and its levels).
+    pub study_threads: usize,
+    /// Deepest array/object nesting accepted in a submitted document (scenes need 4).
+    pub max_json_depth: usize,
+    /// Submissions per second per client IP (token bucket refill rate; 0 disables).
+    pub submit_rate: f64,
+    /// Submissions a client may make at once (token bucket size).
+    pub submit_burst: u32,
+    /// Time a client has to send a complete request head (slow or silent clients are
+    /// disconnected).
+    pub header_timeout: std::time::Duration,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            data_dir: PathBuf::from("./data"),
+            store: None,
+            lease_s: 30.0,
+            workers: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            node: "local".into(),
+            queue_capacity: 1000,
+            max_nodes: 300_000,
+            max_steps: 100_000,
+            max_stored_bytes: 2 << 30,
+            max_body_bytes: 1 << 20,
+            study_threads: 2,
+            max_json_depth: 32,
+            submit_rate: 10.0,
+            submit_burst: 50,
+            header_timeout: std::time::Duration::from_secs(30),
+        }
+    }
+}

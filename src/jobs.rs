@@ -1,0 +1,659 @@
+//! Job execution: a fixed pool of worker threads (never the async runtime's threads) claims
+//! jobs from the store, runs the time loop, writes stored steps and the summary atomically,
+//! checkpoints (u, ζ, step) about once a second, checks cancellation every step, and
+//! publishes progress to live subscribers (SSE).
+//!
+//! Restart safety: a job's state is (u, ζ, step) plus the per-step reports so far; a worker
+//! that dies leaves the job `running` with an expiring lease, and the next claim resumes it
+//! from the last checkpoint.
+
+use super::store::results::ResultFiles;
+use super::store::{JobRecord, JobStatus, Progress, Store, StoreError};
+use super::Config;
+use contact_core::estimate::{ErrorEstimator, EstimateRow};
+use contact_core::output::stored::{decode_state, encode_state, encode_step};
+use contact_core::output::Summary;
+use contact_core::scene;
+use contact_core::solve::stepper::{Simulation, StepReport};
+use contact_core::solve::{SolveError, SolverSettings};
+use contact_core::study::{self, ReferenceCache, StudyError};
+use serde::Serialize;
+use std::collections::HashMap;
+use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+use tokio::sync::broadcast;
+use uuid::Uuid;
+
+/// A job interrupted this often in a row without a new checkpoint is dead-lettered.
+const MAX_ATTEMPTS: u32 = 3;
+const CHECKPOINT_EVERY: Duration = Duration::from_secs(1);
+/// Reference runs of studies kept in memory (an h = k = 1/128 one holds about 50 MB).
+const REFERENCES_KEPT: usize = 2;
+/// File names inside a job's result directory.
+pub const SUMMARY_FILE: &str = "summary.json";
+/// Studies only: the paper-style table and the report plots.
+pub const TABLE_FILE: &str = "summary.txt";
+pub const REPORT_FILE: &str = "report.svg";
+const REPORTS_FILE: &str = "reports.json";
+/// Error-estimate rows so far (simulations with `error_estimate`), saved with the reports.
+const ESTIMATES_FILE: &str = "estimates.json";
+
+/// A stored job document is a study when it has a top-level `study` object (the scene of a
+/// simulation cannot: `study` is not a scene field).
+pub fn is_study(doc: &serde_json::Value) -> bool {
+    doc.get("study").is_some()
+}
+
+pub fn step_file(n: usize) -> String {
+    format!("step_{n:06}.bin")
+}
+
+/// Parses `step_NNNNNN.bin`.
+pub fn parse_step_file(name: &str) -> Option<usize> {
+    name.strip_prefix("step_")?
+        .strip_suffix(".bin")?
+        .parse()
+        .ok()
+}
+
+/// What subscribers of a job see.
+#[derive(Debug, Clone, Serialize)]
+pub struct JobEvent {
+    pub status: JobStatus,
+    pub step: usize,
+    pub steps: usize,
+    pub last_residual: Option<f64>,
+    pub eta_s: Option<f64>,
+}
+
+impl JobEvent {
+    /// The event describing a stored record (its persisted progress).
+    pub fn from_record(r: &JobRecord) -> JobEvent {
+        let eta_s = r.status.is_finished().then_some(0.0);
+        JobEvent {
+            status: r.status,
+            step: r.progress.step,
+            steps: r.progress.steps,
+            last_residual: r.progress.last_residual,
+            eta_s,
+        }
+    }
+}
+
+struct Live {
+    progress: Progress,
+    started: Instant,
+    first_step: usize,
+    cancel: Arc<AtomicBool>,
+}
+
+/// The worker pool and live job registry.
+pub struct Runtime {
+    pub store: Arc<dyn Store>,
+    pub results: Arc<ResultFiles>,
+    pub config: Config,
+    live: Mutex<HashMap<Uuid, Live>>,
+    channels: Mutex<HashMap<Uuid, broadcast::Sender<JobEvent>>>,
+    wake: (Mutex<u64>, Condvar),
+    shutdown: AtomicBool,
+    workers: Mutex<Vec<JoinHandle<()>>>,
+    /// Time steps computed since start (metrics).
+    pub steps_done: AtomicU64,
+    pub running: AtomicUsize,
+    /// Reference runs shared by studies of the same scene and resolution.
+    pub references: ReferenceCache,
+}
+
+enum Outcome {
+    Succeeded,
+    Cancelled,
+    /// Stopped by shutdown or lost lease: left `running` for a later resume.
+    Interrupted,
+}
+
+impl Runtime {
+    /// Starts `config.workers` worker threads.
+    pub fn start(store: Arc<dyn Store>, results: Arc<ResultFiles>, config: Config) -> Arc<Runtime> {
+        let rt = Arc::new(Runtime {
+            store,
+            results,
+            config,
+            live: Mutex::new(HashMap::new()),
+            channels: Mutex::new(HashMap::new()),
+            wake: (Mutex::new(0), Condvar::new()),
+            shutdown: AtomicBool::new(false),
+            workers: Mutex::new(Vec::new()),
+            steps_done: AtomicU64::new(0),
+            running: AtomicUsize::new(0),
+            references: ReferenceCache::new(REFERENCES_KEPT),
+        });
+        let mut handles = Vec::new();
+        for i in 0..rt.config.workers {
+            let rt2 = rt.clone();
+            let name = format!("{}-w{i}", rt.config.node);
+            handles.push(
+                std::thread::Builder::new()
+                    .name(name.clone())
+                    .spawn(move || rt2.worker_loop(&name))
+                    .expect("spawn worker"),
+            );
+        }
+        *rt.workers.lock().unwrap() = handles;
+        if rt.config.workers > 0 {
+            // Submissions on other nodes (shared store) wake this node's idle workers.
+            let weak = Arc::downgrade(&rt);
+            let wake: super::store::Wake = Arc::new(move || match weak.upgrade() {
+                Some(rt) if !rt.shutdown.load(Ordering::SeqCst) => {
+                    rt.notify();
+                    true
+                }
+                _ => false,
+            });
+            if let Err(e) = rt.store.watch_for_work(wake) {
+                eprintln!(
+                    "contact-sim: cannot watch for new jobs (workers look every {:.1} s): {e}",
+                    rt.idle_wait().as_secs_f64()
+                );
+            }
+        }
+        rt
+    }
+
+    /// How long an idle worker waits before looking for claimable jobs again when nobody
+    /// woke it: new jobs wake it at once (the API here, or the store's notifications), so
+    /// this only bounds how late a dead worker's job is noticed after its lease expired.
+    fn idle_wait(&self) -> Duration {
+        Duration::from_secs_f64((self.config.lease_s / 3.0).clamp(0.05, 10.0))
+    }
+
+    /// Wakes idle workers (a job was enqueued).
+    pub fn notify(&self) {
+        let (m, cv) = &self.wake;
+        *m.lock().unwrap() += 1;
+        cv.notify_all();
+    }
+
+    /// Stops the workers at their next step (running jobs are checkpointed and left
+    /// `running`, to be resumed) and joins them.
+    pub fn shutdown(&self) {
+        self.shutdown.store(true, Ordering::SeqCst);
+        self.notify();
+        let handles = std::mem::take(&mut *self.workers.lock().unwrap());
+        for h in handles {
+            let _ = h.join();
+        }
+    }
+
+    pub fn subscribe(&self, id: Uuid) -> broadcast::Receiver<JobEvent> {
+        self.channel(id).subscribe()
+    }
+
+    fn channel(&self, id: Uuid) -> broadcast::Sender<JobEvent> {
+        self.channels
+            .lock()
+            .unwrap()
+            .entry(id)
+            .or_insert_with(|| broadcast::channel(64).0)
+            .clone()
+    }
+
+    fn publish(&self, id: Uuid, ev: JobEvent) {
+        let tx = self.channels.lock().unwrap().get(&id).cloned();
+        if let Some(tx) = tx {
+            let _ = tx.send(ev);
+        }
+    }
+
+    /// Records a running job's progress in memory and tells its subscribers (with an ETA).
+    fn running_progress(&self, id: Uuid, progress: Progress) {
+        let eta_s = {
+            let mut live = self.live.lock().unwrap();
+            live.get_mut(&id).and_then(|l| {
+                l.progress = progress;
+                eta(l)
+            })
+        };
+        self.publish(
+            id,
+            JobEvent {
+                status: JobStatus::Running,
+                step: progress.step,
+                steps: progress.steps,
+                last_residual: progress.last_residual,
+                eta_s,
+            },
+        );
+    }
+
+    /// Asks a running job to stop within one step.
+    pub fn cancel(&self, id: Uuid) {
+        if let Some(l) = self.live.lock().unwrap().get(&id) {
+            l.cancel.store(true, Ordering::SeqCst);
+        }
+    }
+
+    /// Live progress of a running job and its ETA in seconds.
+    pub fn live_progress(&self, id: Uuid) -> Option<(Progress, Option<f64>)> {
+        let live = self.live.lock().unwrap();
+        let l = live.get(&id)?;
+        Some((l.progress, eta(l)))
+    }
+
+    fn worker_loop(self: Arc<Self>, name: &str) {
+        while !self.shutdown.load(Ordering::SeqCst) {
+            match self.store.claim(name, self.config.lease_s, MAX_ATTEMPTS) {
+                Ok(Some(job)) => self.run(job, name),
+                Ok(None) => {
+                    let (m, cv) = &self.wake;
+                    let guard = m.lock().unwrap();
+                    let seen = *guard;
+                    let _ = cv.wait_timeout_while(guard, self.idle_wait(), |v| {
+                        *v == seen && !self.shutdown.load(Ordering::SeqCst)
+                    });
+                }
+                Err(e) => {
+                    eprintln!("contact-sim: {name}: claim failed: {e}");
+                    std::thread::sleep(Duration::from_secs(1));
+                }
+            }
+        }
+    }
+
+    fn run(&self, job: JobRecord, worker: &str) {
+        let id = job.id;
+        let cancel = Arc::new(AtomicBool::new(job.cancel_requested));
+        self.live.lock().unwrap().insert(
+            id,
+            Live {
+                progress: job.progress,
+                started: Instant::now(),
+                first_step: job.progress.step,
+                cancel: cancel.clone(),
+            },
+        );
+        self.running.fetch_add(1, Ordering::SeqCst);
+        let keeper =
+            super::lease::Keeper::start(self.store.clone(), id, worker, self.config.lease_s);
+        let outcome = if is_study(&job.scene) {
+            self.execute_study(&job, worker, &cancel)
+        } else {
+            self.execute(&job, worker, &cancel)
+        };
+        let final_status = match outcome {
+            Ok(Outcome::Succeeded) => Some((JobStatus::Succeeded, None)),
+            Ok(Outcome::Cancelled) => Some((JobStatus::Cancelled, None)),
+            Ok(Outcome::Interrupted) => None,
+            Err(problem) => Some((JobStatus::Failed, Some(problem))),
+        };
+        let progress = self
+            .live
+            .lock()
+            .unwrap()
+            .remove(&id)
+            .map(|l| l.progress)
+            .unwrap_or(job.progress);
+        self.running.fetch_sub(1, Ordering::SeqCst);
+        if let Some((status, error)) = final_status {
+            // The lease is kept until the end is recorded: were the store unreachable for
+            // longer than a lease, another worker would otherwise compute the job again.
+            let _ = self.with_store_retry(|| self.store.set_progress(id, progress));
+            match self.with_store_retry(|| self.store.finish(id, status, error.clone())) {
+                Ok(()) => eprintln!(
+                    "contact-sim: {worker}: job {id} {} (attempt {})",
+                    status.as_str(),
+                    job.attempt
+                ),
+                Err(e) => eprintln!("contact-sim: cannot record the end of job {id}: {e}"),
+            }
+            drop(keeper);
+            self.publish(
+                id,
+                JobEvent {
+                    status,
+                    step: progress.step,
+                    steps: progress.steps,
+                    last_residual: progress.last_residual,
+                    eta_s: Some(0.0),
+                },
+            );
+        }
+        self.channels.lock().unwrap().remove(&id);
+    }
+
+    /// Renews the lease; `Some` if the job is no longer this worker's to compute: cancelled
+    /// meanwhile, or (its lease having expired) claimed by another worker. A store that
+    /// cannot be reached keeps the job going (the lease keeper retries).
+    fn lost(&self, id: Uuid, worker: &str) -> Option<Outcome> {
+        match self.store.heartbeat(id, worker, self.config.lease_s) {
+            Ok(true) => None,
+            Ok(false) => {
+                let rec = self.store.get(id).ok().flatten();
+                Some(if rec.is_some_and(|r| r.cancel_requested) {
+                    Outcome::Cancelled
+                } else {
+                    eprintln!("contact-sim: {worker}: job {id} was taken over by another worker; stopping");
+                    Outcome::Interrupted
+                })
+            }
+            Err(e) => {
+                eprintln!("contact-sim: heartbeat of {id} failed: {e}");
+                None
+            }
+        }
+    }
+
+    /// Runs an idempotent store operation, retrying while the store is unavailable (a
+    /// shared database restarting) with a backoff up to 5 s, until it succeeds, fails for
+    /// another reason, or the server shuts down.
+    fn with_store_retry<T>(
+        &self,
+        mut op: impl FnMut() -> Result<T, StoreError>,
+    ) -> Result<T, StoreError> {
+        let mut backoff = Duration::from_millis(100);
+        loop {
+            match op() {
+                Err(StoreError::Unavailable(e)) if !self.shutdown.load(Ordering::SeqCst) => {
+                    eprintln!("contact-sim: store unavailable ({e}); retrying in {backoff:?}");
+                    std::thread::sleep(backoff);
+                    backoff = (backoff * 2).min(Duration::from_secs(5));
+                }
+                other => return other,
+            }
+        }
+    }
+
+    fn execute(
+        &self,
+        job: &JobRecord,
+        worker: &str,
+        cancel: &AtomicBool,
+    ) -> Result<Outcome, serde_json::Value> {
+        let id = job.id;
+        let problem = scene::validate(&job.scene)
+            .map_err(|e| problem_json(500, "stored scene no longer validates", &e.to_string()))?;
+        let steps = problem.steps;
+        let output = problem.output;
+        let settings = SolverSettings::default();
+        let mut sim = Simulation::new(problem, settings).map_err(|e| solve_problem(&e))?;
+        let mut estimator = match sim.problem.error_estimate {
+            true => Some(ErrorEstimator::new(&sim, settings).map_err(|e| solve_problem(&e))?),
+            false => None,
+        };
+        let mut reports: Vec<StepReport> = Vec::new();
+        if let Some((resumed, rows)) = self
+            .resume(id, &mut sim)
+            .map_err(|e| problem_json(500, "checkpoint unreadable", &e))?
+        {
+            eprintln!(
+                "contact-sim: {worker}: job {id} resumed from step {} (attempt {})",
+                sim.state.step, job.attempt
+            );
+            reports = resumed;
+            if let Some(e) = estimator.as_mut() {
+                e.catch_up(sim.state.step, rows)
+                    .map_err(|e| solve_problem(&e))?;
+            }
+        }
+        let solve_start = Instant::now();
+        let mut last_checkpoint = Instant::now();
+        let io = |e: std::io::Error| problem_json(500, "cannot write results", &e.to_string());
+        while !sim.finished() {
+            if cancel.load(Ordering::SeqCst) {
+                return Ok(Outcome::Cancelled);
+            }
+            if self.shutdown.load(Ordering::SeqCst) {
+                if let Some(stop) = self.lost(id, worker) {
+                    return Ok(stop);
+                }
+                self.checkpoint(id, &sim, &reports, estimator.as_ref())?;
+                return Ok(Outcome::Interrupted);
+            }
+            let r = sim.step().map_err(|e| solve_problem(&e))?;
+            if let Some(e) = estimator.as_mut() {
+                e.after_step(&sim, output.stores(r.n, steps))
+                    .map_err(|e| solve_problem(&e))?;
+            }
+            if output.stores(r.n, steps) {
+                self.results
+                    .write_atomic(id, &step_file(r.n), &encode_step(&sim.fields()))
+                    .map_err(io)?;
+            }
+            let residual = r
+                .velocity
+                .residual
+                .max(r.damage.map_or(0.0, |d| d.residual));
+            let progress = Progress {
+                step: r.n,
+                steps,
+                last_residual: Some(residual),
+            };
+            reports.push(r);
+            self.steps_done.fetch_add(1, Ordering::Relaxed);
+            self.running_progress(id, progress);
+            if last_checkpoint.elapsed() >= CHECKPOINT_EVERY && !sim.finished() {
+                last_checkpoint = Instant::now();
+                // Ownership first: a worker that lost the job must not overwrite the
+                // checkpoint of the worker that holds it now.
+                if let Some(stop) = self.lost(id, worker) {
+                    return Ok(stop);
+                }
+                self.checkpoint(id, &sim, &reports, estimator.as_ref())?;
+            }
+        }
+        // A worker that was paused (not killed) past its lease may find the job taken over
+        // by another: it must not complete it a second time.
+        if let Some(stop) = self.lost(id, worker) {
+            return Ok(stop);
+        }
+        let mut summary = Summary::new(&sim, reports, solve_start.elapsed().as_secs_f64());
+        summary.error_estimate = estimator.map(ErrorEstimator::finish);
+        let text = serde_json::to_vec_pretty(&summary).expect("summary serialises");
+        self.results
+            .write_atomic(id, SUMMARY_FILE, &text)
+            .map_err(io)?;
+        Ok(Outcome::Succeeded)
+    }
+
+    /// A convergence study: no per-step checkpoints (a resumed study starts over; its
+    /// reference may still be cached), progress over all runs' steps, the lease renewed
+    /// about once a second from the computing threads.
+    fn execute_study(
+        &self,
+        job: &JobRecord,
+        worker: &str,
+        cancel: &AtomicBool,
+    ) -> Result<Outcome, serde_json::Value> {
+        let id = job.id;
+        let (plan, _) = study::parse(&job.scene["study"], "/study")
+            .map_err(|e| problem_json(500, "stored study no longer validates", &e.to_string()))?;
+        let last_beat = Mutex::new(Instant::now());
+        // Why a heartbeat stopped the study (cancelled, or taken over by another worker).
+        let stopped: Mutex<Option<Outcome>> = Mutex::new(None);
+        let progress = |done: usize, total: usize| {
+            if cancel.load(Ordering::SeqCst) || self.shutdown.load(Ordering::SeqCst) {
+                return ControlFlow::Break(());
+            }
+            self.steps_done.fetch_add(1, Ordering::Relaxed);
+            let p = Progress {
+                step: done,
+                steps: total,
+                last_residual: None,
+            };
+            self.running_progress(id, p);
+            let mut beat = last_beat.lock().unwrap();
+            if beat.elapsed() >= CHECKPOINT_EVERY {
+                *beat = Instant::now();
+                let _ = self.store.set_progress(id, p);
+                if let Some(stop) = self.lost(id, worker) {
+                    *stopped.lock().unwrap() = Some(stop);
+                    return ControlFlow::Break(());
+                }
+            }
+            ControlFlow::Continue(())
+        };
+        let exec = study::Execution {
+            threads: self.config.study_threads.max(1),
+            ..Default::default()
+        };
+        match study::run(&plan, &self.references, exec, &progress) {
+            Ok(result) => {
+                let io =
+                    |e: std::io::Error| problem_json(500, "cannot write results", &e.to_string());
+                let json = serde_json::to_vec_pretty(&result).expect("study result serialises");
+                self.results
+                    .write_atomic(id, TABLE_FILE, result.text_table().as_bytes())
+                    .map_err(io)?;
+                let svg = contact_core::study::report_svg::study_report(&result);
+                self.results
+                    .write_atomic(id, REPORT_FILE, svg.as_bytes())
+                    .map_err(io)?;
+                // The summary last: its presence means the result is complete.
+                self.results
+                    .write_atomic(id, SUMMARY_FILE, &json)
+                    .map_err(io)?;
+                Ok(Outcome::Succeeded)
+            }
+            Err(StudyError::Cancelled) => Ok(if cancel.load(Ordering::SeqCst) {
+                Outcome::Cancelled
+            } else {
+                // A heartbeat's verdict, or else shutting down: a cancel requested through
+                // another node meanwhile still counts.
+                let stopped = stopped.into_inner().unwrap();
+                stopped
+                    .or_else(|| self.lost(id, worker))
+                    .unwrap_or(Outcome::Interrupted)
+            }),
+            Err(StudyError::Run(contact_core::run::RunError::Solve(e))) => Err(solve_problem(&e)),
+            Err(e) => Err(problem_json(500, "study failed", &e.to_string())),
+        }
+    }
+
+    /// [`Self::save_checkpoint`]; a store that is unreachable just now (shared database
+    /// restarting) skips this checkpoint — the job goes on and the next one is tried a
+    /// second later — while any other failure fails the job.
+    fn checkpoint(
+        &self,
+        id: Uuid,
+        sim: &Simulation,
+        reports: &[StepReport],
+        estimator: Option<&ErrorEstimator>,
+    ) -> Result<(), serde_json::Value> {
+        match self.save_checkpoint(id, sim, reports, estimator) {
+            Ok(()) => Ok(()),
+            Err(StoreError::Unavailable(e)) => {
+                eprintln!("contact-sim: checkpoint of {id} skipped, store unavailable: {e}");
+                Ok(())
+            }
+            Err(e) => Err(problem_json(500, "checkpoint failed", &e.to_string())),
+        }
+    }
+
+    /// Saves the per-step reports, then (u, ζ, step) in the store. A crash between the two
+    /// leaves more reports than the checkpoint step; `resume` truncates them.
+    fn save_checkpoint(
+        &self,
+        id: Uuid,
+        sim: &Simulation,
+        reports: &[StepReport],
+        estimator: Option<&ErrorEstimator>,
+    ) -> Result<(), StoreError> {
+        let bytes = serde_json::to_vec(reports).expect("reports serialise");
+        self.results.write_atomic(id, REPORTS_FILE, &bytes)?;
+        if let Some(e) = estimator {
+            let bytes = serde_json::to_vec(&e.rows).expect("estimates serialise");
+            self.results.write_atomic(id, ESTIMATES_FILE, &bytes)?;
+        }
+        self.store
+            .checkpoint(id, sim.state.step, &encode_state(&sim.checkpoint_state()))?;
+        self.store.set_progress(
+            id,
+            Progress {
+                step: sim.state.step,
+                steps: sim.problem.steps,
+                last_residual: None,
+            },
+        )
+    }
+
+    /// Restores the last checkpoint, if any; returns the reports and error-estimate rows up
+    /// to it.
+    fn resume(&self, id: Uuid, sim: &mut Simulation) -> Result<Option<Resumed>, String> {
+        let Some((step, bytes)) = self
+            .with_store_retry(|| self.store.load_checkpoint(id))
+            .map_err(|e| e.to_string())?
+        else {
+            return Ok(None);
+        };
+        let state = decode_state(&bytes).map_err(|e| e.to_string())?;
+        let reports: Vec<StepReport> = match self
+            .results
+            .read(id, REPORTS_FILE)
+            .map_err(|e| e.to_string())?
+        {
+            Some(b) => serde_json::from_slice(&b).map_err(|e| e.to_string())?,
+            None => Vec::new(),
+        };
+        if state.step != step
+            || reports.len() < step
+            || state.u.len() != sim.state.u.len()
+            || state.zeta.len() != sim.state.zeta.len()
+        {
+            // Inconsistent checkpoint: start over rather than produce a wrong result.
+            return Ok(None);
+        }
+        let mut reports = reports;
+        reports.truncate(step);
+        let mut rows: Vec<EstimateRow> = match self
+            .results
+            .read(id, ESTIMATES_FILE)
+            .map_err(|e| e.to_string())?
+        {
+            Some(b) => serde_json::from_slice(&b).map_err(|e| e.to_string())?,
+            None => Vec::new(),
+        };
+        rows.retain(|r| r.n <= step);
+        sim.restore(state);
+        Ok(Some((reports, rows)))
+    }
+}
+
+/// Per-step reports and error-estimate rows restored from a checkpoint.
+type Resumed = (Vec<StepReport>, Vec<EstimateRow>);
+
+fn eta(l: &Live) -> Option<f64> {
+    let done = l.progress.step.saturating_sub(l.first_step);
+    (done > 0).then(|| {
+        l.started.elapsed().as_secs_f64() / done as f64
+            * (l.progress.steps - l.progress.step) as f64
+    })
+}
+
+pub fn problem_json(status: u16, title: &str, detail: &str) -> serde_json::Value {
+    serde_json::json!({"type": "about:blank", "title": title, "status": status, "detail": detail})
+}
+
+fn solve_problem(e: &SolveError) -> serde_json::Value {
+    match e {
+        SolveError::Smallness(_) => {
+            let mut p = problem_json(422, "smallness condition violated", &e.to_string());
+            p["type"] = "/problems/smallness".into();
+            p
+        }
+        // Scene data unusable where the scheme evaluates it (e.g. a load formula infinite at
+        // a quadrature point between validation's samples): the scene's fault, at its field.
+        SolveError::Data { pointer, message } => {
+            let mut p = problem_json(422, "invalid scene data", &e.to_string());
+            p["type"] = "/problems/scene-data".into();
+            p["errors"] = serde_json::json!([{"pointer": pointer, "message": message}]);
+            p
+        }
+        _ => {
+            let mut p = problem_json(500, "simulation failed", &e.to_string());
+            p["type"] = "/problems/solver".into();
+            p
+        }
+    }
+}

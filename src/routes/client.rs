@@ -1,0 +1,144 @@
+//! The browser client: `GET /` (the page) and `GET /client/{file}` (its ES modules and CSS).
+//! The files live under `api/client/` and are embedded in the binary, so the service needs
+//! nothing beside itself. Each response carries a strong ETag (a hash of the file) with
+//! `Cache-Control: no-cache`: browsers revalidate and get a 304 while the file is unchanged,
+//! and a new build is picked up at once (the modules import each other by plain relative
+//! names, so no version can be put in their URLs without a build step).
+
+use crate::error::ApiError;
+use axum::extract::Path;
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use sha2::{Digest, Sha256};
+use std::sync::OnceLock;
+
+/// One embedded file.
+struct Asset {
+    name: &'static str,
+    content_type: &'static str,
+    body: &'static [u8],
+}
+
+macro_rules! asset {
+    ($name:literal, $ct:expr) => {
+        Asset {
+            name: $name,
+            content_type: $ct,
+            body: include_bytes!(concat!("../../api/client/", $name)),
+        }
+    };
+}
+
+const JS: &str = "text/javascript; charset=utf-8";
+
+/// Every file of `api/client/` (a test checks the directory and this list agree).
+const ASSETS: &[Asset] = &[
+    asset!("index.html", "text/html; charset=utf-8"),
+    asset!("style.css", "text/css; charset=utf-8"),
+    asset!("app.js", JS),
+    asset!("api.js", JS),
+    asset!("editor.js", JS),
+    asset!("jsonpos.js", JS),
+    asset!("jobs.js", JS),
+    asset!("viewer.js", JS),
+    asset!("render.js", JS),
+    asset!("colormap.js", JS),
+    asset!("plots.js", JS),
+    asset!("study.js", JS),
+    asset!("util.js", JS),
+];
+
+/// ETags of `ASSETS`, in order, computed once.
+fn etags() -> &'static [String] {
+    static TAGS: OnceLock<Vec<String>> = OnceLock::new();
+    TAGS.get_or_init(|| {
+        ASSETS
+            .iter()
+            .map(|a| {
+                let d = Sha256::digest(a.body);
+                let hex: String = d[..8].iter().map(|b| format!("{b:02x}")).collect();
+                format!("\"{hex}\"")
+            })
+            .collect()
+    })
+}
+
+fn serve(name: &str, headers: &HeaderMap) -> Result<Response, ApiError> {
+    let i = ASSETS.iter().position(|a| a.name == name).ok_or_else(|| {
+        ApiError::not_found(format!(
+            "no client file {name:?}; the client is served at GET /"
+        ))
+    })?;
+    let (asset, etag) = (&ASSETS[i], &etags()[i]);
+    let not_modified = headers
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| {
+            v.split(',')
+                .any(|t| t.trim().trim_start_matches("W/") == etag || t.trim() == "*")
+        });
+    let mut r = if not_modified {
+        StatusCode::NOT_MODIFIED.into_response()
+    } else {
+        let mut r = asset.body.into_response();
+        r.headers_mut().insert(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static(asset.content_type),
+        );
+        r
+    };
+    let h = r.headers_mut();
+    h.insert(header::ETAG, HeaderValue::from_str(etag).expect("hex"));
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+    h.insert(
+        header::X_CONTENT_TYPE_OPTIONS,
+        HeaderValue::from_static("nosniff"),
+    );
+    Ok(r)
+}
+
+/// `GET /`: the client page.
+pub async fn index(headers: HeaderMap) -> Result<Response, ApiError> {
+    serve("index.html", &headers)
+}
+
+/// `GET /client/{file}`: a module, stylesheet or the page itself.
+pub async fn file(Path(file): Path<String>, headers: HeaderMap) -> Result<Response, ApiError> {
+    serve(&file, &headers)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ASSETS;
+
+    /// Every file under api/client/ is embedded (and nothing else is listed).
+    #[test]
+    fn assets_match_the_directory() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("api/client");
+        let mut on_disk: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        on_disk.sort();
+        let mut listed: Vec<String> = ASSETS.iter().map(|a| a.name.to_string()).collect();
+        listed.sort();
+        assert_eq!(
+            on_disk, listed,
+            "api/client/ and ASSETS in client.rs differ"
+        );
+    }
+
+    #[test]
+    fn content_types_follow_extensions() {
+        for a in ASSETS {
+            let ext = a.name.rsplit('.').next().unwrap();
+            let want = match ext {
+                "html" => "text/html",
+                "css" => "text/css",
+                "js" => "text/javascript",
+                _ => panic!("unexpected client file {}", a.name),
+            };
+            assert!(a.content_type.starts_with(want), "{}", a.name);
+        }
+    }
+}

@@ -1,0 +1,592 @@
+//! /jobs: submit (validate, limit, deduplicate, enqueue), list, get (ETag, Retry-After),
+//! cancel, delete, and the Server-Sent Events progress stream.
+
+use super::{blocking, load_job, only_params, parse_id, rfc3339};
+use crate::error::ApiError;
+use crate::jobs::{is_study, JobEvent};
+use crate::state::AppState;
+use crate::store::{Enqueued, JobRecord, JobStatus, NewJob};
+use axum::body::Bytes;
+use axum::extract::{Path, Query, State};
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use contact_core::scene::{self, canonical, hex_sha256, presets, Overrides};
+use contact_core::solve::SolverSettings;
+use contact_core::study;
+use serde_json::{json, Value};
+use std::collections::HashMap;
+use std::convert::Infallible;
+use std::time::Duration;
+
+/// The job resource as served.
+pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
+    let id = rec.id;
+    let (progress, eta) = match state.rt.live_progress(id) {
+        Some((p, eta)) if rec.status == JobStatus::Running => (p, eta),
+        _ => (rec.progress, None),
+    };
+    let percent = if progress.steps > 0 {
+        100.0 * progress.step as f64 / progress.steps as f64
+    } else {
+        0.0
+    };
+    let base = format!("/jobs/{id}");
+    let mut links = json!({"self": base, "events": format!("{base}/events")});
+    if !rec.status.is_finished() {
+        links["cancel"] = json!(format!("{base}/cancel"));
+    }
+    let study = is_study(&rec.scene);
+    if rec.status == JobStatus::Succeeded && study {
+        links["summary"] = json!(format!("{base}/summary"));
+        links["table"] = json!(format!("{base}/summary?format=text"));
+        links["report"] = json!(format!("{base}/report.svg"));
+    } else if rec.status == JobStatus::Succeeded {
+        links["summary"] = json!(format!("{base}/summary"));
+        links["fields"] = json!(format!("{base}/fields?step=last"));
+        links["mesh"] = json!(format!("{base}/mesh"));
+        links["pvd"] = json!(format!("{base}/result.pvd"));
+        links["archive"] = json!(format!("{base}/archive.tar"));
+    }
+    json!({
+        "id": id,
+        "kind": if study { "study" } else { "simulation" },
+        "scene": if study {
+            rec.scene["study"].get("name").or_else(|| rec.scene["study"]["scene"].get("name"))
+        } else {
+            rec.scene.get("name")
+        }
+        .cloned()
+        .unwrap_or(Value::Null),
+        "status": rec.status,
+        "progress": {
+            "step": progress.step,
+            "steps": progress.steps,
+            "percent": (percent * 10.0).round() / 10.0,
+            "eta_s": eta,
+            "last_residual": progress.last_residual,
+        },
+        "created_at": rfc3339(rec.created_at),
+        "started_at": rec.started_at.map(rfc3339),
+        "finished_at": rec.finished_at.map(rfc3339),
+        "error": rec.error,
+        "attempt": rec.attempt,
+        "worker": rec.worker,
+        "last_checkpoint_step": rec.last_checkpoint_step,
+        "scene_hash": rec.scene_hash,
+        "links": links,
+    })
+}
+
+fn json_response(status: StatusCode, body: &Value) -> Response {
+    let mut r = (status, serde_json::to_vec(body).unwrap_or_default()).into_response();
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/json"),
+    );
+    r
+}
+
+/// Content hash of a result: scene (canonical JSON), crate version, solver settings.
+pub fn scene_hash(scene: &Value) -> String {
+    let key = json!({
+        "scene": canonical(scene),
+        "version": env!("CARGO_PKG_VERSION"),
+        "solver": SolverSettings::default(),
+    });
+    hex_sha256(key.to_string().as_bytes())
+}
+
+/// Expands `{"preset": NAME, "overrides": {...}}`; any other document is a scene.
+fn expand(doc: Value) -> Result<(Value, bool), ApiError> {
+    let Some(obj) = doc.as_object().filter(|o| o.contains_key("preset")) else {
+        return Ok((doc, false));
+    };
+    for k in obj.keys() {
+        if k != "preset" && k != "overrides" {
+            return Err(ApiError::invalid_field(
+                &format!("/{k}"),
+                format!("unknown field {k:?} in a preset request (allowed: preset, overrides)"),
+            ));
+        }
+    }
+    let name = obj["preset"]
+        .as_str()
+        .ok_or_else(|| ApiError::invalid_field("/preset", "preset must be a string"))?;
+    let mut scene = presets::get(name).ok_or_else(|| {
+        ApiError::invalid_field(
+            "/preset",
+            format!(
+                "unknown preset {name:?}; known: {}",
+                presets::names().join(", ")
+            ),
+        )
+    })?;
+    let mut o = Overrides::default();
+    if let Some(ov) = obj.get("overrides") {
+        let ov = ov
+            .as_object()
+            .ok_or_else(|| ApiError::invalid_field("/overrides", "overrides must be an object"))?;
+        for (k, v) in ov {
+            match k.as_str() {
+                "h" => o.h = Some(v.clone()),
+                "k" => o.k = Some(v.clone()),
+                "t_end" => o.t_end = Some(v.clone()),
+                _ => {
+                    return Err(ApiError::invalid_field(
+                        &format!("/overrides/{k}"),
+                        format!("unknown override {k:?} (allowed: h, k, t_end)"),
+                    ))
+                }
+            }
+        }
+    }
+    scene::apply_overrides(&mut scene, &o);
+    Ok((scene, true))
+}
+
+/// Maps pointers of an expanded preset back to the request's `overrides`.
+fn map_override_pointers(mut e: ApiError) -> ApiError {
+    if let Some(Value::Array(errors)) = e.errors.as_deref_mut() {
+        for err in errors {
+            let p = err["pointer"].as_str().unwrap_or("");
+            let mapped = match p {
+                "/mesh/h" => "/overrides/h",
+                "/time/k" | "/time/N" => "/overrides/k",
+                "/time/t_end" => "/overrides/t_end",
+                _ => continue,
+            };
+            err["pointer"] = json!(mapped);
+        }
+    }
+    e
+}
+
+/// Per-job limits (nodes, steps, stored bytes), reported at the field that sets them.
+fn check_limits(
+    p: &contact_core::problem::Problem,
+    state: &AppState,
+    is_preset: bool,
+) -> Result<(), ApiError> {
+    let cfg = &state.rt.config;
+    let (nx, ny) = p.cells();
+    let mut nodes = (nx + 1) * (ny + 1);
+    if p.pattern == contact_core::problem::MeshPattern::Cross {
+        nodes += nx * ny;
+    }
+    let (hptr, kptr) = if is_preset {
+        ("/overrides/h", "/overrides/k")
+    } else {
+        ("/mesh/h", "/time/k")
+    };
+    if nodes > cfg.max_nodes {
+        return Err(ApiError::invalid_field(
+            hptr,
+            format!(
+                "the mesh has {nodes} nodes, more than this server's limit of {}",
+                cfg.max_nodes
+            ),
+        ));
+    }
+    if p.steps > cfg.max_steps {
+        return Err(ApiError::invalid_field(
+            kptr,
+            format!(
+                "{} time steps, more than this server's limit of {}",
+                p.steps, cfg.max_steps
+            ),
+        ));
+    }
+    let f = p.output.fields;
+    let per_node = 2 * f.u as usize + 2 * f.w as usize + f.zeta as usize;
+    let per_cell = 3 * f.sigma as usize + f.von_mises as usize;
+    let per_step = 8 * (per_node * nodes + per_cell * nx * ny * 4) as u64 + 64;
+    let stored = (1..=p.steps)
+        .filter(|&n| p.output.stores(n, p.steps))
+        .count() as u64;
+    if per_step * stored > cfg.max_stored_bytes {
+        return Err(ApiError::invalid_field(
+            "/output",
+            format!("the selected output stores about {} MB, more than this server's limit of {} MB; store fewer steps (output.every) or fields", (per_step * stored) >> 20, cfg.max_stored_bytes >> 20),
+        ));
+    }
+    Ok(())
+}
+
+/// A study's runs against the per-job limits: the reference (its largest run) must fit the
+/// node limit, all runs together the step limit.
+fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), ApiError> {
+    let cfg = &state.rt.config;
+    let (nx, ny) = plan.base.cells();
+    let nodes = (nx + 1) * (ny + 1);
+    if nodes > cfg.max_nodes {
+        return Err(ApiError::invalid_field(
+            "/study/reference/h",
+            format!(
+                "the reference mesh has {nodes} nodes, more than this server's limit of {}",
+                cfg.max_nodes
+            ),
+        ));
+    }
+    let steps = study::total_steps(plan);
+    if steps > cfg.max_steps {
+        return Err(ApiError::invalid_field(
+            "/study/reference/k",
+            format!(
+                "the study's runs take {steps} time steps in all, more than this server's limit of {}",
+                cfg.max_steps
+            ),
+        ));
+    }
+    Ok(())
+}
+
+pub async fn submit(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    if let Some(ct) = headers.get(header::CONTENT_TYPE) {
+        let ct = ct.to_str().unwrap_or("");
+        if !ct.starts_with("application/json") && !ct.contains("+json") {
+            return Err(ApiError::new(
+                StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                "unsupported media type",
+                format!("send the scene as application/json, not {ct:?}"),
+            ));
+        }
+    }
+    let doc: Value = serde_json::from_slice(&body)
+        .map_err(|e| ApiError::bad_request(format!("malformed JSON: {e}")))?;
+    crate::limits::check_depth(&doc, state.rt.config.max_json_depth)?;
+    let (scene_doc, steps) = match doc.get("study") {
+        Some(study) => {
+            if let Some(k) = doc
+                .as_object()
+                .and_then(|o| o.keys().find(|k| *k != "study"))
+            {
+                return Err(ApiError::invalid_field(
+                    &format!("/{k}"),
+                    format!("unknown field {k:?} next to a study (a study request is {{\"study\": {{...}}}})"),
+                ));
+            }
+            let (plan, expanded) =
+                study::parse(study, "/study").map_err(|e| ApiError::invalid_scene(&e))?;
+            check_study_limits(&plan, &state)?;
+            (json!({ "study": expanded }), study::total_steps(&plan))
+        }
+        None => {
+            let (scene_doc, is_preset) = expand(doc)?;
+            let problem = match scene::validate(&scene_doc) {
+                Ok(p) => p,
+                Err(errors) => {
+                    let e = ApiError::invalid_scene(&errors);
+                    return Err(if is_preset {
+                        map_override_pointers(e)
+                    } else {
+                        e
+                    });
+                }
+            };
+            check_limits(&problem, &state, is_preset)?;
+            (scene_doc, problem.steps)
+        }
+    };
+    let hash = scene_hash(&scene_doc);
+    let key = match headers.get("idempotency-key") {
+        Some(v) => Some(
+            v.to_str()
+                .ok()
+                .filter(|s| !s.is_empty() && s.len() <= 255)
+                .ok_or_else(|| {
+                    ApiError::bad_request("Idempotency-Key must be 1–255 visible ASCII characters")
+                })?
+                .to_string(),
+        ),
+        None => None,
+    };
+    let request_hash = key.as_ref().map(|_| hex_sha256(&body));
+    let store = state.store().clone();
+    let capacity = state.rt.config.queue_capacity;
+    let outcome = blocking(move || {
+        if key.is_none() {
+            // An identical scene already computed by this version: answer from the store.
+            if let Some(done) = store.find_succeeded_by_hash(&hash)? {
+                return Ok(Enqueued::Existing(done));
+            }
+        }
+        let queued = store
+            .counts()?
+            .into_iter()
+            .find(|(s, _)| *s == JobStatus::Queued)
+            .map_or(0, |(_, n)| n);
+        if queued >= capacity {
+            let mut e = ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "queue full",
+                format!("{queued} jobs are queued (limit {capacity}); retry later"),
+            );
+            e.retry_after = Some(5);
+            return Err(e);
+        }
+        Ok(store.enqueue(NewJob {
+            scene: scene_doc,
+            scene_hash: hash,
+            steps,
+            idempotency_key: key,
+            request_hash,
+        })?)
+    })
+    .await?;
+    let (status, rec) = match outcome {
+        Enqueued::New(rec) => {
+            state.rt.notify();
+            (StatusCode::ACCEPTED, rec)
+        }
+        Enqueued::Existing(rec)
+            if rec.status == JobStatus::Succeeded && rec.idempotency_key.is_none() =>
+        {
+            (StatusCode::OK, rec)
+        }
+        Enqueued::Existing(rec) => (StatusCode::ACCEPTED, rec),
+        Enqueued::KeyConflict(rec) => {
+            return Err(ApiError::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "idempotency key reused",
+                format!(
+                    "this Idempotency-Key was used for job {} with a different request body",
+                    rec.id
+                ),
+            ))
+        }
+    };
+    let mut resp = json_response(status, &job_view(&rec, &state));
+    resp.headers_mut().insert(
+        header::LOCATION,
+        HeaderValue::from_str(&format!("/jobs/{}", rec.id)).expect("uuid is ASCII"),
+    );
+    Ok(resp)
+}
+
+pub async fn list(
+    State(state): State<AppState>,
+    Query(q): Query<HashMap<String, String>>,
+) -> Result<Response, ApiError> {
+    only_params(&q, &["status", "cursor", "limit"])?;
+    let status = match q.get("status") {
+        Some(s) => Some(JobStatus::parse(s).ok_or_else(|| {
+            ApiError::bad_request(format!(
+                "status must be one of queued, running, succeeded, failed, cancelled, not {s:?}"
+            ))
+        })?),
+        None => None,
+    };
+    let limit = match q.get("limit") {
+        Some(l) => l
+            .parse::<usize>()
+            .ok()
+            .filter(|n| (1..=500).contains(n))
+            .ok_or_else(|| ApiError::bad_request("limit must be an integer in 1..=500"))?,
+        None => 50,
+    };
+    let cursor = q.get("cursor").cloned();
+    if let Some(c) = &cursor {
+        if crate::store::parse_cursor(c).is_none() {
+            return Err(ApiError::bad_request(format!("invalid cursor {c:?}")));
+        }
+    }
+    let store = state.store().clone();
+    let page = blocking(move || Ok(store.list(status, cursor.as_deref(), limit)?)).await?;
+    let next = page.next.map(|c| {
+        let mut url = format!("/jobs?cursor={c}&limit={limit}");
+        if let Some(s) = status {
+            url += &format!("&status={}", s.as_str());
+        }
+        url
+    });
+    let jobs: Vec<Value> = page.jobs.iter().map(|r| job_view(r, &state)).collect();
+    let mut resp = json_response(StatusCode::OK, &json!({"jobs": jobs, "next": next}));
+    if let Some(n) = &next {
+        if let Ok(v) = HeaderValue::from_str(&format!("<{n}>; rel=\"next\"")) {
+            resp.headers_mut().insert(header::LINK, v);
+        }
+    }
+    Ok(resp)
+}
+
+pub async fn get_job(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let rec = load_job(&state, parse_id(&id)?).await?;
+    let view = job_view(&rec, &state);
+    let body = serde_json::to_vec(&view).unwrap_or_default();
+    let etag = format!("\"{}\"", &hex_sha256(&body)[..16]);
+    let unfinished = !rec.status.is_finished();
+    let not_modified = headers
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"));
+    let mut resp = if not_modified {
+        StatusCode::NOT_MODIFIED.into_response()
+    } else {
+        json_response(StatusCode::OK, &view)
+    };
+    resp.headers_mut()
+        .insert(header::ETAG, HeaderValue::from_str(&etag).expect("hex"));
+    resp.headers_mut()
+        .insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+    if unfinished {
+        resp.headers_mut()
+            .insert(header::RETRY_AFTER, HeaderValue::from_static("1"));
+    }
+    Ok(resp)
+}
+
+pub async fn cancel(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let id = parse_id(&id)?;
+    let store = state.store().clone();
+    let rec = blocking(move || {
+        store
+            .request_cancel(id)?
+            .ok_or_else(|| ApiError::not_found(format!("no job with id {id}")))
+    })
+    .await?;
+    state.rt.cancel(id);
+    let status = if rec.status.is_finished() && rec.status != JobStatus::Cancelled {
+        StatusCode::CONFLICT
+    } else {
+        StatusCode::ACCEPTED
+    };
+    if status == StatusCode::CONFLICT {
+        return Err(ApiError::conflict(format!(
+            "job {id} already finished ({})",
+            rec.status.as_str()
+        )));
+    }
+    Ok(json_response(status, &job_view(&rec, &state)))
+}
+
+pub async fn delete_job(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let id = parse_id(&id)?;
+    let rec = load_job(&state, id).await?;
+    if !rec.status.is_finished() {
+        return Err(ApiError::conflict(format!(
+            "job {id} is {}; cancel it first",
+            rec.status.as_str()
+        )));
+    }
+    let store = state.store().clone();
+    let results = state.rt.results.clone();
+    blocking(move || {
+        store.delete(id)?;
+        results
+            .remove_job(id)
+            .map_err(|e| ApiError::internal(e.to_string()))
+    })
+    .await?;
+    Ok(StatusCode::NO_CONTENT.into_response())
+}
+
+/// SSE: the current state first, then every progress event, and the final status; the stream
+/// ends when the job is finished.
+pub async fn events(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let id = parse_id(&id)?;
+    // Unknown ids are refused before a channel is created for them; then subscribe before
+    // reading the record again, so no event between the two is lost.
+    load_job(&state, id).await?;
+    let mut rx = state.rt.subscribe(id);
+    let rec = load_job(&state, id).await?;
+    let first = JobEvent::from_record(&rec);
+    let mut closing = state.closing.clone();
+    let store = state.store().clone();
+    let rt = state.rt.clone();
+    let stream = async_stream(
+        move |tx: tokio::sync::mpsc::Sender<Result<Event, Infallible>>| async move {
+            let done = first.status.is_finished();
+            let _ = tx.send(Ok(to_event(&first))).await;
+            let mut last = first;
+            if done {
+                return;
+            }
+            loop {
+                tokio::select! {
+                    ev = rx.recv() => match ev {
+                        Ok(ev) => {
+                            let fin = ev.status.is_finished();
+                            last = ev.clone();
+                            if tx.send(Ok(to_event(&ev))).await.is_err() || fin {
+                                return;
+                            }
+                        }
+                        Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => continue,
+                        Err(tokio::sync::broadcast::error::RecvError::Closed) => break,
+                    },
+                    _ = closing.changed() => return,
+                    // The record now and then: a job run by another node (shared store)
+                    // publishes nothing here, and an event may have been published before
+                    // the channel existed (e.g. a queued job cancelled).
+                    _ = tokio::time::sleep(Duration::from_secs(2)) => {
+                        let s = store.clone();
+                        if let Ok(Ok(Some(r))) = tokio::task::spawn_blocking(move || s.get(id)).await {
+                            let ev = JobEvent::from_record(&r);
+                            if r.status.is_finished() {
+                                let _ = tx.send(Ok(to_event(&ev))).await;
+                                return;
+                            }
+                            let moved = (ev.status, ev.step) != (last.status, last.step);
+                            if moved && rt.live_progress(id).is_none() {
+                                if tx.send(Ok(to_event(&ev))).await.is_err() {
+                                    return;
+                                }
+                                last = ev;
+                            }
+                        }
+                    }
+                }
+            }
+            // Channel closed: the job ended; report its final record.
+            let s = store.clone();
+            if let Ok(Ok(Some(r))) = tokio::task::spawn_blocking(move || s.get(id)).await {
+                let ev = JobEvent::from_record(&r);
+                let _ = tx.send(Ok(to_event(&ev))).await;
+            }
+        },
+    );
+    Ok(Sse::new(stream)
+        .keep_alive(KeepAlive::default())
+        .into_response())
+}
+
+fn to_event(ev: &JobEvent) -> Event {
+    let kind = if ev.status.is_finished() {
+        "status"
+    } else {
+        "progress"
+    };
+    Event::default()
+        .event(kind)
+        .json_data(ev)
+        .unwrap_or_default()
+}
+
+/// A stream fed by an async task through a channel.
+fn async_stream<T: Send + 'static, F, Fut>(f: F) -> impl futures_util::Stream<Item = T>
+where
+    F: FnOnce(tokio::sync::mpsc::Sender<T>) -> Fut,
+    Fut: std::future::Future<Output = ()> + Send + 'static,
+{
+    let (tx, mut rx) = tokio::sync::mpsc::channel(16);
+    tokio::spawn(f(tx));
+    futures_util::stream::poll_fn(move |cx| rx.poll_recv(cx))
+}

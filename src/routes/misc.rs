@@ -1,0 +1,87 @@
+//! Presets, health, Prometheus metrics and the OpenAPI document.
+
+use crate::error::ApiError;
+use crate::state::AppState;
+use crate::store::JobStatus;
+use axum::extract::{Path, State};
+use axum::http::{header, HeaderValue};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use contact_core::scene::presets;
+use serde_json::{json, Value};
+use std::sync::atomic::Ordering;
+
+pub const OPENAPI: &str = include_str!("../../api/openapi.yaml");
+
+pub async fn presets() -> Json<Value> {
+    let list: Vec<Value> = presets::names()
+        .iter()
+        .map(|n| json!({"name": n, "description": presets::description(n), "href": format!("/presets/{n}")}))
+        .collect();
+    Json(json!({"presets": list}))
+}
+
+pub async fn preset(Path(name): Path<String>) -> Result<Json<Value>, ApiError> {
+    presets::get(&name).map(Json).ok_or_else(|| {
+        ApiError::not_found(format!(
+            "unknown preset {name:?}; known: {}",
+            presets::names().join(", ")
+        ))
+    })
+}
+
+pub async fn healthz(State(state): State<AppState>) -> Result<Json<Value>, ApiError> {
+    let store = state.store().clone();
+    super::blocking(move || Ok(store.counts()?)).await?;
+    Ok(Json(json!({
+        "status": "ok",
+        "workers": state.rt.config.workers,
+        "node": state.rt.config.node,
+        "store": if state.rt.config.store.is_some() { "postgres" } else { "sqlite" },
+        "version": env!("CARGO_PKG_VERSION"),
+    })))
+}
+
+pub async fn metrics(State(state): State<AppState>) -> Result<Response, ApiError> {
+    let store = state.store().clone();
+    let counts = super::blocking(move || Ok(store.counts()?)).await?;
+    let count = |s: JobStatus| counts.iter().find(|(x, _)| *x == s).map_or(0, |(_, n)| *n);
+    let mut out = String::new();
+    out += "# HELP contact_sim_queue_depth Jobs waiting for a worker.\n# TYPE contact_sim_queue_depth gauge\n";
+    out += &format!("contact_sim_queue_depth {}\n", count(JobStatus::Queued));
+    out += "# HELP contact_sim_running_jobs Jobs being computed by this node.\n# TYPE contact_sim_running_jobs gauge\n";
+    out += &format!(
+        "contact_sim_running_jobs {}\n",
+        state.rt.running.load(Ordering::Relaxed)
+    );
+    out += "# HELP contact_sim_jobs Jobs in the store by status.\n# TYPE contact_sim_jobs gauge\n";
+    for s in JobStatus::ALL {
+        out += &format!(
+            "contact_sim_jobs{{status=\"{}\"}} {}\n",
+            s.as_str(),
+            count(s)
+        );
+    }
+    out += "# HELP contact_sim_steps_total Time steps computed by this process.\n# TYPE contact_sim_steps_total counter\n";
+    out += &format!(
+        "contact_sim_steps_total {}\n",
+        state.rt.steps_done.load(Ordering::Relaxed)
+    );
+    out += "# HELP contact_sim_workers Worker threads of this node.\n# TYPE contact_sim_workers gauge\n";
+    out += &format!("contact_sim_workers {}\n", state.rt.config.workers);
+    let mut r = out.into_response();
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("text/plain; version=0.0.4"),
+    );
+    Ok(r)
+}
+
+pub async fn openapi() -> Response {
+    let mut r = OPENAPI.into_response();
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/yaml"),
+    );
+    r
+}
