@@ -1,5 +1,5 @@
 //! Geometry only: nodes, triangles and boundary edges tagged with the boundary part that
-//! contains them. The structured generator follows SCHEME.md: n = round(1/h) cells per unit
+//! contains them. The structured generator (docs/numerics.md#mesh-patterns-refinement-and-nesting): n = round(1/h) cells per unit
 //! length, every square cell cut by its lower-left → upper-right diagonal (default), so the
 //! meshes of h and h/2 are nested.
 
@@ -106,7 +106,7 @@ impl Mesh {
         }
     }
 
-    /// Tags each boundary edge with the first part whose segment contains it (SCHEME.md: "a
+    /// Tags each boundary edge with the first part whose segment contains it (docs/numerics.md#boundary-tagging: "a
     /// boundary edge belongs to the part that contains it"); parts do not overlap (validated).
     pub fn tag_boundary(&mut self, segments: &[Segment]) {
         let tol = 1e-9 * self.width.max(self.height);

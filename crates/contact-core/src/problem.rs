@@ -63,7 +63,7 @@ impl VectorField {
 /// How each square cell of the structured mesh is cut into triangles.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MeshPattern {
-    /// Lower-left → upper-right diagonal (SCHEME.md's default).
+    /// Lower-left → upper-right diagonal (the default; docs/numerics.md#the-three-patterns).
     Diagonal,
     /// Lower-right → upper-left diagonal.
     AntiDiagonal,

@@ -1,6 +1,6 @@
 //! Right-hand sides: the external load (f_n, v)_V = ∫_Ω f0·v + ∫_Γ2 f2·v, the explicit
 //! elastic term −(B_{n−1}, ε(v)) of (3.13), and the damage source F_{n−1} of (3.10).
-//! Quadratures follow SCHEME.md: exact for constant data (f0: |T|/3 per vertex; f2: |e|/2
+//! Quadratures (docs/numerics.md#quadrature-and-load-vectors): exact for constant data (f0: |T|/3 per vertex; f2: |e|/2
 //! per endpoint), otherwise exact for linear data (edge midpoints on T, 2-point Gauss on e).
 
 use super::Geometry;
@@ -149,7 +149,7 @@ pub fn add_stress_divergence(mesh: &Mesh, geo: &Geometry, b: &[Tensor2<f64>], ou
 }
 
 /// F_i = ∫_Ω φ_T(ζ) ψ_i by the 3-point edge-midpoint rule (weights |T|/3), with ζ
-/// interpolated linearly to the midpoints and the strain constant on T (SCHEME.md).
+/// interpolated linearly to the midpoints and the strain constant on T (docs/numerics.md#damage-source-vector).
 /// `phi(e, ζ)` is the source on element e at damage value ζ.
 pub fn damage_source(
     mesh: &Mesh,

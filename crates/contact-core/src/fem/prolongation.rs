@@ -1,5 +1,5 @@
 //! Interpolation of a P1 field from a coarse structured mesh onto a finer nested one
-//! (SCHEME.md: meshes of h and h/2 are nested, so this is exact for P1 fields). Used by
+//! (docs/numerics.md#nesting-and-prolongation: meshes of h and h/2 are nested, so this is exact for P1 fields). Used by
 //! convergence studies to compare a coarse solution with the reference on the fine mesh.
 
 use crate::mesh::Mesh;

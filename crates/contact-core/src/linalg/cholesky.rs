@@ -3,7 +3,7 @@
 //! recomputed for new values on the same pattern, and solves reuse one scratch buffer.
 //!
 //! faer's automatic simplicial/supernodal switch picks the slower variant for P1 meshes of
-//! these sizes (ECOSYSTEM.md: 2–5×), so the supernodal path is forced. Parallelism is `Seq`:
+//! these sizes (measured here: 2–5× slower), so the supernodal path is forced. Parallelism is `Seq`:
 //! jobs and the two sub-problems of a step are parallel instead.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
