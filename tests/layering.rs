@@ -174,3 +174,45 @@ fn the_core_names_nothing_of_the_service() {
         }
     }
 }
+
+/// The code block of README's "Layout" section: one line per module, its path first.
+fn readme_layout() -> Vec<String> {
+    let readme = std::fs::read_to_string(workspace().join("README.md")).unwrap();
+    let section = readme
+        .split("\n## Layout\n")
+        .nth(1)
+        .expect("README has a Layout section");
+    let block = section.split("```").nth(1).expect("a code block");
+    block
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn readme_layout_names_every_module_file_and_no_other() {
+    let listed = readme_layout();
+    let mut files = Vec::new();
+    for dir in ["src", "crates/contact-core/src"] {
+        rust_files(&workspace().join(dir), &mut files);
+    }
+    for f in &files {
+        let rel = f.strip_prefix(workspace()).unwrap().to_str().unwrap();
+        // A directory's line stands for its mod.rs.
+        let as_listed = match rel.strip_suffix("mod.rs") {
+            Some(dir) => dir.to_string(),
+            None => rel.to_string(),
+        };
+        assert!(
+            listed.contains(&as_listed),
+            "README's Layout does not list {as_listed}"
+        );
+    }
+    for l in listed.iter().filter(|l| l.contains('/')) {
+        assert!(
+            workspace().join(l).exists(),
+            "README's Layout lists {l}, which does not exist"
+        );
+    }
+}
