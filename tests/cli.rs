@@ -170,3 +170,53 @@ fn study_file_prints_the_table_as_json_or_text() {
     assert!(err.contains("/h/0") && err.contains("not nested"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Scripts read stdout and may log stderr: piped, the long commands draw no progress bar
+/// (no escape sequences, no carriage returns).
+#[test]
+fn piped_stderr_carries_no_progress_bar() {
+    let out = bin()
+        .args([
+            "run",
+            "--preset",
+            "paper-convergence",
+            "--h",
+            "1/4",
+            "--k",
+            "1/16",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains(['\x1b', '\r']) && err.is_empty(), "{err:?}");
+    let out = bin()
+        .args(["stress", "--quick", "--format", "json"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains(['\x1b', '\r']), "{err:?}");
+    let report: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(report["cases"].as_array().is_some_and(|c| !c.is_empty()));
+}
+
+/// On a terminal `run` draws its bar (steps and ETA) on stderr. The terminal is the
+/// pseudo-terminal of util-linux's `script`; without it the test has nothing to run.
+#[test]
+fn a_terminal_gets_a_progress_bar() {
+    let exe = env!("CARGO_BIN_EXE_contact-sim");
+    let command = format!(
+        "'{exe}' run --preset paper-convergence --h 1/4 --k 1/16 --log-format text >/dev/null"
+    );
+    let Ok(out) = Command::new("script")
+        .args(["-qec", &command, "/dev/null"])
+        .stdin(std::process::Stdio::null())
+        .output()
+    else {
+        eprintln!("no `script` (util-linux): the terminal case is not checked");
+        return;
+    };
+    assert!(out.status.success(), "{out:?}");
+    let tty = String::from_utf8_lossy(&out.stdout);
+    assert!(tty.contains("/16 steps") && tty.contains("ETA"), "{tty:?}");
+}

@@ -492,8 +492,22 @@ pub struct StressReport {
 
 /// Runs the table (or its quick subset).
 pub fn run(quick: bool) -> StressReport {
+    run_with(quick, |_, _, _| {})
+}
+
+/// [`run`], calling `starting(i, n, case)` before case `i` of the `n` it runs (progress).
+pub fn run_with(quick: bool, mut starting: impl FnMut(usize, usize, &Case)) -> StressReport {
     let start = Instant::now();
-    let cases: Vec<CaseReport> = cases().iter().filter_map(|c| run_case(c, quick)).collect();
+    let all = cases();
+    let selected: Vec<&Case> = all.iter().filter(|c| c.quick.is_some() || !quick).collect();
+    let cases: Vec<CaseReport> = selected
+        .iter()
+        .enumerate()
+        .filter_map(|(i, c)| {
+            starting(i, selected.len(), c);
+            run_case(c, quick)
+        })
+        .collect();
     StressReport {
         quick,
         tolerance: SolverSettings::default().tolerance,

@@ -1,0 +1,43 @@
+//! `contact-sim bench`: the speed figures of README.
+
+use super::{fail, pretty};
+use clap::Args;
+use contact_core::{bench, study};
+use std::process::ExitCode;
+
+#[derive(Args)]
+pub struct BenchArgs {
+    /// Levels 1/h = 1/k to run.
+    #[arg(long, value_delimiter = ',', default_value = "16,32,64,128")]
+    pub levels: Vec<usize>,
+    /// Repetitions per level (the fastest is reported).
+    #[arg(long, default_value_t = 3)]
+    pub repeat: usize,
+    /// Instead: Tables 1 and 2 together (one shared reference) against the reference
+    /// run alone.
+    #[arg(long)]
+    pub tables: bool,
+}
+
+pub fn main(args: BenchArgs) -> ExitCode {
+    let repeat = args.repeat.max(1);
+    if args.tables {
+        // The threads a study uses by default.
+        let threads = study::Execution::default().threads;
+        return match bench::tables(repeat, threads) {
+            Ok(r) => {
+                println!("{}", pretty(&r));
+                ExitCode::SUCCESS
+            }
+            Err(e) => fail(1, &e.to_string()),
+        };
+    }
+    match bench::run(&args.levels, repeat) {
+        Ok(report) => {
+            eprintln!("{}", report.table());
+            println!("{}", pretty(&report));
+            ExitCode::SUCCESS
+        }
+        Err(e) => fail(1, &e.to_string()),
+    }
+}

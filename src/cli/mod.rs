@@ -1,0 +1,85 @@
+//! The command line's parts: the argument types ([`Cli`], [`Command`]) and one module per
+//! command, each with its flags and what it does. `main.rs` parses and dispatches.
+
+pub mod bench;
+pub mod logging;
+pub mod node;
+pub mod preset;
+pub mod progress;
+pub mod run;
+pub mod serve;
+pub mod stress;
+pub mod study;
+pub mod worker;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "contact-sim",
+    version,
+    about = "Quasistatic frictional contact of a viscoelastic body with damage (Han, Jureczka & Ochal 2020)"
+)]
+pub struct Cli {
+    /// Without a subcommand: `serve` with its defaults.
+    #[command(subcommand)]
+    pub command: Option<Command>,
+    /// How log lines on stderr are written: text for people, json (one object a line) for
+    /// log collectors.
+    #[arg(long = "log-format", global = true, value_enum, default_value_t)]
+    pub log_format: logging::LogFormatArg,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Run the HTTP job service (the default).
+    Serve(serve::ServeArgs),
+    /// A compute-only node: workers that claim jobs from a shared store (no HTTP). Stops on
+    /// SIGINT or SIGTERM; its running jobs are checkpointed and resumed by any node.
+    Worker(worker::WorkerArgs),
+    /// Run a scene (a JSON file or a preset) and print the summary JSON.
+    Run(run::RunArgs),
+    /// List the presets.
+    Presets,
+    /// Print a preset as a scene file.
+    Preset(preset::PresetArgs),
+    /// Convergence studies: study files (JSON, `{"study": {...}}` or the study object) and/or
+    /// presets (paper-table-1, paper-table-2). Studies of one scene share their reference run.
+    /// Prints the result JSON (an array for several studies) or the paper-style tables.
+    Study(study::StudyArgs),
+    /// Speed figures: paper-convergence at h = k = 1/16 … 1/128 (and more with --levels).
+    Bench(bench::BenchArgs),
+    /// The stability suite: hard scenes (friction, non-convexity, damage, extreme h and k, a
+    /// slender beam, load jumps) run with every invariant checked, or refused with a reason.
+    /// Exit code 1 if any case does not do what it must.
+    Stress(stress::StressArgs),
+}
+
+impl Default for Command {
+    fn default() -> Self {
+        Command::Serve(serve::ServeArgs::default())
+    }
+}
+
+/// Reports `msg` on stderr and exits with `code` (2: bad input, 1: the work failed).
+pub fn fail(code: u8, msg: &str) -> ExitCode {
+    eprintln!("contact-sim: {msg}");
+    ExitCode::from(code)
+}
+
+/// The indented JSON every command prints.
+pub fn pretty(value: &impl serde::Serialize) -> String {
+    serde_json::to_string_pretty(value).expect("JSON")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_argument_definitions_are_consistent() {
+        Cli::command().debug_assert();
+    }
+}

@@ -1,0 +1,141 @@
+//! `contact-sim run`: one simulation, its summary on stdout, its files with --out.
+
+use super::{fail, preset, pretty, progress};
+use clap::Args;
+use contact_core::output::fields::MeshJson;
+use contact_core::scene::{self, presets, Overrides};
+use contact_core::solve::SolverSettings;
+use serde_json::Value;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+#[derive(Args)]
+pub struct RunArgs {
+    /// Scene file (JSON); omit when using --preset.
+    pub scene: Option<PathBuf>,
+    /// A built-in scene instead of a file (see `contact-sim presets`).
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Mesh size: a number or a fraction like 1/32.
+    #[arg(long)]
+    pub h: Option<String>,
+    /// Time step: a number or a fraction like 1/32.
+    #[arg(long)]
+    pub k: Option<String>,
+    /// Final time T.
+    #[arg(long = "t-end")]
+    pub t_end: Option<String>,
+    /// Directory for summary.json, mesh.json and fields/step_NNNNN.json.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Relative optimality residual of the sub-problem solvers.
+    #[arg(long, default_value_t = SolverSettings::default().tolerance)]
+    pub tol: f64,
+}
+
+pub fn main(args: RunArgs) -> ExitCode {
+    let mut doc = match load_scene(args.scene.as_deref(), args.preset.as_deref()) {
+        Ok(d) => d,
+        Err(e) => return fail(2, &e),
+    };
+    // A number stays a number; anything else ("1/32") is for the scene's ratio parser.
+    let to_value = |s: Option<String>| {
+        s.map(|s| {
+            s.parse::<f64>()
+                .map(Value::from)
+                .unwrap_or(Value::String(s))
+        })
+    };
+    let overrides = Overrides {
+        h: to_value(args.h),
+        k: to_value(args.k),
+        t_end: to_value(args.t_end),
+    };
+    scene::apply_overrides(&mut doc, &overrides);
+    let problem = match scene::validate(&doc) {
+        Ok(p) => p,
+        Err(errors) => {
+            eprintln!(
+                "{}",
+                pretty(&serde_json::json!({"title": "invalid scene", "errors": errors}))
+            );
+            return ExitCode::from(2);
+        }
+    };
+    let fields_dir = args.out.as_ref().map(|d| d.join("fields"));
+    if let Some(dir) = &fields_dir {
+        if let Err(e) = std::fs::create_dir_all(dir) {
+            return fail(1, &format!("cannot create {}: {e}", dir.display()));
+        }
+    }
+    let settings = SolverSettings {
+        tolerance: args.tol,
+        ..Default::default()
+    };
+    let bar = progress::bar(problem.steps as u64, "steps");
+    let mut io_error = None;
+    let mut wrote_mesh = false;
+    let result = contact_core::run::run(problem, settings, |sim, r| {
+        bar.inc(1);
+        let Some(dir) = &fields_dir else {
+            return ControlFlow::Continue(());
+        };
+        let mut write = |path: PathBuf, json: String| match std::fs::write(&path, json) {
+            Ok(()) => ControlFlow::Continue(()),
+            Err(e) => {
+                io_error = Some(format!("cannot write {}: {e}", path.display()));
+                ControlFlow::Break(())
+            }
+        };
+        if !wrote_mesh {
+            wrote_mesh = true;
+            write(
+                dir.parent().unwrap().join("mesh.json"),
+                to_json(&MeshJson::new(&sim.mesh)),
+            )?;
+        }
+        if sim.problem.output.stores(r.n, sim.problem.steps) {
+            write(
+                dir.join(format!("step_{:05}.json", r.n)),
+                to_json(&sim.fields()),
+            )?;
+        }
+        ControlFlow::Continue(())
+    });
+    bar.finish_and_clear();
+    match result {
+        Ok(summary) => {
+            let text = pretty(&summary);
+            if let Some(dir) = &args.out {
+                if let Err(e) = std::fs::write(dir.join("summary.json"), &text) {
+                    return fail(1, &format!("cannot write summary.json: {e}"));
+                }
+            }
+            println!("{text}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => fail(1, &io_error.unwrap_or_else(|| e.to_string())),
+    }
+}
+
+/// The scene document of a file or a preset (exactly one of them).
+fn load_scene(path: Option<&Path>, preset: Option<&str>) -> Result<Value, String> {
+    match (path, preset) {
+        (Some(_), Some(_)) => Err("give either a scene file or --preset, not both".into()),
+        (None, None) => {
+            Err("give a scene file or --preset NAME (see `contact-sim presets`)".into())
+        }
+        (None, Some(name)) => presets::get(name).ok_or_else(|| preset::unknown(name)),
+        (Some(p), None) => {
+            let text = std::fs::read_to_string(p)
+                .map_err(|e| format!("cannot read {}: {e}", p.display()))?;
+            serde_json::from_str(&text).map_err(|e| format!("{}: invalid JSON: {e}", p.display()))
+        }
+    }
+}
+
+/// Field and mesh files are compact JSON.
+fn to_json(value: &impl serde::Serialize) -> String {
+    serde_json::to_string(value).expect("JSON")
+}
