@@ -1,10 +1,13 @@
-//! Problem 3.1's time loop. For n = 1..N, from (u_{n−1}, ζ_{n−1}) only:
-//! 1. velocity (3.13) → w_n;     2. u_n = u_{n−1} + k w_n (3.12);
-//! 3. damage (3.10) → ζ_n;       4. σ_n = A ε(w_n) + B_{n−1} (3.8), only when stored.
+//! Problem 3.1's time loop. For n = 1..N, from (u_{n−1}, ζ_{n−1}) only
+//! ([`Simulation::step`]):
+//! 1. B_{n−1} = B(ε(u_{n−1}), ζ_{n−1}) per element (3.8);
+//! 2. velocity load and velocity step (3.13) → w_n  ∥  damage step (3.10) → ζ_n;
+//! 3. u_n = u_{n−1} + k w_n (3.12);
+//! 4. the step's norms; σ_n = A ε(w_n) + B_{n−1} (3.8) only when stored ([`Simulation::fields`]).
 //!
-//! Steps 1 and 3 are independent and run on two threads for meshes large enough to pay for
-//! it. Physics absent from the scene is not computed: no damage block → ζ ≡ 1 and no damage
-//! solve; no Γ3 → a single linear solve per step.
+//! The two sub-problems of step 2 are independent and run on two threads for meshes large
+//! enough to pay for it. Physics absent from the scene is not computed: no damage block → ζ ≡ 1
+//! and no damage solve; no Γ3 → a single linear solve per step.
 
 use super::damage::DamageStep;
 use super::smallness::{self, SmallnessReport};
@@ -94,11 +97,101 @@ pub struct StepFields {
     pub contact: Option<Vec<ContactNode>>,
 }
 
+/// The velocity sub-problem (3.13): its solver and work vectors.
+struct VelocityPart {
+    solver: VelocityStep,
+    /// The velocity load over all DOFs (global, interleaved) ...
+    load: Vec<f64>,
+    /// ... and on the free DOFs.
+    load_free: Vec<f64>,
+    /// w_n on the free DOFs.
+    w_free: Vec<f64>,
+}
+
+/// The damage sub-problem (3.10): its solver and work vectors.
 struct DamagePart {
     solver: DamageStep,
+    /// The linear term M ζ_{n−1}/k + F_{n−1}.
     g: Vec<f64>,
+    /// The source vector F_{n−1}.
     f: Vec<f64>,
+    /// ζ_n once solved; on entry the solver's starting point.
     next: Vec<f64>,
+}
+
+/// What the two sub-problems of step n read, borrowed from the [`Simulation`]: the data, the
+/// discretisation, and the state at t_{n−1} with its per-element ε(u_{n−1}) and B_{n−1}.
+struct StepInput<'a> {
+    n: usize,
+    k: f64,
+    t: f64,
+    problem: &'a Problem,
+    mesh: &'a Mesh,
+    geo: &'a Geometry,
+    dofs: &'a DofMap,
+    settings: &'a SolverSettings,
+    mass: &'a Csr,
+    zeta_prev: &'a [f64],
+    eps: &'a [Tensor2<f64>],
+    b: &'a [Tensor2<f64>],
+}
+
+impl VelocityPart {
+    /// The velocity step (3.13): w_n is the stationary point over V^h of
+    /// E(w) = ½ (A ε(w), ε(w)) + (B_{n−1}, ε(w)) − (f_n, w) + Σ_i ω_i j(w_τ(x_i)),
+    /// its minimiser when j is convex (unique under the smallness condition (2.31)).
+    fn step(&mut self, s: &StepInput) -> Result<SolverReport, SolveError> {
+        self.assemble_load(s)?;
+        s.dofs.to_free(&self.load, &mut self.load_free);
+        self.solver
+            .solve(&self.load_free, &mut self.w_free, s.settings, s.n)
+    }
+
+    /// The velocity load, the linear part of (3.13): (f_n, ψ)_V − (B_{n−1}, ε(ψ))_Q for every
+    /// nodal basis function ψ, with f_n of (2.23) from the body force f0 and the tractions f2
+    /// at t_n. A load that is not finite is reported at the formula responsible.
+    fn assemble_load(&mut self, s: &StepInput) -> Result<(), SolveError> {
+        let load = &mut self.load;
+        load.iter_mut().for_each(|v| *v = 0.0);
+        loads::add_body_force(s.mesh, s.geo, &s.problem.body_force, s.t, load);
+        loads::add_tractions(s.mesh, &s.problem.boundary, s.t, load);
+        if load.iter().any(|v| !v.is_finite()) {
+            return Err(load_fault(s.problem, s.mesh, s.t, s.n));
+        }
+        loads::add_stress_divergence(s.mesh, s.geo, s.b, load);
+        Ok(())
+    }
+}
+
+impl DamagePart {
+    /// The damage step (3.10): ζ_n minimises ½ ζᵀ (M/k + κK) ζ − gᵀζ subject to
+    /// 0 ≤ ζ_i ≤ 1 at every node, g from [`DamagePart::assemble_rhs`].
+    fn step(&mut self, s: &StepInput) -> Result<SolverReport, SolveError> {
+        self.assemble_rhs(s);
+        self.solver.solve(&self.g, &mut self.next, s.settings, s.n)
+    }
+
+    /// g = M ζ_{n−1}/k + F_{n−1} with (F_{n−1})_i = ∫_Ω φ(ε(u_{n−1}), ζ_{n−1}) ψ_i dx: the
+    /// backward difference (3.1) of ζ and the source of (3.10), both at step n−1.
+    fn assemble_rhs(&mut self, s: &StepInput) {
+        let source = s
+            .problem
+            .damage
+            .as_ref()
+            .expect("damage part implies damage data")
+            .source;
+        loads::damage_source(
+            s.mesh,
+            s.geo,
+            s.zeta_prev,
+            |e, z| phi(&source, &s.eps[e], z),
+            &mut self.f,
+        );
+        s.mass.mul_vec(s.zeta_prev, &mut self.g);
+        for (g, f) in self.g.iter_mut().zip(&self.f) {
+            *g = *g / s.k + f;
+        }
+    }
 }
 
 /// The set-up that depends only on the mesh, the boundary, the viscosity and the friction law,
@@ -156,14 +249,11 @@ pub struct Simulation {
     /// w_n of the last step (global, interleaved).
     pub w: Vec<f64>,
     mass: Csr,
-    velocity: VelocityStep,
+    velocity: VelocityPart,
     damage: Option<DamagePart>,
     /// Per-element ε(u_{n−1}) and B_{n−1} of the current step.
     eps: Vec<Tensor2<f64>>,
     b: Vec<Tensor2<f64>>,
-    load: Vec<f64>,
-    load_free: Vec<f64>,
-    w_free: Vec<f64>,
     pub setup_seconds: f64,
 }
 
@@ -255,13 +345,15 @@ impl Simulation {
             },
             w: vec![0.0; 2 * nn],
             mass,
-            velocity,
+            velocity: VelocityPart {
+                solver: velocity,
+                load: vec![0.0; 2 * nn],
+                load_free: vec![0.0; n_free],
+                w_free: vec![0.0; n_free],
+            },
             damage,
             eps: vec![Tensor2::zeros(); nt],
             b: vec![Tensor2::zeros(); nt],
-            load: vec![0.0; 2 * nn],
-            load_free: vec![0.0; n_free],
-            w_free: vec![0.0; n_free],
             setup_seconds: prepared_seconds + start.elapsed().as_secs_f64(),
             problem,
             mesh,
@@ -275,7 +367,7 @@ impl Simulation {
     /// The state with the solvers' warm starts, for a checkpoint.
     pub fn checkpoint_state(&self) -> State {
         State {
-            contact_velocity: self.velocity.contact_velocity().to_vec(),
+            contact_velocity: self.velocity.solver.contact_velocity().to_vec(),
             damage_active: self
                 .damage
                 .as_ref()
@@ -290,8 +382,8 @@ impl Simulation {
         assert_eq!(state.u.len(), self.state.u.len());
         assert_eq!(state.zeta.len(), self.state.zeta.len());
         let warm = std::mem::take(&mut state.contact_velocity);
-        if warm.len() == self.velocity.n_contact() {
-            self.velocity.set_contact_velocity(&warm);
+        if warm.len() == self.velocity.solver.n_contact() {
+            self.velocity.solver.set_contact_velocity(&warm);
         }
         let active = std::mem::take(&mut state.damage_active);
         if let Some(d) = &mut self.damage {
@@ -307,12 +399,22 @@ impl Simulation {
         self.state.step >= self.problem.steps
     }
 
-    /// Advances one time step.
+    /// Advances one time step of Problem 3.1, from (u_{n−1}, ζ_{n−1}) only: B_{n−1}, then the
+    /// velocity step (3.13) ∥ the damage step (3.10), then u_n and ζ_n, then the step's norms.
     pub fn step(&mut self) -> Result<StepReport, SolveError> {
         let n = self.state.step + 1;
         let k = self.problem.k();
         let t = n as f64 * k;
-        // ε(u_{n−1}) per element, shared by B_{n−1} and φ.
+        self.history_stress();
+        let (velocity, damage) = self.solve_sub_problems(n, k, t)?;
+        self.advance(n, k);
+        self.report(n, k, t, velocity, damage)
+    }
+
+    /// B_{n−1} = B(ε(u_{n−1}), ζ̄_{n−1}) on every element, the history term of (3.8) and (3.13),
+    /// with ζ̄ the mean of ζ_{n−1} at the element's vertices (the P0 projection of (3.8) for
+    /// the paper's B (4.1)); keeps ε(u_{n−1}), which the damage source φ reads too.
+    fn history_stress(&mut self) {
         for (e, eps) in self.eps.iter_mut().enumerate() {
             *eps = self.geo.strain(&self.mesh, e, &self.state.u);
         }
@@ -322,73 +424,48 @@ impl Simulation {
             let zbar = (zeta_prev[tri[0]] + zeta_prev[tri[1]] + zeta_prev[tri[2]]) / 3.0;
             self.b[e] = elastic_stress(&elasticity, &self.eps[e], zbar);
         }
+    }
 
+    /// The velocity step (3.13) ∥ the damage step (3.10) of step n: neither reads the other's
+    /// result, so on large meshes the damage step runs on a second thread. A velocity error
+    /// is reported before a damage error.
+    fn solve_sub_problems(
+        &mut self,
+        n: usize,
+        k: f64,
+        t: f64,
+    ) -> Result<(SolverReport, Option<SolverReport>), SolveError> {
         let parallel = self.damage.is_some() && self.mesh.n_nodes() >= PARALLEL_MIN_NODES;
-        let (vel, dam) = {
-            let Simulation {
-                problem,
-                mesh,
-                geo,
-                dofs,
-                settings,
-                state,
-                velocity,
-                damage,
-                eps,
-                b,
-                load,
-                load_free,
-                w_free,
-                mass,
-                ..
-            } = self;
-            let mut velocity_job = || -> Result<SolverReport, SolveError> {
-                load.iter_mut().for_each(|v| *v = 0.0);
-                loads::add_body_force(mesh, geo, &problem.body_force, t, load);
-                loads::add_tractions(mesh, &problem.boundary, t, load);
-                if load.iter().any(|v| !v.is_finite()) {
-                    return Err(load_fault(problem, mesh, t, n));
-                }
-                loads::add_stress_divergence(mesh, geo, b, load);
-                dofs.to_free(load, load_free);
-                velocity.solve(load_free, w_free, settings, n)
-            };
-            let damage_job = |d: &mut DamagePart| -> Result<SolverReport, SolveError> {
-                let dm = problem
-                    .damage
-                    .as_ref()
-                    .expect("damage part implies damage data");
-                let src = dm.source;
-                loads::damage_source(
-                    mesh,
-                    geo,
-                    &state.zeta,
-                    |e, z| phi(&src, &eps[e], z),
-                    &mut d.f,
-                );
-                mass.mul_vec(&state.zeta, &mut d.g);
-                for (g, f) in d.g.iter_mut().zip(&d.f) {
-                    *g = *g / k + f;
-                }
-                let DamagePart {
-                    solver, g, next, ..
-                } = d;
-                solver.solve(g, next, settings, n)
-            };
-            match damage.as_mut() {
-                Some(d) if parallel => std::thread::scope(|s| {
-                    let h = s.spawn(|| damage_job(d));
-                    let v = velocity_job();
-                    (v, Some(h.join().expect("damage thread panicked")))
-                }),
-                Some(d) => (velocity_job(), Some(damage_job(d))),
-                None => (velocity_job(), None),
-            }
+        let input = StepInput {
+            n,
+            k,
+            t,
+            problem: &self.problem,
+            mesh: &self.mesh,
+            geo: &self.geo,
+            dofs: &self.dofs,
+            settings: &self.settings,
+            mass: &self.mass,
+            zeta_prev: &self.state.zeta,
+            eps: &self.eps,
+            b: &self.b,
         };
-        let velocity_report = vel?;
-        let damage_report = dam.transpose()?;
+        let velocity = &mut self.velocity;
+        let (v, d) = match self.damage.as_mut() {
+            Some(d) if parallel => std::thread::scope(|s| {
+                let h = s.spawn(|| d.step(&input));
+                let v = velocity.step(&input);
+                (v, Some(h.join().expect("damage thread panicked")))
+            }),
+            Some(d) => (velocity.step(&input), Some(d.step(&input))),
+            None => (velocity.step(&input), None),
+        };
+        Ok((v?, d.transpose()?))
+    }
 
-        self.dofs.to_global(&self.w_free, &mut self.w);
+    /// u_n = u_{n−1} + k w_n (3.12) and ζ_n from the damage step: the state moves to t_n.
+    fn advance(&mut self, n: usize, k: f64) {
+        self.dofs.to_global(&self.velocity.w_free, &mut self.w);
         for (u, w) in self.state.u.iter_mut().zip(&self.w) {
             *u += k * w;
         }
@@ -396,7 +473,20 @@ impl Simulation {
             self.state.zeta.copy_from_slice(&d.next);
         }
         self.state.step = n;
-        // |w_n|_V and |u_n|_V in one pass: ε(u_n) = ε(u_{n−1}) + k ε(w_n) per element.
+    }
+
+    /// The report of step n: |w_n|_V and |u_n|_V (|v|_V = ‖ε(v)‖_L2(Ω)), |ζ_n|_Z0 =
+    /// (ζ_nᵀ M ζ_n)^½, min ζ_n, the solvers' reports and the slipping Γ3 nodes. A norm that
+    /// is not finite is an error.
+    fn report(
+        &self,
+        n: usize,
+        k: f64,
+        t: f64,
+        velocity: SolverReport,
+        damage: Option<SolverReport>,
+    ) -> Result<StepReport, SolveError> {
+        // Both in one pass: ε(u_n) = ε(u_{n−1}) + k ε(w_n) per element.
         let (mut w2, mut u2) = (0.0, 0.0);
         for (e, eps) in self.eps.iter().enumerate() {
             let ew = self.geo.strain(&self.mesh, e, &self.w);
@@ -416,10 +506,11 @@ impl Simulation {
                 .iter()
                 .cloned()
                 .fold(f64::INFINITY, f64::min),
-            velocity: velocity_report,
-            damage: damage_report,
+            velocity,
+            damage,
             slip_nodes: self
                 .velocity
+                .solver
                 .contact_velocity()
                 .iter()
                 .filter(|x| **x != 0.0)
@@ -467,8 +558,8 @@ impl Simulation {
 
     /// Stick/slip state of every Γ3 DOF after the last step.
     pub fn contact_state(&self) -> Vec<ContactNode> {
-        let x = self.velocity.contact_velocity();
-        let force = self.velocity.contact_force();
+        let x = self.velocity.solver.contact_velocity();
+        let force = self.velocity.solver.contact_force();
         self.dofs
             .contact
             .iter()
@@ -485,15 +576,15 @@ impl Simulation {
 
     /// Dimension and factor size of the velocity system (interior DOFs).
     pub fn velocity_factor_size(&self) -> (usize, usize) {
-        self.velocity.factor_size()
+        self.velocity.solver.factor_size()
     }
 
     /// One forward+backward substitution with the velocity factor on a copy of the current
     /// load (the unit of the benchmark's per-step ratio).
     pub fn time_one_substitution(&mut self) -> f64 {
-        let mut v = self.load_free[..self.dofs.n_interior].to_vec();
+        let mut v = self.velocity.load_free[..self.dofs.n_interior].to_vec();
         let start = Instant::now();
-        self.velocity.substitute(&mut v);
+        self.velocity.solver.substitute(&mut v);
         start.elapsed().as_secs_f64()
     }
 

@@ -1,0 +1,397 @@
+//! The `.vtu` and `.pvd` documents read back with a strict XML parser (roxmltree): structure,
+//! attributes, and every binary array decoded and compared bit for bit.
+
+use super::*;
+use crate::mesh::Mesh;
+use crate::problem::MeshPattern;
+use crate::solve::stepper::ContactNode;
+use base64::Engine;
+use roxmltree::{Document, Node};
+
+/// What the checks below ask of an element.
+trait Element<'a> {
+    /// The attribute's value; panics when it is missing.
+    fn attr(&self, key: &str) -> &'a str;
+    /// The element children, in document order (text and comments left out).
+    fn elements(&self) -> Vec<Node<'a, 'a>>;
+    /// The element children called `name`.
+    fn all(&self, name: &str) -> Vec<Node<'a, 'a>>;
+    /// The only child called `name`.
+    fn child(&self, name: &str) -> Node<'a, 'a>;
+    /// The only `<DataArray>` child with `Name="name"`.
+    fn array(&self, name: &str) -> Node<'a, 'a>;
+    /// The `Name`s of the `<DataArray>` children, in order.
+    fn array_names(&self) -> Vec<&'a str>;
+    /// All text directly inside the element.
+    fn text_content(&self) -> String;
+}
+
+impl<'a> Element<'a> for Node<'a, 'a> {
+    fn attr(&self, key: &str) -> &'a str {
+        self.attribute(key)
+            .unwrap_or_else(|| panic!("<{}> has no attribute {key}", self.tag_name().name()))
+    }
+
+    fn elements(&self) -> Vec<Node<'a, 'a>> {
+        self.children().filter(Node::is_element).collect()
+    }
+
+    fn all(&self, name: &str) -> Vec<Node<'a, 'a>> {
+        self.children()
+            .filter(|c| c.is_element() && c.tag_name().name() == name)
+            .collect()
+    }
+
+    fn child(&self, name: &str) -> Node<'a, 'a> {
+        let found = self.all(name);
+        assert_eq!(
+            found.len(),
+            1,
+            "<{}> has {} <{name}>",
+            self.tag_name().name(),
+            found.len()
+        );
+        found[0]
+    }
+
+    fn array(&self, name: &str) -> Node<'a, 'a> {
+        let found: Vec<_> = self
+            .all("DataArray")
+            .into_iter()
+            .filter(|a| a.attr("Name") == name)
+            .collect();
+        assert_eq!(
+            found.len(),
+            1,
+            "<{}> has {} arrays {name}",
+            self.tag_name().name(),
+            found.len()
+        );
+        found[0]
+    }
+
+    fn array_names(&self) -> Vec<&'a str> {
+        self.all("DataArray")
+            .iter()
+            .map(|a| a.attr("Name"))
+            .collect()
+    }
+
+    fn text_content(&self) -> String {
+        self.children().filter_map(|c| c.text()).collect()
+    }
+}
+
+/// Parses a whole document; anything that is not well-formed XML panics.
+fn parse_xml(doc: &str) -> Document<'_> {
+    Document::parse(doc).unwrap_or_else(|e| panic!("not well-formed XML: {e}"))
+}
+
+/// Decodes an inline binary array: checks the format, the type, the UInt64 byte-count
+/// header against the payload and the payload against tuples × components; returns the
+/// payload.
+fn payload(a: Node, vtk_type: &str, size: usize, tuples: usize, comps: usize) -> Vec<u8> {
+    assert_eq!(a.attr("format"), "binary");
+    assert_eq!(a.attr("type"), vtk_type, "array {}", a.attr("Name"));
+    let declared = match a.attribute("NumberOfComponents") {
+        Some(c) => c.parse().unwrap(),
+        None => 1,
+    };
+    assert_eq!(declared, comps, "components of {}", a.attr("Name"));
+    assert!(a.elements().is_empty());
+    let raw = base64::engine::general_purpose::STANDARD
+        .decode(a.text_content().trim())
+        .expect("valid base64");
+    assert!(raw.len() >= 8);
+    let (head, data) = raw.split_at(8);
+    let count = u64::from_le_bytes(head.try_into().unwrap());
+    assert_eq!(
+        count as usize,
+        data.len(),
+        "byte-count header of {}",
+        a.attr("Name")
+    );
+    assert_eq!(
+        data.len(),
+        tuples * comps * size,
+        "length of {}",
+        a.attr("Name")
+    );
+    data.to_vec()
+}
+
+fn f64s(a: Node, tuples: usize, comps: usize) -> Vec<f64> {
+    payload(a, "Float64", 8, tuples, comps)
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+        .collect()
+}
+
+fn i64s(a: Node, tuples: usize) -> Vec<i64> {
+    payload(a, "Int64", 8, tuples, 1)
+        .chunks_exact(8)
+        .map(|c| i64::from_le_bytes(c.try_into().unwrap()))
+        .collect()
+}
+
+fn vec3(interleaved: &[f64]) -> Vec<f64> {
+    interleaved
+        .chunks_exact(2)
+        .flat_map(|c| [c[0], c[1], 0.0])
+        .collect()
+}
+
+fn hand_built(mesh: &Mesh) -> StepFields {
+    let np = mesh.nodes.len();
+    let nc = mesh.triangles.len();
+    StepFields {
+        n: 7,
+        t: 0.35,
+        u: Some((0..2 * np).map(|i| i as f64 * 1e-3 - 0.01).collect()),
+        w: Some((0..2 * np).map(|i| -(i as f64) / 7.0).collect()),
+        zeta: Some((0..np).map(|i| 1.0 - i as f64 / 100.0).collect()),
+        sigma: Some(
+            (0..nc)
+                .map(|e| [e as f64, -(e as f64) * 2.5, 0.125 * e as f64])
+                .collect(),
+        ),
+        von_mises: Some((0..nc).map(|e| (e as f64).sqrt()).collect()),
+        contact: Some(vec![ContactNode {
+            node: 0,
+            slip_velocity: 0.5,
+            friction_traction: 0.1,
+            bound: 0.2,
+            slipping: true,
+        }]),
+    }
+}
+
+fn render(mesh: &Mesh, f: &StepFields) -> String {
+    let mut buf = Vec::new();
+    write_vtu(&mut buf, &mesh.nodes, &mesh.triangles, f).unwrap();
+    String::from_utf8(buf).expect("UTF-8")
+}
+
+/// Everything every .vtu must satisfy.
+fn check_grid(root: Node, mesh: &Mesh, f: &StepFields) {
+    let np = mesh.nodes.len();
+    let nc = mesh.triangles.len();
+    assert_eq!(root.tag_name().name(), "VTKFile");
+    assert_eq!(root.attr("type"), "UnstructuredGrid");
+    assert_eq!(root.attr("version"), "1.0");
+    assert_eq!(root.attr("byte_order"), "LittleEndian");
+    assert_eq!(root.attr("header_type"), "UInt64");
+    assert_eq!(root.elements().len(), 1);
+    let grid = root.child("UnstructuredGrid");
+    assert_eq!(grid.elements().len(), 2);
+
+    let fd = grid.child("FieldData");
+    let time = fd.array("TimeValue");
+    assert_eq!(time.attr("NumberOfTuples"), "1");
+    assert_eq!(f64s(time, 1, 1)[0].to_bits(), f.t.to_bits());
+    assert_eq!(i64s(fd.array("Step"), 1), [f.n as i64]);
+
+    let piece = grid.child("Piece");
+    assert_eq!(piece.attr("NumberOfPoints"), np.to_string());
+    assert_eq!(piece.attr("NumberOfCells"), nc.to_string());
+
+    let points = piece.child("Points").child("DataArray");
+    let expected: Vec<f64> = mesh.nodes.iter().flat_map(|p| [p[0], p[1], 0.0]).collect();
+    assert_eq!(f64s(points, np, 3), expected);
+
+    let cells = piece.child("Cells");
+    assert_eq!(cells.array_names(), ["connectivity", "offsets", "types"]);
+    let conn = i64s(cells.array("connectivity"), 3 * nc);
+    let tri: Vec<i64> = mesh.triangles.iter().flatten().map(|&i| i as i64).collect();
+    assert_eq!(conn, tri);
+    let offsets = i64s(cells.array("offsets"), nc);
+    assert_eq!(offsets, (1..=nc as i64).map(|c| 3 * c).collect::<Vec<_>>());
+    let types = payload(cells.array("types"), "UInt8", 1, nc, 1);
+    assert!(types.iter().all(|&t| t == 5));
+}
+
+#[test]
+fn vtu_of_all_fields_reads_back() {
+    let mesh = Mesh::rectangle(2.0, 1.0, 4, 2, MeshPattern::Diagonal);
+    let (np, nc) = (mesh.nodes.len(), mesh.triangles.len());
+    assert_eq!((np, nc), (15, 16));
+    let f = hand_built(&mesh);
+    let doc = render(&mesh, &f);
+    let xml = parse_xml(&doc);
+    let root = xml.root_element();
+    check_grid(root, &mesh, &f);
+    let piece = root.child("UnstructuredGrid").child("Piece");
+
+    let pd = piece.child("PointData");
+    assert_eq!(pd.array_names(), ["u", "w", "zeta"]);
+    for (name, v) in [("u", &f.u), ("w", &f.w)] {
+        assert_eq!(f64s(pd.array(name), np, 3), vec3(v.as_ref().unwrap()));
+    }
+    assert_eq!(&f64s(pd.array("zeta"), np, 1), f.zeta.as_ref().unwrap());
+
+    let cd = piece.child("CellData");
+    assert_eq!(cd.array_names(), ["sigma", "von_mises"]);
+    let sigma = cd.array("sigma");
+    assert_eq!(sigma.attr("ComponentName0"), "xx");
+    assert_eq!(sigma.attr("ComponentName1"), "yy");
+    assert_eq!(sigma.attr("ComponentName2"), "xy");
+    let expected: Vec<f64> = f
+        .sigma
+        .as_ref()
+        .unwrap()
+        .iter()
+        .flatten()
+        .copied()
+        .collect();
+    assert_eq!(f64s(sigma, nc, 3), expected);
+    assert_eq!(
+        &f64s(cd.array("von_mises"), nc, 1),
+        f.von_mises.as_ref().unwrap()
+    );
+}
+
+#[test]
+fn vtu_writes_only_the_present_fields() {
+    let mesh = Mesh::rectangle(2.0, 1.0, 4, 2, MeshPattern::Diagonal);
+    let full = hand_built(&mesh);
+    let none = StepFields {
+        u: None,
+        w: None,
+        zeta: None,
+        sigma: None,
+        von_mises: None,
+        contact: None,
+        ..full.clone()
+    };
+    let doc = render(&mesh, &none);
+    let xml = parse_xml(&doc);
+    let root = xml.root_element();
+    check_grid(root, &mesh, &none);
+    let piece = root.child("UnstructuredGrid").child("Piece");
+    assert!(piece.all("PointData").is_empty() && piece.all("CellData").is_empty());
+
+    let some = StepFields {
+        w: full.w.clone(),
+        von_mises: full.von_mises.clone(),
+        ..none.clone()
+    };
+    let doc = render(&mesh, &some);
+    let xml = parse_xml(&doc);
+    let root = xml.root_element();
+    check_grid(root, &mesh, &some);
+    let piece = root.child("UnstructuredGrid").child("Piece");
+    assert_eq!(piece.child("PointData").array_names(), ["w"]);
+    assert_eq!(piece.child("CellData").array_names(), ["von_mises"]);
+}
+
+#[test]
+fn vtu_of_a_larger_mesh_crosses_chunk_boundaries() {
+    // 61 × 41 nodes: every array is larger than one encoder chunk.
+    let mesh = Mesh::rectangle(3.0, 2.0, 60, 40, MeshPattern::Cross);
+    let f = hand_built(&mesh);
+    assert!(8 * 3 * 3 * mesh.triangles.len() > CHUNK_BYTES * 2);
+    let doc = render(&mesh, &f);
+    let xml = parse_xml(&doc);
+    let root = xml.root_element();
+    check_grid(root, &mesh, &f);
+    let piece = root.child("UnstructuredGrid").child("Piece");
+    let np = mesh.nodes.len();
+    let u = f64s(piece.child("PointData").array("u"), np, 3);
+    assert_eq!(u, vec3(f.u.as_ref().unwrap()));
+}
+
+#[test]
+fn vtu_rejects_fields_that_do_not_match_the_mesh() {
+    let mesh = Mesh::rectangle(2.0, 1.0, 4, 2, MeshPattern::Diagonal);
+    let good = hand_built(&mesh);
+    let mut bad = Vec::new();
+    let mut u = good.clone();
+    u.u.as_mut().unwrap().pop();
+    bad.push(u);
+    let mut zeta = good.clone();
+    zeta.zeta.as_mut().unwrap().push(1.0);
+    bad.push(zeta);
+    let mut sigma = good.clone();
+    sigma.sigma.as_mut().unwrap().pop();
+    bad.push(sigma);
+    let mut vm = good.clone();
+    vm.von_mises = Some(Vec::new());
+    bad.push(vm);
+    for f in &bad {
+        let mut buf = Vec::new();
+        let err = write_vtu(&mut buf, &mesh.nodes, &mesh.triangles, f).unwrap_err();
+        assert_eq!(err.kind(), io::ErrorKind::InvalidInput, "{err}");
+        assert!(buf.is_empty(), "nothing is written for invalid input");
+    }
+    let mut triangles = mesh.triangles.clone();
+    triangles[3][1] = mesh.nodes.len();
+    let mut buf = Vec::new();
+    let err = write_vtu(&mut buf, &mesh.nodes, &triangles, &good).unwrap_err();
+    assert_eq!(err.kind(), io::ErrorKind::InvalidInput);
+    assert!(err.to_string().contains("triangle 3"), "{err}");
+    assert!(buf.is_empty());
+}
+
+#[test]
+fn pvd_lists_the_steps_with_escaped_file_names() {
+    let entries = vec![
+        (0.0, "step_0.vtu".to_string()),
+        (0.1, "fields?step=1&format=vtu".to_string()),
+        (1e-7, "a<b>\"c\" 'd'.vtu".to_string()),
+        (2.5e3, "tab\there.vtu".to_string()),
+    ];
+    let mut buf = Vec::new();
+    write_pvd(&mut buf, &entries).unwrap();
+    let doc = String::from_utf8(buf).unwrap();
+    assert!(
+        doc.contains("file=\"fields?step=1&amp;format=vtu\""),
+        "{doc}"
+    );
+    let xml = parse_xml(&doc);
+    let root = xml.root_element();
+    assert_eq!(root.tag_name().name(), "VTKFile");
+    assert_eq!(root.attr("type"), "Collection");
+    assert_eq!(root.attr("version"), "1.0");
+    assert_eq!(root.attr("byte_order"), "LittleEndian");
+    let sets = root.child("Collection").all("DataSet");
+    assert_eq!(sets.len(), entries.len());
+    for (set, (t, file)) in sets.iter().zip(&entries) {
+        assert_eq!(set.attr("timestep").parse::<f64>().unwrap(), *t);
+        assert_eq!(set.attr("group"), "");
+        assert_eq!(set.attr("part"), "0");
+        assert_eq!(set.attr("file"), file);
+        assert!(!set.has_children());
+    }
+
+    let mut buf = Vec::new();
+    write_pvd(&mut buf, &[]).unwrap();
+    let xml = parse_xml(std::str::from_utf8(&buf).unwrap());
+    assert!(xml.root_element().child("Collection").elements().is_empty());
+
+    let mut buf = Vec::new();
+    let err = write_pvd(&mut buf, &[(0.0, "bell\u{7}.vtu".to_string())]).unwrap_err();
+    assert_eq!(err.kind(), io::ErrorKind::InvalidInput);
+    assert!(buf.is_empty());
+}
+
+/// The reader these checks rest on rejects what is not well-formed, so a document that reads
+/// back is one ParaView's XML parser accepts too.
+#[test]
+fn the_test_reader_is_strict() {
+    for bad in [
+        "<a><b></a></b>",
+        "<a>",
+        "<a x=\"1\" x=\"2\"/>",
+        "<a x=\"&\"/>",
+        "<a>&bogus;</a>",
+        "<a/><b/>",
+        "<a x=\"1\"y=\"2\"/>",
+    ] {
+        assert!(Document::parse(bad).is_err(), "accepted {bad:?}");
+    }
+    let xml = parse_xml("<?xml version=\"1.0\"?>\n<a x=\"&lt;&#38;\"><b/>t&amp;</a>\n");
+    let ok = xml.root_element();
+    assert_eq!(ok.attr("x"), "<&");
+    assert_eq!(ok.text_content(), "t&");
+    assert_eq!(ok.child("b").tag_name().name(), "b");
+}
