@@ -205,9 +205,7 @@ fn piped_stderr_carries_no_progress_bar() {
 #[test]
 fn a_terminal_gets_a_progress_bar() {
     let exe = env!("CARGO_BIN_EXE_contact-sim");
-    let command = format!(
-        "'{exe}' run --preset paper-convergence --h 1/4 --k 1/16 --log-format text >/dev/null"
-    );
+    let command = format!("'{exe}' run --preset paper-convergence --h 1/4 --k 1/16 >/dev/null");
     let Ok(out) = Command::new("script")
         .args(["-qec", &command, "/dev/null"])
         .stdin(std::process::Stdio::null())

@@ -2,7 +2,6 @@
 //! command, each with its flags and what it does. `main.rs` parses and dispatches.
 
 pub mod bench;
-pub mod logging;
 pub mod node;
 pub mod preset;
 pub mod progress;
@@ -25,10 +24,6 @@ pub struct Cli {
     /// Without a subcommand: `serve` with its defaults.
     #[command(subcommand)]
     pub command: Option<Command>,
-    /// How log lines on stderr are written: text for people, json (one object a line) for
-    /// log collectors.
-    #[arg(long = "log-format", global = true, value_enum, default_value_t)]
-    pub log_format: logging::LogFormatArg,
 }
 
 #[derive(Subcommand)]
