@@ -206,8 +206,10 @@ fn piped_stderr_carries_no_progress_bar() {
 fn a_terminal_gets_a_progress_bar() {
     let exe = env!("CARGO_BIN_EXE_contact-sim");
     let command = format!("'{exe}' run --preset paper-convergence --h 1/4 --k 1/16 >/dev/null");
+    // indicatif draws nothing on a terminal whose TERM is unset or `dumb` (as under CI).
     let Ok(out) = Command::new("script")
         .args(["-qec", &command, "/dev/null"])
+        .env("TERM", "xterm")
         .stdin(std::process::Stdio::null())
         .output()
     else {
