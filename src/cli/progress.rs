@@ -20,5 +20,8 @@ pub fn bar(len: u64, unit: &str) -> ProgressBar {
     let bar = ProgressBar::new(len).with_style(style);
     // Steps and stress cases can take seconds each: keep the clock moving between them.
     bar.enable_steady_tick(Duration::from_millis(250));
+    // With a ticker installed only the ticker draws: show the bar now, not a tick later, so
+    // that a command shorter than one tick still shows where it was.
+    bar.force_draw();
     bar
 }
