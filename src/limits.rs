@@ -4,9 +4,9 @@
 //! path encoding, body too large, …) into problem+json.
 //!
 //! Clients are told apart by peer IP address (IPv6 by /64 prefix: one host usually owns a
-//! whole /64), which needs `ConnectInfo<SocketAddr>` (the server is started with
-//! `into_make_service_with_connect_info`, see `app::serve`). A request without that
-//! information (a router driven in-process) is not rate-limited.
+//! whole /64), which needs `ConnectInfo<SocketAddr>` (the accept loop in `server` attaches
+//! it to every request). A request without that information (a router driven in-process)
+//! is not rate-limited.
 
 use super::problem::Problem;
 use axum::extract::{ConnectInfo, Request, State};
