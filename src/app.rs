@@ -1,8 +1,8 @@
 //! The router and the server: `app(state)` returns the Router (tests call it on an ephemeral
 //! port), `serve` runs it with the worker pool until shutdown.
 
-use crate::error::ApiError;
 use crate::limits;
+use crate::problem::Problem;
 use crate::routes::{client, jobs, misc, results};
 use crate::state::AppState;
 use axum::extract::DefaultBodyLimit;
@@ -32,9 +32,9 @@ pub fn app(state: AppState) -> Router {
         .route("/openapi.yaml", get(misc::openapi))
         .route("/", get(client::index))
         .route("/client/{file}", get(client::file))
-        .fallback(|| async { ApiError::not_found("no such route; see GET /openapi.yaml") })
+        .fallback(|| async { Problem::not_found("no such route; see GET /openapi.yaml") })
         .method_not_allowed_fallback(|| async {
-            ApiError::new(
+            Problem::new(
                 StatusCode::METHOD_NOT_ALLOWED,
                 "method not allowed",
                 "see GET /openapi.yaml for the methods of each route",

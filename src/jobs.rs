@@ -7,9 +7,11 @@
 //! that dies leaves the job `running` with an expiring lease, and the next claim resumes it
 //! from the last checkpoint.
 
+use super::problem::Problem;
 use super::store::results::ResultFiles;
 use super::store::{JobRecord, JobStatus, Progress, Store, StoreError};
 use super::Config;
+use axum::http::StatusCode;
 use contact_core::estimate::{ErrorEstimator, EstimateRow};
 use contact_core::output::stored::{decode_state, encode_state, encode_step};
 use contact_core::output::Summary;
@@ -153,8 +155,8 @@ impl Runtime {
                 _ => false,
             });
             if let Err(e) = rt.store.watch_for_work(wake) {
-                eprintln!(
-                    "contact-sim: cannot watch for new jobs (workers look every {:.1} s): {e}",
+                tracing::warn!(
+                    "cannot watch for new jobs (workers look every {:.1} s): {e}",
                     rt.idle_wait().as_secs_f64()
                 );
             }
@@ -255,15 +257,25 @@ impl Runtime {
                     });
                 }
                 Err(e) => {
-                    eprintln!("contact-sim: {name}: claim failed: {e}");
+                    tracing::error!(worker = name, "claim failed: {e}");
                     std::thread::sleep(Duration::from_secs(1));
                 }
             }
         }
     }
 
+    /// Runs one claimed job to its end (or interruption) inside a `job` span carrying its
+    /// id, attempt, kind and worker, so that a node's log can be filtered by job.
     fn run(&self, job: JobRecord, worker: &str) {
         let id = job.id;
+        let kind = if is_study(&job.scene) {
+            "study"
+        } else {
+            "simulation"
+        };
+        let span =
+            tracing::info_span!("job", %id, attempt = job.attempt, kind = %kind, worker = %worker);
+        let _entered = span.enter();
         let cancel = Arc::new(AtomicBool::new(job.cancel_requested));
         self.live.lock().unwrap().insert(
             id,
@@ -300,13 +312,10 @@ impl Runtime {
             // The lease is kept until the end is recorded: were the store unreachable for
             // longer than a lease, another worker would otherwise compute the job again.
             let _ = self.with_store_retry(|| self.store.set_progress(id, progress));
+            let error = error.map(|p| p.to_json());
             match self.with_store_retry(|| self.store.finish(id, status, error.clone())) {
-                Ok(()) => eprintln!(
-                    "contact-sim: {worker}: job {id} {} (attempt {})",
-                    status.as_str(),
-                    job.attempt
-                ),
-                Err(e) => eprintln!("contact-sim: cannot record the end of job {id}: {e}"),
+                Ok(()) => tracing::info!("job {id} {} (attempt {})", status.as_str(), job.attempt),
+                Err(e) => tracing::error!("cannot record the end of job {id}: {e}"),
             }
             drop(keeper);
             self.publish(
@@ -334,12 +343,12 @@ impl Runtime {
                 Some(if rec.is_some_and(|r| r.cancel_requested) {
                     Outcome::Cancelled
                 } else {
-                    eprintln!("contact-sim: {worker}: job {id} was taken over by another worker; stopping");
+                    tracing::warn!("job {id} was taken over by another worker; stopping");
                     Outcome::Interrupted
                 })
             }
             Err(e) => {
-                eprintln!("contact-sim: heartbeat of {id} failed: {e}");
+                tracing::warn!("heartbeat of {id} failed: {e}");
                 None
             }
         }
@@ -356,7 +365,7 @@ impl Runtime {
         loop {
             match op() {
                 Err(StoreError::Unavailable(e)) if !self.shutdown.load(Ordering::SeqCst) => {
-                    eprintln!("contact-sim: store unavailable ({e}); retrying in {backoff:?}");
+                    tracing::warn!("store unavailable ({e}); retrying in {backoff:?}");
                     std::thread::sleep(backoff);
                     backoff = (backoff * 2).min(Duration::from_secs(5));
                 }
@@ -370,10 +379,10 @@ impl Runtime {
         job: &JobRecord,
         worker: &str,
         cancel: &AtomicBool,
-    ) -> Result<Outcome, serde_json::Value> {
+    ) -> Result<Outcome, Problem> {
         let id = job.id;
         let problem = scene::validate(&job.scene)
-            .map_err(|e| problem_json(500, "stored scene no longer validates", &e.to_string()))?;
+            .map_err(|e| failure("stored scene no longer validates", &e.to_string()))?;
         let steps = problem.steps;
         let output = problem.output;
         let settings = SolverSettings::default();
@@ -385,11 +394,12 @@ impl Runtime {
         let mut reports: Vec<StepReport> = Vec::new();
         if let Some((resumed, rows)) = self
             .resume(id, &mut sim)
-            .map_err(|e| problem_json(500, "checkpoint unreadable", &e))?
+            .map_err(|e| failure("checkpoint unreadable", &e))?
         {
-            eprintln!(
-                "contact-sim: {worker}: job {id} resumed from step {} (attempt {})",
-                sim.state.step, job.attempt
+            tracing::info!(
+                "job {id} resumed from step {} (attempt {})",
+                sim.state.step,
+                job.attempt
             );
             reports = resumed;
             if let Some(e) = estimator.as_mut() {
@@ -399,7 +409,7 @@ impl Runtime {
         }
         let solve_start = Instant::now();
         let mut last_checkpoint = Instant::now();
-        let io = |e: std::io::Error| problem_json(500, "cannot write results", &e.to_string());
+        let io = |e: std::io::Error| failure("cannot write results", &e.to_string());
         while !sim.finished() {
             if cancel.load(Ordering::SeqCst) {
                 return Ok(Outcome::Cancelled);
@@ -465,10 +475,10 @@ impl Runtime {
         job: &JobRecord,
         worker: &str,
         cancel: &AtomicBool,
-    ) -> Result<Outcome, serde_json::Value> {
+    ) -> Result<Outcome, Problem> {
         let id = job.id;
         let (plan, _) = study::parse(&job.scene["study"], "/study")
-            .map_err(|e| problem_json(500, "stored study no longer validates", &e.to_string()))?;
+            .map_err(|e| failure("stored study no longer validates", &e.to_string()))?;
         let last_beat = Mutex::new(Instant::now());
         // Why a heartbeat stopped the study (cancelled, or taken over by another worker).
         let stopped: Mutex<Option<Outcome>> = Mutex::new(None);
@@ -500,8 +510,7 @@ impl Runtime {
         };
         match study::run(&plan, &self.references, exec, &progress) {
             Ok(result) => {
-                let io =
-                    |e: std::io::Error| problem_json(500, "cannot write results", &e.to_string());
+                let io = |e: std::io::Error| failure("cannot write results", &e.to_string());
                 let json = serde_json::to_vec_pretty(&result).expect("study result serialises");
                 self.results
                     .write_atomic(id, TABLE_FILE, result.text_table().as_bytes())
@@ -527,7 +536,7 @@ impl Runtime {
                     .unwrap_or(Outcome::Interrupted)
             }),
             Err(StudyError::Run(contact_core::run::RunError::Solve(e))) => Err(solve_problem(&e)),
-            Err(e) => Err(problem_json(500, "study failed", &e.to_string())),
+            Err(e) => Err(failure("study failed", &e.to_string())),
         }
     }
 
@@ -540,14 +549,14 @@ impl Runtime {
         sim: &Simulation,
         reports: &[StepReport],
         estimator: Option<&ErrorEstimator>,
-    ) -> Result<(), serde_json::Value> {
+    ) -> Result<(), Problem> {
         match self.save_checkpoint(id, sim, reports, estimator) {
             Ok(()) => Ok(()),
             Err(StoreError::Unavailable(e)) => {
-                eprintln!("contact-sim: checkpoint of {id} skipped, store unavailable: {e}");
+                tracing::warn!("checkpoint of {id} skipped, store unavailable: {e}");
                 Ok(())
             }
-            Err(e) => Err(problem_json(500, "checkpoint failed", &e.to_string())),
+            Err(e) => Err(failure("checkpoint failed", &e.to_string())),
         }
     }
 
@@ -631,29 +640,32 @@ fn eta(l: &Live) -> Option<f64> {
     })
 }
 
-pub fn problem_json(status: u16, title: &str, detail: &str) -> serde_json::Value {
-    serde_json::json!({"type": "about:blank", "title": title, "status": status, "detail": detail})
+/// A job that failed through no fault of its scene (500).
+fn failure(title: &'static str, detail: &str) -> Problem {
+    Problem::new(StatusCode::INTERNAL_SERVER_ERROR, title, detail)
 }
 
-fn solve_problem(e: &SolveError) -> serde_json::Value {
+fn solve_problem(e: &SolveError) -> Problem {
     match e {
-        SolveError::Smallness(_) => {
-            let mut p = problem_json(422, "smallness condition violated", &e.to_string());
-            p["type"] = "/problems/smallness".into();
-            p
-        }
+        SolveError::Smallness(_) => Problem::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "smallness condition violated",
+            e.to_string(),
+        )
+        .with_type("/problems/smallness"),
         // Scene data unusable where the scheme evaluates it (e.g. a load formula infinite at
         // a quadrature point between validation's samples): the scene's fault, at its field.
         SolveError::Data { pointer, message } => {
-            let mut p = problem_json(422, "invalid scene data", &e.to_string());
-            p["type"] = "/problems/scene-data".into();
-            p["errors"] = serde_json::json!([{"pointer": pointer, "message": message}]);
+            let mut p = Problem::field(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid scene data",
+                pointer,
+                message.clone(),
+            )
+            .with_type("/problems/scene-data");
+            p.detail = e.to_string();
             p
         }
-        _ => {
-            let mut p = problem_json(500, "simulation failed", &e.to_string());
-            p["type"] = "/problems/solver".into();
-            p
-        }
+        _ => failure("simulation failed", &e.to_string()).with_type("/problems/solver"),
     }
 }

@@ -31,15 +31,18 @@ impl Keeper {
         let (tx, rx) = mpsc::channel::<()>();
         let worker = worker.to_string();
         let every = Duration::from_secs_f64((lease_s / 3.0).max(0.01));
+        // The job's span (see `jobs`), so that renewal failures are logged as the job's.
+        let span = tracing::Span::current();
         let thread = std::thread::Builder::new()
             .name(format!("{worker}-lease"))
             .spawn(move || {
+                let _entered = span.enter();
                 // Until the sender is dropped (or sends).
                 while let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(every) {
                     // false: cancelled, finished or not this worker's any more; the worker
                     // notices at its next checkpoint. Errors are retried at the next tick.
                     if let Err(e) = store.heartbeat(id, &worker, lease_s) {
-                        eprintln!("contact-sim: lease renewal of {id} failed: {e}");
+                        tracing::warn!("lease renewal of {id} failed: {e}");
                     }
                 }
             })

@@ -5,10 +5,10 @@
 
 pub mod app;
 pub mod config;
-pub mod error;
 pub mod jobs;
 pub mod lease;
 pub mod limits;
+pub mod problem;
 pub mod routes;
 pub mod server;
 pub mod state;

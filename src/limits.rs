@@ -1,86 +1,111 @@
-//! Request limits that sit in front of the handlers: a per-client token bucket on
-//! submissions (429 + `Retry-After`), a cap on the nesting depth of submitted JSON, and the
-//! rewriting of every error response that did not come from [`ApiError`] (axum's extractor
-//! rejections: bad path encoding, bad query, body too large, …) into problem+json.
+//! Request limits that sit in front of the handlers: a per-client limit on submissions
+//! (429 + `Retry-After`), a cap on the nesting depth of submitted JSON, and the rewriting of
+//! every error response that is not a [`Problem`] already (axum's extractor rejections: bad
+//! path encoding, body too large, …) into problem+json.
 //!
 //! Clients are told apart by peer IP address (IPv6 by /64 prefix: one host usually owns a
-//! whole /64), which needs `ConnectInfo<SocketAddr>` (the server is started with
-//! `into_make_service_with_connect_info`, see `app::serve`). A request without that
-//! information (a router driven in-process) is not rate-limited.
+//! whole /64), which needs `ConnectInfo<SocketAddr>` (the accept loop in `server` attaches
+//! it to every request). A request without that information (a router driven in-process)
+//! is not rate-limited.
 
-use super::error::ApiError;
+use super::problem::Problem;
 use axum::extract::{ConnectInfo, Request, State};
 use axum::http::{header, Method, StatusCode};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
-use std::collections::HashMap;
+use governor::clock::{Clock, MonotonicClock};
+use governor::middleware::NoOpMiddleware;
+use governor::state::keyed::HashMapStateStore;
+use governor::Quota;
 use std::net::{IpAddr, Ipv6Addr, SocketAddr};
-use std::sync::{Arc, Mutex};
-use std::time::Instant;
+use std::num::NonZeroU32;
+use std::sync::Arc;
+use std::time::Duration;
 
-/// Above this many tracked clients, buckets that have refilled completely are forgotten
-/// (a full bucket carries no information), so memory stays bounded by the number of
-/// clients active within one refill period.
+/// Above this many tracked clients, those whose allowance has refilled completely are
+/// forgotten (a full allowance carries no information), so memory stays bounded by the
+/// number of clients active within one refill period.
 const PRUNE_AT: usize = 10_000;
 
-#[derive(Debug, Clone, Copy)]
-struct Bucket {
-    tokens: f64,
-    at: Instant,
-}
+/// The longest a client's whole burst may take to refill: slower configured rates are
+/// this slow (governor counts time in u64 nanoseconds, about 584 years).
+const LONGEST_REFILL: Duration = Duration::from_secs(100 * 365 * 86_400);
 
-/// Token buckets per client: `burst` submissions at once, refilled at `rate` per second.
-#[derive(Debug)]
-pub struct RateLimiter {
+type Keyed<C> = governor::RateLimiter<
+    IpAddr,
+    HashMapStateStore<IpAddr>,
+    C,
+    NoOpMiddleware<<C as Clock>::Instant>,
+>;
+
+/// Submissions per client: `burst` at once, one more every 1/`rate` seconds (a token
+/// bucket, as governor's GCRA keyed by client address).
+pub struct RateLimiter<C: Clock = MonotonicClock> {
     rate: f64,
-    burst: f64,
-    buckets: Mutex<HashMap<IpAddr, Bucket>>,
+    burst: u32,
+    /// None: disabled.
+    keyed: Option<Keyed<C>>,
 }
 
 impl RateLimiter {
     /// `rate` ≤ 0 (or not finite) disables the limiter; `burst` is at least 1.
     pub fn new(rate: f64, burst: u32) -> RateLimiter {
+        RateLimiter::with_clock(rate, burst, MonotonicClock)
+    }
+}
+
+impl<C: Clock> RateLimiter<C> {
+    /// [`RateLimiter::new`] reading the time from `clock`.
+    pub fn with_clock(rate: f64, burst: u32, clock: C) -> RateLimiter<C> {
+        let rate = if rate.is_finite() { rate.max(0.0) } else { 0.0 };
+        let burst = NonZeroU32::new(burst.max(1)).expect("at least 1");
+        let keyed = (rate > 0.0)
+            .then(|| {
+                let period = Duration::try_from_secs_f64(1.0 / rate)
+                    .unwrap_or(Duration::MAX)
+                    .min(LONGEST_REFILL / burst.get());
+                Quota::with_period(period.max(Duration::from_nanos(1)))
+            })
+            .flatten()
+            .map(|q| {
+                governor::RateLimiter::new(
+                    q.allow_burst(burst),
+                    HashMapStateStore::default(),
+                    clock,
+                )
+            });
         RateLimiter {
-            rate: if rate.is_finite() { rate.max(0.0) } else { 0.0 },
-            burst: f64::from(burst.max(1)),
-            buckets: Mutex::new(HashMap::new()),
+            rate,
+            burst: burst.get(),
+            keyed,
         }
     }
 
     pub fn enabled(&self) -> bool {
-        self.rate > 0.0
+        self.keyed.is_some()
     }
 
-    /// Takes one token for `client` at time `now`; on refusal, the whole seconds until a
-    /// token is available (at least 1).
-    pub fn take_at(&self, client: IpAddr, now: Instant) -> Result<(), u32> {
-        if !self.enabled() {
+    /// Takes one submission of `client`'s allowance; on refusal, the whole seconds until
+    /// the next one is allowed (at least 1).
+    pub fn take(&self, client: IpAddr) -> Result<(), u32> {
+        let Some(keyed) = &self.keyed else {
             return Ok(());
+        };
+        if keyed.len() >= PRUNE_AT {
+            keyed.retain_recent();
         }
-        let mut map = self.buckets.lock().unwrap_or_else(|e| e.into_inner());
-        if map.len() >= PRUNE_AT && !map.contains_key(&client) {
-            let (rate, burst) = (self.rate, self.burst);
-            map.retain(|_, b| b.tokens + rate * now.duration_since(b.at).as_secs_f64() < burst);
-        }
-        let b = map.entry(client).or_insert(Bucket {
-            tokens: self.burst,
-            at: now,
-        });
-        let elapsed = now.saturating_duration_since(b.at).as_secs_f64();
-        b.tokens = (b.tokens + elapsed * self.rate).min(self.burst);
-        b.at = now;
-        if b.tokens >= 1.0 {
-            b.tokens -= 1.0;
-            Ok(())
-        } else {
-            let wait = ((1.0 - b.tokens) / self.rate).ceil();
-            Err(wait.clamp(1.0, f64::from(u32::MAX)) as u32)
-        }
+        keyed.check_key(&client).map_err(|not_until| {
+            not_until
+                .wait_time_from(keyed.clock().now())
+                .as_secs_f64()
+                .ceil()
+                .clamp(1.0, f64::from(u32::MAX)) as u32
+        })
     }
 
     /// Number of clients currently tracked.
     pub fn tracked(&self) -> usize {
-        self.buckets.lock().map_or(0, |m| m.len())
+        self.keyed.as_ref().map_or(0, |k| k.len())
     }
 }
 
@@ -109,18 +134,18 @@ pub async fn rate_limit(
 ) -> Response {
     if limiter.enabled() && is_submission(&req) {
         if let Some(ConnectInfo(peer)) = req.extensions().get::<ConnectInfo<SocketAddr>>() {
-            if let Err(wait) = limiter.take_at(client_key(peer.ip()), Instant::now()) {
-                let mut e = ApiError::new(
+            if let Err(wait) = limiter.take(client_key(peer.ip())) {
+                return Problem::new(
                     StatusCode::TOO_MANY_REQUESTS,
                     "too many requests",
                     format!(
                         "more than {} submissions per second (bursts of {}) from this client; retry in {wait} s",
                         limiter.rate, limiter.burst
                     ),
-                );
-                e.type_ = "/problems/rate-limited";
-                e.retry_after = Some(wait);
-                return e.into_response();
+                )
+                .with_type("/problems/rate-limited")
+                .retry_after(wait)
+                .into_response();
             }
         }
     }
@@ -155,11 +180,11 @@ fn too_deep(v: &serde_json::Value, limit: usize, path: &mut Vec<String>) -> bool
 
 /// Refuses a document nested deeper than `limit` arrays/objects (422 at the first value
 /// below the limit). Scenes are at most 4 levels deep; anything much deeper is not a scene.
-pub fn check_depth(doc: &serde_json::Value, limit: usize) -> Result<(), ApiError> {
+pub fn check_depth(doc: &serde_json::Value, limit: usize) -> Result<(), Problem> {
     let mut path = Vec::new();
     if too_deep(doc, limit, &mut path) {
         let pointer: String = path.iter().map(|p| format!("/{p}")).collect();
-        return Err(ApiError::invalid_field(
+        return Err(Problem::invalid_field(
             &pointer,
             format!("the document is nested more than {limit} levels deep"),
         ));
@@ -168,7 +193,7 @@ pub fn check_depth(doc: &serde_json::Value, limit: usize) -> Result<(), ApiError
 }
 
 /// Middleware: every error response becomes problem+json. Responses built from
-/// [`ApiError`] pass unchanged; others (axum's rejections, whose body is a short text)
+/// [`Problem`] pass unchanged; others (axum's rejections, whose body is a short text)
 /// are rewritten with that text as `detail`, keeping their status and headers.
 pub async fn problem_json_errors(req: Request, next: Next) -> Response {
     let resp = next.run(req).await;
@@ -189,7 +214,7 @@ pub async fn problem_json_errors(req: Request, next: Next) -> Response {
         _ => status.canonical_reason().unwrap_or("error").to_string(),
     };
     let title = status.canonical_reason().unwrap_or("error");
-    let mut out = ApiError::new(status, title, detail).into_response();
+    let mut out = Problem::new(status, title, detail).into_response();
     for (name, value) in &parts.headers {
         if name != header::CONTENT_TYPE && name != header::CONTENT_LENGTH {
             out.headers_mut().insert(name.clone(), value.clone());
@@ -201,49 +226,54 @@ pub async fn problem_json_errors(req: Request, next: Next) -> Response {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::time::Duration;
+    use governor::clock::FakeRelativeClock;
 
     #[test]
     fn token_bucket_burst_refill_and_retry_after() {
-        let l = RateLimiter::new(2.0, 3);
+        let clock = FakeRelativeClock::default();
+        let l = RateLimiter::with_clock(2.0, 3, clock.clone());
         let ip: IpAddr = "10.0.0.1".parse().unwrap();
         let other: IpAddr = "10.0.0.2".parse().unwrap();
-        let t0 = Instant::now();
         for _ in 0..3 {
-            assert_eq!(l.take_at(ip, t0), Ok(()));
+            assert_eq!(l.take(ip), Ok(()));
         }
-        assert_eq!(l.take_at(ip, t0), Err(1));
+        assert_eq!(l.take(ip), Err(1));
         // Another client has its own bucket.
-        assert_eq!(l.take_at(other, t0), Ok(()));
+        assert_eq!(l.take(other), Ok(()));
         // Half a second at 2/s refills one token.
-        assert_eq!(l.take_at(ip, t0 + Duration::from_millis(500)), Ok(()));
-        assert!(l.take_at(ip, t0 + Duration::from_millis(500)).is_err());
+        clock.advance(Duration::from_millis(500));
+        assert_eq!(l.take(ip), Ok(()));
+        assert!(l.take(ip).is_err());
         // A long pause refills to the burst, not beyond.
-        let t1 = t0 + Duration::from_secs(3600);
+        clock.advance(Duration::from_secs(3600));
         for _ in 0..3 {
-            assert_eq!(l.take_at(ip, t1), Ok(()));
+            assert_eq!(l.take(ip), Ok(()));
         }
-        assert!(l.take_at(ip, t1).is_err());
+        assert!(l.take(ip).is_err());
         // Slow rates give a longer Retry-After.
-        let slow = RateLimiter::new(0.1, 1);
-        assert_eq!(slow.take_at(ip, t0), Ok(()));
-        assert_eq!(slow.take_at(ip, t0), Err(10));
+        let slow = RateLimiter::with_clock(0.1, 1, FakeRelativeClock::default());
+        assert_eq!(slow.take(ip), Ok(()));
+        assert_eq!(slow.take(ip), Err(10));
         // Disabled.
         let off = RateLimiter::new(0.0, 1);
         for _ in 0..100 {
-            assert_eq!(off.take_at(ip, t0), Ok(()));
+            assert_eq!(off.take(ip), Ok(()));
         }
-        assert_eq!(RateLimiter::new(f64::NAN, 1).take_at(ip, t0), Ok(()));
+        assert_eq!(RateLimiter::new(f64::NAN, 1).take(ip), Ok(()));
+        // Absurd rates neither overflow nor divide by zero.
+        let glacial = RateLimiter::new(1e-300, u32::MAX);
+        assert_eq!(glacial.take(ip), Ok(()));
+        assert_eq!(RateLimiter::new(1e300, 1).take(ip), Ok(()));
     }
 
     #[test]
     fn many_clients_are_pruned() {
-        let l = RateLimiter::new(1000.0, 2);
-        let t0 = Instant::now();
+        let clock = FakeRelativeClock::default();
+        let l = RateLimiter::with_clock(1000.0, 2, clock.clone());
         for i in 0..(PRUNE_AT as u32 + 500) {
             let ip = IpAddr::V4(std::net::Ipv4Addr::from(i));
-            let t = t0 + Duration::from_millis(u64::from(i));
-            assert!(l.take_at(ip, t).is_ok());
+            clock.advance(Duration::from_millis(1));
+            assert!(l.take(ip).is_ok());
         }
         assert!(l.tracked() <= PRUNE_AT, "{}", l.tracked());
     }
@@ -265,16 +295,13 @@ mod tests {
         assert!(check_depth(&ok, 3).is_ok());
         let e = check_depth(&ok, 2).unwrap_err();
         assert_eq!(e.status, 422);
-        assert_eq!(e.errors.unwrap()[0]["pointer"], "/a/0");
+        assert_eq!(e.errors.unwrap()[0].pointer, "/a/0");
         let mut deep = serde_json::json!(1);
         for _ in 0..100 {
             deep = serde_json::json!({"x/y": deep});
         }
         let e = check_depth(&deep, 16).unwrap_err();
-        assert!(e.errors.unwrap()[0]["pointer"]
-            .as_str()
-            .unwrap()
-            .starts_with("/x~1y/x~1y"));
+        assert!(e.errors.unwrap()[0].pointer.starts_with("/x~1y/x~1y"));
         assert!(check_depth(&serde_json::json!("scalar"), 0).is_ok());
     }
 }

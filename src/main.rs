@@ -9,6 +9,7 @@ use std::process::ExitCode;
 
 fn main() -> ExitCode {
     let cli = cli::Cli::parse();
+    cli::logging::init(cli.log_format);
     match cli.command.unwrap_or_default() {
         Command::Serve(args) => cli::serve::main(args),
         Command::Worker(args) => cli::worker::main(args),

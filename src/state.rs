@@ -79,10 +79,7 @@ fn connect_waiting(url: &str) -> Result<PgStore, StoreError> {
     loop {
         match PgStore::connect(url) {
             Err(StoreError::Unavailable(e)) if std::time::Instant::now() < deadline => {
-                eprintln!(
-                    "contact-sim: waiting for the database at {} ({e})",
-                    redact(url)
-                );
+                tracing::warn!("waiting for the database at {} ({e})", redact(url));
                 std::thread::sleep(backoff);
                 backoff = (backoff * 2).min(std::time::Duration::from_secs(5));
             }

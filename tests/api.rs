@@ -245,7 +245,12 @@ fn whole_lifecycle_over_http() {
     let tar = get(a, &format!("/jobs/{id}/archive.tar")).body;
     let names = tar_names(&tar);
     assert!(
-        names.contains(&"summary.json".to_string()) && names.contains(&"result.pvd".to_string())
+        names.iter().all(|n| n.starts_with(&format!("{id}/"))),
+        "{names:?}"
+    );
+    assert!(
+        names.contains(&format!("{id}/summary.json"))
+            && names.contains(&format!("{id}/result.pvd"))
     );
     assert_eq!(names.iter().filter(|n| n.ends_with(".vtu")).count(), 8);
 

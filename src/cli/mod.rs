@@ -2,6 +2,7 @@
 //! command, each with its flags and what it does. `main.rs` parses and dispatches.
 
 pub mod bench;
+pub mod logging;
 pub mod node;
 pub mod preset;
 pub mod progress;
@@ -24,6 +25,10 @@ pub struct Cli {
     /// Without a subcommand: `serve` with its defaults.
     #[command(subcommand)]
     pub command: Option<Command>,
+    /// How the log lines on stderr are written: text for people, json (one object a line)
+    /// for log collectors. The level comes from RUST_LOG (default info).
+    #[arg(long = "log-format", global = true, value_enum, default_value_t)]
+    pub log_format: logging::LogFormat,
 }
 
 #[derive(Subcommand)]
@@ -57,10 +62,17 @@ impl Default for Command {
     }
 }
 
-/// Reports `msg` on stderr and exits with `code` (2: bad input, 1: the work failed).
+/// Reports `msg` to the user on stderr and exits with `code` (2: bad input, 1: the work
+/// failed).
 pub fn fail(code: u8, msg: &str) -> ExitCode {
     eprintln!("contact-sim: {msg}");
     ExitCode::from(code)
+}
+
+/// A service node that cannot go on: `msg` goes to its log, exit code 1.
+pub fn fatal(msg: &str) -> ExitCode {
+    tracing::error!("{msg}");
+    ExitCode::FAILURE
 }
 
 /// The indented JSON every command prints.

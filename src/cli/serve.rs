@@ -1,7 +1,7 @@
 //! `contact-sim serve`: the HTTP job service (also what runs without a subcommand).
 
-use super::fail;
 use super::node::{shutdown_signal, NodeArgs};
+use super::{fail, fatal};
 use clap::{Args, FromArgMatches};
 use contact_sim::Config;
 use std::process::ExitCode;
@@ -98,28 +98,31 @@ fn serve(addr: &str, config: Config) -> ExitCode {
         .build()
     {
         Ok(rt) => rt,
-        Err(e) => return fail(1, &format!("cannot start the async runtime: {e}")),
+        Err(e) => return fatal(&format!("cannot start the async runtime: {e}")),
     };
     if config.workers == 0 && config.store.is_none() {
-        eprintln!(
-            "contact-sim: warning: --workers 0 with the embedded store: jobs are accepted but \
-             nothing runs them (an API-only node needs a shared --store and worker nodes)"
+        tracing::warn!(
+            "--workers 0 with the embedded store: jobs are accepted but nothing runs them \
+             (an API-only node needs a shared --store and worker nodes)"
         );
     }
     // Opening a PostgreSQL store blocks: not on the runtime's threads.
     let state = match contact_sim::state::start(config.clone()) {
         Ok(s) => s,
-        Err(e) => return fail(1, &e),
+        Err(e) => return fatal(&e),
     };
     rt.block_on(async {
         let listener = match tokio::net::TcpListener::bind(addr).await {
             Ok(l) => l,
-            Err(e) => return fail(1, &format!("cannot listen on {addr}: {e}")),
+            Err(e) => return fatal(&format!("cannot listen on {addr}: {e}")),
         };
-        eprintln!(
+        tracing::info!(
             "contact-sim {} listening on http://{} (data in {}, store {}, node {}, {} workers)",
             env!("CARGO_PKG_VERSION"),
-            listener.local_addr().map(|a| a.to_string()).unwrap_or_default(),
+            listener
+                .local_addr()
+                .map(|a| a.to_string())
+                .unwrap_or_default(),
             config.data_dir.display(),
             config
                 .store
@@ -130,11 +133,13 @@ fn serve(addr: &str, config: Config) -> ExitCode {
         );
         let shutdown = async {
             shutdown_signal().await;
-            eprintln!("contact-sim: shutting down (running jobs are checkpointed and resume at the next start)");
+            tracing::info!(
+                "shutting down (running jobs are checkpointed and resume at the next start)"
+            );
         };
         match contact_sim::app::serve(listener, state, shutdown).await {
             Ok(()) => ExitCode::SUCCESS,
-            Err(e) => fail(1, &e.to_string()),
+            Err(e) => fatal(&e.to_string()),
         }
     })
 }

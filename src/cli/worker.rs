@@ -1,7 +1,7 @@
 //! `contact-sim worker`: a compute-only node of a shared store.
 
-use super::fail;
 use super::node::{shutdown_signal, NodeArgs};
+use super::{fail, fatal};
 use clap::Args;
 use contact_sim::Config;
 use std::process::ExitCode;
@@ -39,9 +39,9 @@ pub fn main(args: WorkerArgs) -> ExitCode {
 fn work(config: Config) -> ExitCode {
     let rt = match contact_sim::state::open_runtime(config.clone()) {
         Ok(rt) => rt,
-        Err(e) => return fail(1, &e),
+        Err(e) => return fatal(&e),
     };
-    eprintln!(
+    tracing::info!(
         "contact-sim {} worker node {} ({} workers, store {}, results in {})",
         env!("CARGO_PKG_VERSION"),
         config.node,
@@ -57,9 +57,9 @@ fn work(config: Config) -> ExitCode {
         .build()
     {
         Ok(signals) => signals.block_on(shutdown_signal()),
-        Err(e) => return fail(1, &format!("cannot wait for signals: {e}")),
+        Err(e) => return fatal(&format!("cannot wait for signals: {e}")),
     }
-    eprintln!("contact-sim: worker node stopping (running jobs are checkpointed)");
+    tracing::info!("worker node stopping (running jobs are checkpointed)");
     rt.shutdown();
     ExitCode::SUCCESS
 }

@@ -5,7 +5,7 @@
 //! and a new build is picked up at once (the modules import each other by plain relative
 //! names, so no version can be put in their URLs without a build step).
 
-use crate::error::ApiError;
+use crate::problem::Problem;
 use axum::extract::Path;
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -63,9 +63,9 @@ fn etags() -> &'static [String] {
     })
 }
 
-fn serve(name: &str, headers: &HeaderMap) -> Result<Response, ApiError> {
+fn serve(name: &str, headers: &HeaderMap) -> Result<Response, Problem> {
     let i = ASSETS.iter().position(|a| a.name == name).ok_or_else(|| {
-        ApiError::not_found(format!(
+        Problem::not_found(format!(
             "no client file {name:?}; the client is served at GET /"
         ))
     })?;
@@ -98,12 +98,12 @@ fn serve(name: &str, headers: &HeaderMap) -> Result<Response, ApiError> {
 }
 
 /// `GET /`: the client page.
-pub async fn index(headers: HeaderMap) -> Result<Response, ApiError> {
+pub async fn index(headers: HeaderMap) -> Result<Response, Problem> {
     serve("index.html", &headers)
 }
 
 /// `GET /client/{file}`: a module, stylesheet or the page itself.
-pub async fn file(Path(file): Path<String>, headers: HeaderMap) -> Result<Response, ApiError> {
+pub async fn file(Path(file): Path<String>, headers: HeaderMap) -> Result<Response, Problem> {
     serve(&file, &headers)
 }
 

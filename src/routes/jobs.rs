@@ -1,13 +1,14 @@
 //! /jobs: submit (validate, limit, deduplicate, enqueue), list, get (ETag, Retry-After),
 //! cancel, delete, and the Server-Sent Events progress stream.
 
-use super::{blocking, load_job, only_params, parse_id, rfc3339};
-use crate::error::ApiError;
+use super::query::Params;
+use super::{blocking, load_job, parse_id, rfc3339};
 use crate::jobs::{is_study, JobEvent};
+use crate::problem::Problem;
 use crate::state::AppState;
 use crate::store::{Enqueued, JobRecord, JobStatus, NewJob};
 use axum::body::Bytes;
-use axum::extract::{Path, Query, State};
+use axum::extract::{Path, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
@@ -15,7 +16,6 @@ use contact_core::scene::{self, canonical, hex_sha256, presets, Overrides};
 use contact_core::solve::SolverSettings;
 use contact_core::study;
 use serde_json::{json, Value};
-use std::collections::HashMap;
 use std::convert::Infallible;
 use std::time::Duration;
 
@@ -98,13 +98,13 @@ pub fn scene_hash(scene: &Value) -> String {
 }
 
 /// Expands `{"preset": NAME, "overrides": {...}}`; any other document is a scene.
-fn expand(doc: Value) -> Result<(Value, bool), ApiError> {
+fn expand(doc: Value) -> Result<(Value, bool), Problem> {
     let Some(obj) = doc.as_object().filter(|o| o.contains_key("preset")) else {
         return Ok((doc, false));
     };
     for k in obj.keys() {
         if k != "preset" && k != "overrides" {
-            return Err(ApiError::invalid_field(
+            return Err(Problem::invalid_field(
                 &format!("/{k}"),
                 format!("unknown field {k:?} in a preset request (allowed: preset, overrides)"),
             ));
@@ -112,9 +112,9 @@ fn expand(doc: Value) -> Result<(Value, bool), ApiError> {
     }
     let name = obj["preset"]
         .as_str()
-        .ok_or_else(|| ApiError::invalid_field("/preset", "preset must be a string"))?;
+        .ok_or_else(|| Problem::invalid_field("/preset", "preset must be a string"))?;
     let mut scene = presets::get(name).ok_or_else(|| {
-        ApiError::invalid_field(
+        Problem::invalid_field(
             "/preset",
             format!(
                 "unknown preset {name:?}; known: {}",
@@ -126,14 +126,14 @@ fn expand(doc: Value) -> Result<(Value, bool), ApiError> {
     if let Some(ov) = obj.get("overrides") {
         let ov = ov
             .as_object()
-            .ok_or_else(|| ApiError::invalid_field("/overrides", "overrides must be an object"))?;
+            .ok_or_else(|| Problem::invalid_field("/overrides", "overrides must be an object"))?;
         for (k, v) in ov {
             match k.as_str() {
                 "h" => o.h = Some(v.clone()),
                 "k" => o.k = Some(v.clone()),
                 "t_end" => o.t_end = Some(v.clone()),
                 _ => {
-                    return Err(ApiError::invalid_field(
+                    return Err(Problem::invalid_field(
                         &format!("/overrides/{k}"),
                         format!("unknown override {k:?} (allowed: h, k, t_end)"),
                     ))
@@ -146,20 +146,17 @@ fn expand(doc: Value) -> Result<(Value, bool), ApiError> {
 }
 
 /// Maps pointers of an expanded preset back to the request's `overrides`.
-fn map_override_pointers(mut e: ApiError) -> ApiError {
-    if let Some(Value::Array(errors)) = e.errors.as_deref_mut() {
-        for err in errors {
-            let p = err["pointer"].as_str().unwrap_or("");
-            let mapped = match p {
-                "/mesh/h" => "/overrides/h",
-                "/time/k" | "/time/N" => "/overrides/k",
-                "/time/t_end" => "/overrides/t_end",
-                _ => continue,
-            };
-            err["pointer"] = json!(mapped);
-        }
+fn map_override_pointers(mut p: Problem) -> Problem {
+    for err in p.errors.iter_mut().flatten() {
+        let mapped = match err.pointer.as_str() {
+            "/mesh/h" => "/overrides/h",
+            "/time/k" | "/time/N" => "/overrides/k",
+            "/time/t_end" => "/overrides/t_end",
+            _ => continue,
+        };
+        err.pointer = mapped.to_string();
     }
-    e
+    p
 }
 
 /// Per-job limits (nodes, steps, stored bytes), reported at the field that sets them.
@@ -167,7 +164,7 @@ fn check_limits(
     p: &contact_core::problem::Problem,
     state: &AppState,
     is_preset: bool,
-) -> Result<(), ApiError> {
+) -> Result<(), Problem> {
     let cfg = &state.rt.config;
     let (nx, ny) = p.cells();
     let mut nodes = (nx + 1) * (ny + 1);
@@ -180,7 +177,7 @@ fn check_limits(
         ("/mesh/h", "/time/k")
     };
     if nodes > cfg.max_nodes {
-        return Err(ApiError::invalid_field(
+        return Err(Problem::invalid_field(
             hptr,
             format!(
                 "the mesh has {nodes} nodes, more than this server's limit of {}",
@@ -189,7 +186,7 @@ fn check_limits(
         ));
     }
     if p.steps > cfg.max_steps {
-        return Err(ApiError::invalid_field(
+        return Err(Problem::invalid_field(
             kptr,
             format!(
                 "{} time steps, more than this server's limit of {}",
@@ -205,7 +202,7 @@ fn check_limits(
         .filter(|&n| p.output.stores(n, p.steps))
         .count() as u64;
     if per_step * stored > cfg.max_stored_bytes {
-        return Err(ApiError::invalid_field(
+        return Err(Problem::invalid_field(
             "/output",
             format!("the selected output stores about {} MB, more than this server's limit of {} MB; store fewer steps (output.every) or fields", (per_step * stored) >> 20, cfg.max_stored_bytes >> 20),
         ));
@@ -215,12 +212,12 @@ fn check_limits(
 
 /// A study's runs against the per-job limits: the reference (its largest run) must fit the
 /// node limit, all runs together the step limit.
-fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), ApiError> {
+fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), Problem> {
     let cfg = &state.rt.config;
     let (nx, ny) = plan.base.cells();
     let nodes = (nx + 1) * (ny + 1);
     if nodes > cfg.max_nodes {
-        return Err(ApiError::invalid_field(
+        return Err(Problem::invalid_field(
             "/study/reference/h",
             format!(
                 "the reference mesh has {nodes} nodes, more than this server's limit of {}",
@@ -230,7 +227,7 @@ fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), ApiErr
     }
     let steps = study::total_steps(plan);
     if steps > cfg.max_steps {
-        return Err(ApiError::invalid_field(
+        return Err(Problem::invalid_field(
             "/study/reference/k",
             format!(
                 "the study's runs take {steps} time steps in all, more than this server's limit of {}",
@@ -245,11 +242,11 @@ pub async fn submit(
     State(state): State<AppState>,
     headers: HeaderMap,
     body: Bytes,
-) -> Result<Response, ApiError> {
+) -> Result<Response, Problem> {
     if let Some(ct) = headers.get(header::CONTENT_TYPE) {
         let ct = ct.to_str().unwrap_or("");
         if !ct.starts_with("application/json") && !ct.contains("+json") {
-            return Err(ApiError::new(
+            return Err(Problem::new(
                 StatusCode::UNSUPPORTED_MEDIA_TYPE,
                 "unsupported media type",
                 format!("send the scene as application/json, not {ct:?}"),
@@ -257,7 +254,7 @@ pub async fn submit(
         }
     }
     let doc: Value = serde_json::from_slice(&body)
-        .map_err(|e| ApiError::bad_request(format!("malformed JSON: {e}")))?;
+        .map_err(|e| Problem::bad_request(format!("malformed JSON: {e}")))?;
     crate::limits::check_depth(&doc, state.rt.config.max_json_depth)?;
     let (scene_doc, steps) = match doc.get("study") {
         Some(study) => {
@@ -265,13 +262,13 @@ pub async fn submit(
                 .as_object()
                 .and_then(|o| o.keys().find(|k| *k != "study"))
             {
-                return Err(ApiError::invalid_field(
+                return Err(Problem::invalid_field(
                     &format!("/{k}"),
                     format!("unknown field {k:?} next to a study (a study request is {{\"study\": {{...}}}})"),
                 ));
             }
             let (plan, expanded) =
-                study::parse(study, "/study").map_err(|e| ApiError::invalid_scene(&e))?;
+                study::parse(study, "/study").map_err(|e| Problem::invalid_scene(&e))?;
             check_study_limits(&plan, &state)?;
             (json!({ "study": expanded }), study::total_steps(&plan))
         }
@@ -280,7 +277,7 @@ pub async fn submit(
             let problem = match scene::validate(&scene_doc) {
                 Ok(p) => p,
                 Err(errors) => {
-                    let e = ApiError::invalid_scene(&errors);
+                    let e = Problem::invalid_scene(&errors);
                     return Err(if is_preset {
                         map_override_pointers(e)
                     } else {
@@ -299,7 +296,7 @@ pub async fn submit(
                 .ok()
                 .filter(|s| !s.is_empty() && s.len() <= 255)
                 .ok_or_else(|| {
-                    ApiError::bad_request("Idempotency-Key must be 1–255 visible ASCII characters")
+                    Problem::bad_request("Idempotency-Key must be 1–255 visible ASCII characters")
                 })?
                 .to_string(),
         ),
@@ -321,13 +318,12 @@ pub async fn submit(
             .find(|(s, _)| *s == JobStatus::Queued)
             .map_or(0, |(_, n)| n);
         if queued >= capacity {
-            let mut e = ApiError::new(
+            return Err(Problem::new(
                 StatusCode::SERVICE_UNAVAILABLE,
                 "queue full",
                 format!("{queued} jobs are queued (limit {capacity}); retry later"),
-            );
-            e.retry_after = Some(5);
-            return Err(e);
+            )
+            .retry_after(5));
         }
         Ok(store.enqueue(NewJob {
             scene: scene_doc,
@@ -350,7 +346,7 @@ pub async fn submit(
         }
         Enqueued::Existing(rec) => (StatusCode::ACCEPTED, rec),
         Enqueued::KeyConflict(rec) => {
-            return Err(ApiError::new(
+            return Err(Problem::new(
                 StatusCode::UNPROCESSABLE_ENTITY,
                 "idempotency key reused",
                 format!(
@@ -368,33 +364,72 @@ pub async fn submit(
     Ok(resp)
 }
 
-pub async fn list(
-    State(state): State<AppState>,
-    Query(q): Query<HashMap<String, String>>,
-) -> Result<Response, ApiError> {
-    only_params(&q, &["status", "cursor", "limit"])?;
-    let status = match q.get("status") {
-        Some(s) => Some(JobStatus::parse(s).ok_or_else(|| {
-            ApiError::bad_request(format!(
+/// The query of `GET /jobs`.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ListQuery {
+    /// Only jobs in this status.
+    status: Option<StatusParam>,
+    /// Where the page starts: the `next` of the previous page.
+    cursor: Option<Cursor>,
+    /// Jobs per page, 1..=500 (default 50).
+    limit: Option<Limit>,
+}
+
+/// `status`: a job status by name.
+#[derive(Clone, Copy, serde::Deserialize)]
+#[serde(try_from = "String")]
+struct StatusParam(JobStatus);
+
+impl TryFrom<String> for StatusParam {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        JobStatus::parse(&s).map(StatusParam).ok_or_else(|| {
+            format!(
                 "status must be one of queued, running, succeeded, failed, cancelled, not {s:?}"
-            ))
-        })?),
-        None => None,
-    };
-    let limit = match q.get("limit") {
-        Some(l) => l
-            .parse::<usize>()
-            .ok()
-            .filter(|n| (1..=500).contains(n))
-            .ok_or_else(|| ApiError::bad_request("limit must be an integer in 1..=500"))?,
-        None => 50,
-    };
-    let cursor = q.get("cursor").cloned();
-    if let Some(c) = &cursor {
-        if crate::store::parse_cursor(c).is_none() {
-            return Err(ApiError::bad_request(format!("invalid cursor {c:?}")));
+            )
+        })
+    }
+}
+
+/// `cursor`: a page position as the store writes it.
+#[derive(serde::Deserialize)]
+#[serde(try_from = "String")]
+struct Cursor(String);
+
+impl TryFrom<String> for Cursor {
+    type Error = String;
+    fn try_from(c: String) -> Result<Self, String> {
+        match crate::store::parse_cursor(&c) {
+            Some(_) => Ok(Cursor(c)),
+            None => Err(format!("invalid cursor {c:?}")),
         }
     }
+}
+
+/// `limit`: an integer in 1..=500.
+#[derive(serde::Deserialize)]
+#[serde(try_from = "String")]
+struct Limit(usize);
+
+impl TryFrom<String> for Limit {
+    type Error = &'static str;
+    fn try_from(l: String) -> Result<Self, &'static str> {
+        l.parse::<usize>()
+            .ok()
+            .filter(|n| (1..=500).contains(n))
+            .map(Limit)
+            .ok_or("limit must be an integer in 1..=500")
+    }
+}
+
+pub async fn list(
+    State(state): State<AppState>,
+    Params(q): Params<ListQuery>,
+) -> Result<Response, Problem> {
+    let status = q.status.map(|s| s.0);
+    let limit = q.limit.map_or(50, |l| l.0);
+    let cursor = q.cursor.map(|c| c.0);
     let store = state.store().clone();
     let page = blocking(move || Ok(store.list(status, cursor.as_deref(), limit)?)).await?;
     let next = page.next.map(|c| {
@@ -418,7 +453,7 @@ pub async fn get_job(
     State(state): State<AppState>,
     Path(id): Path<String>,
     headers: HeaderMap,
-) -> Result<Response, ApiError> {
+) -> Result<Response, Problem> {
     let rec = load_job(&state, parse_id(&id)?).await?;
     let view = job_view(&rec, &state);
     let body = serde_json::to_vec(&view).unwrap_or_default();
@@ -447,13 +482,13 @@ pub async fn get_job(
 pub async fn cancel(
     State(state): State<AppState>,
     Path(id): Path<String>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, Problem> {
     let id = parse_id(&id)?;
     let store = state.store().clone();
     let rec = blocking(move || {
         store
             .request_cancel(id)?
-            .ok_or_else(|| ApiError::not_found(format!("no job with id {id}")))
+            .ok_or_else(|| Problem::not_found(format!("no job with id {id}")))
     })
     .await?;
     state.rt.cancel(id);
@@ -463,7 +498,7 @@ pub async fn cancel(
         StatusCode::ACCEPTED
     };
     if status == StatusCode::CONFLICT {
-        return Err(ApiError::conflict(format!(
+        return Err(Problem::conflict(format!(
             "job {id} already finished ({})",
             rec.status.as_str()
         )));
@@ -474,11 +509,11 @@ pub async fn cancel(
 pub async fn delete_job(
     State(state): State<AppState>,
     Path(id): Path<String>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, Problem> {
     let id = parse_id(&id)?;
     let rec = load_job(&state, id).await?;
     if !rec.status.is_finished() {
-        return Err(ApiError::conflict(format!(
+        return Err(Problem::conflict(format!(
             "job {id} is {}; cancel it first",
             rec.status.as_str()
         )));
@@ -489,7 +524,7 @@ pub async fn delete_job(
         store.delete(id)?;
         results
             .remove_job(id)
-            .map_err(|e| ApiError::internal(e.to_string()))
+            .map_err(|e| Problem::internal(e.to_string()))
     })
     .await?;
     Ok(StatusCode::NO_CONTENT.into_response())
@@ -500,7 +535,7 @@ pub async fn delete_job(
 pub async fn events(
     State(state): State<AppState>,
     Path(id): Path<String>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, Problem> {
     let id = parse_id(&id)?;
     // Unknown ids are refused before a channel is created for them; then subscribe before
     // reading the record again, so no event between the two is lost.

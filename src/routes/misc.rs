@@ -1,6 +1,6 @@
 //! Presets, health, Prometheus metrics and the OpenAPI document.
 
-use crate::error::ApiError;
+use crate::problem::Problem;
 use crate::state::AppState;
 use crate::store::JobStatus;
 use axum::extract::{Path, State};
@@ -21,16 +21,16 @@ pub async fn presets() -> Json<Value> {
     Json(json!({"presets": list}))
 }
 
-pub async fn preset(Path(name): Path<String>) -> Result<Json<Value>, ApiError> {
+pub async fn preset(Path(name): Path<String>) -> Result<Json<Value>, Problem> {
     presets::get(&name).map(Json).ok_or_else(|| {
-        ApiError::not_found(format!(
+        Problem::not_found(format!(
             "unknown preset {name:?}; known: {}",
             presets::names().join(", ")
         ))
     })
 }
 
-pub async fn healthz(State(state): State<AppState>) -> Result<Json<Value>, ApiError> {
+pub async fn healthz(State(state): State<AppState>) -> Result<Json<Value>, Problem> {
     let store = state.store().clone();
     super::blocking(move || Ok(store.counts()?)).await?;
     Ok(Json(json!({
@@ -42,7 +42,7 @@ pub async fn healthz(State(state): State<AppState>) -> Result<Json<Value>, ApiEr
     })))
 }
 
-pub async fn metrics(State(state): State<AppState>) -> Result<Response, ApiError> {
+pub async fn metrics(State(state): State<AppState>) -> Result<Response, Problem> {
     let store = state.store().clone();
     let counts = super::blocking(move || Ok(store.counts()?)).await?;
     let count = |s: JobStatus| counts.iter().find(|(x, _)| *x == s).map_or(0, |(_, n)| *n);

@@ -2,13 +2,14 @@
 //! mesh, fields as JSON, VTK (.vtu per step, .pvd collection) and one tar archive. Bodies are
 //! streamed from the blocking pool.
 
-use super::{blocking, load_job, only_params, parse_id};
-use crate::error::ApiError;
+use super::query::Params;
+use super::{blocking, load_job, parse_id};
 use crate::jobs::{is_study, parse_step_file, step_file, REPORT_FILE, SUMMARY_FILE, TABLE_FILE};
+use crate::problem::Problem;
 use crate::state::AppState;
 use crate::store::{JobRecord, JobStatus};
 use crate::stream::blocking_body;
-use axum::extract::{Path, Query, State};
+use axum::extract::{Path, State};
 use axum::http::{header, HeaderValue};
 use axum::response::{IntoResponse, Response};
 use contact_core::mesh::Mesh;
@@ -16,16 +17,14 @@ use contact_core::output::fields::MeshJson;
 use contact_core::output::stored::decode_step;
 use contact_core::output::vtk::{write_pvd, write_vtu};
 use contact_core::solve::stepper::StepFields;
-use std::collections::HashMap;
-use std::io::Write;
 use uuid::Uuid;
 
 const FIELD_NAMES: [&str; 6] = ["u", "w", "zeta", "sigma", "von_mises", "contact"];
 
-fn require_succeeded(rec: &JobRecord) -> Result<(), ApiError> {
+fn require_succeeded(rec: &JobRecord) -> Result<(), Problem> {
     match rec.status {
         JobStatus::Succeeded => Ok(()),
-        s => Err(ApiError::conflict(format!(
+        s => Err(Problem::conflict(format!(
             "job {} is {}; results are available once it has succeeded{}",
             rec.id,
             s.as_str(),
@@ -38,17 +37,17 @@ fn require_succeeded(rec: &JobRecord) -> Result<(), ApiError> {
     }
 }
 
-async fn succeeded(state: &AppState, id: &str) -> Result<JobRecord, ApiError> {
+async fn succeeded(state: &AppState, id: &str) -> Result<JobRecord, Problem> {
     let rec = load_job(state, parse_id(id)?).await?;
     require_succeeded(&rec)?;
     Ok(rec)
 }
 
 /// A succeeded simulation (the per-step results of a study are its table, not fields).
-async fn simulation(state: &AppState, id: &str) -> Result<JobRecord, ApiError> {
+async fn simulation(state: &AppState, id: &str) -> Result<JobRecord, Problem> {
     let rec = load_job(state, parse_id(id)?).await?;
     if is_study(&rec.scene) {
-        return Err(ApiError::not_found(format!(
+        return Err(Problem::not_found(format!(
             "job {} is a convergence study: it has no fields; see /jobs/{}/summary and /jobs/{}/report.svg",
             rec.id, rec.id, rec.id
         )));
@@ -62,14 +61,14 @@ async fn result_file(
     state: &AppState,
     rec: &JobRecord,
     file: &'static str,
-) -> Result<Vec<u8>, ApiError> {
+) -> Result<Vec<u8>, Problem> {
     let results = state.rt.results.clone();
     let id = rec.id;
     blocking(move || {
         results
             .read(id, file)
-            .map_err(|e| ApiError::internal(e.to_string()))?
-            .ok_or_else(|| ApiError::internal(format!("{file} missing")))
+            .map_err(|e| Problem::internal(e.to_string()))?
+            .ok_or_else(|| Problem::internal(format!("{file} missing")))
     })
     .await
 }
@@ -96,21 +95,21 @@ fn with_type(bytes: Vec<u8>, content_type: &'static str) -> Response {
 }
 
 /// The mesh is not stored: it is regenerated (deterministically) from the stored scene.
-fn mesh_of(rec: &JobRecord) -> Result<(Mesh, f64), ApiError> {
+fn mesh_of(rec: &JobRecord) -> Result<(Mesh, f64), Problem> {
     let p = contact_core::scene::validate(&rec.scene)
-        .map_err(|e| ApiError::internal(format!("stored scene: {e}")))?;
+        .map_err(|e| Problem::internal(format!("stored scene: {e}")))?;
     let (nx, ny) = p.cells();
     let mut mesh = Mesh::rectangle(p.width, p.height, nx, ny, p.pattern);
     mesh.tag_boundary(&p.boundary.iter().map(|b| b.segment).collect::<Vec<_>>());
     Ok((mesh, p.k()))
 }
 
-fn stored_steps(state: &AppState, id: Uuid) -> Result<Vec<usize>, ApiError> {
+fn stored_steps(state: &AppState, id: Uuid) -> Result<Vec<usize>, Problem> {
     let mut steps: Vec<usize> = state
         .rt
         .results
         .list(id)
-        .map_err(|e| ApiError::internal(e.to_string()))?
+        .map_err(|e| Problem::internal(e.to_string()))?
         .iter()
         .filter_map(|n| parse_step_file(n))
         .collect();
@@ -118,21 +117,21 @@ fn stored_steps(state: &AppState, id: Uuid) -> Result<Vec<usize>, ApiError> {
     Ok(steps)
 }
 
-fn pick_step(steps: &[usize], spec: &str) -> Result<usize, ApiError> {
+fn pick_step(steps: &[usize], spec: &str) -> Result<usize, Problem> {
     let want = if spec == "last" {
         *steps.last().ok_or_else(|| {
-            ApiError::not_found("this job stored no steps (see the scene's output selection)")
+            Problem::not_found("this job stored no steps (see the scene's output selection)")
         })?
     } else {
         spec.parse::<usize>().map_err(|_| {
-            ApiError::bad_request(format!(
+            Problem::bad_request(format!(
                 "step must be a step number or \"last\", not {spec:?}"
             ))
         })?
     };
     if steps.binary_search(&want).is_err() {
         let shown: Vec<String> = steps.iter().take(20).map(|s| s.to_string()).collect();
-        return Err(ApiError::not_found(format!(
+        return Err(Problem::not_found(format!(
             "step {want} is not stored; stored steps: {}{}",
             shown.join(", "),
             if steps.len() > 20 { ", …" } else { "" }
@@ -141,35 +140,52 @@ fn pick_step(steps: &[usize], spec: &str) -> Result<usize, ApiError> {
     Ok(want)
 }
 
-fn load_step(state: &AppState, id: Uuid, n: usize) -> Result<StepFields, ApiError> {
+fn load_step(state: &AppState, id: Uuid, n: usize) -> Result<StepFields, Problem> {
     let bytes = state
         .rt
         .results
         .read(id, &step_file(n))
-        .map_err(|e| ApiError::internal(e.to_string()))?
-        .ok_or_else(|| ApiError::not_found(format!("step {n} is not stored")))?;
-    decode_step(&bytes).map_err(|e| ApiError::internal(format!("stored step {n} is corrupt: {e}")))
+        .map_err(|e| Problem::internal(e.to_string()))?
+        .ok_or_else(|| Problem::not_found(format!("step {n} is not stored")))?;
+    decode_step(&bytes).map_err(|e| Problem::internal(format!("stored step {n} is corrupt: {e}")))
+}
+
+/// The query of `/jobs/{id}/summary`.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SummaryQuery {
+    /// `json` (the default) or, for studies, `text` (the paper's table layout).
+    format: Option<SummaryFormat>,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(try_from = "String")]
+enum SummaryFormat {
+    Json,
+    Text,
+}
+
+impl TryFrom<String> for SummaryFormat {
+    type Error = String;
+    fn try_from(o: String) -> Result<Self, String> {
+        match o.as_str() {
+            "json" => Ok(SummaryFormat::Json),
+            "text" => Ok(SummaryFormat::Text),
+            _ => Err(format!("format must be json or text, not {o:?}")),
+        }
+    }
 }
 
 /// `?format=json` (default) or, for studies, `?format=text` (the paper's table layout).
 pub async fn summary(
     State(state): State<AppState>,
     Path(id): Path<String>,
-    Query(q): Query<HashMap<String, String>>,
-) -> Result<Response, ApiError> {
-    only_params(&q, &["format"])?;
-    let text = match q.get("format").map(String::as_str) {
-        None | Some("json") => false,
-        Some("text") => true,
-        Some(o) => {
-            return Err(ApiError::bad_request(format!(
-                "format must be json or text, not {o:?}"
-            )))
-        }
-    };
+    Params(q): Params<SummaryQuery>,
+) -> Result<Response, Problem> {
+    let text = q.format == Some(SummaryFormat::Text);
     let rec = succeeded(&state, &id).await?;
     if text && !is_study(&rec.scene) {
-        return Err(ApiError::bad_request(
+        return Err(Problem::bad_request(
             "format=text is the error table of a study; a simulation's summary is JSON",
         ));
     }
@@ -190,10 +206,10 @@ pub async fn summary(
 pub async fn report(
     State(state): State<AppState>,
     Path(id): Path<String>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, Problem> {
     let rec = succeeded(&state, &id).await?;
     if !is_study(&rec.scene) {
-        return Err(ApiError::not_found(format!(
+        return Err(Problem::not_found(format!(
             "job {} is a simulation; reports are drawn for convergence studies (POST /jobs with {{\"study\": ...}}, or a scene with \"error_estimate\": true for an error bar)",
             rec.id
         )));
@@ -207,7 +223,7 @@ pub async fn report(
 pub async fn mesh(
     State(state): State<AppState>,
     Path(id): Path<String>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, Problem> {
     let rec = simulation(&state, &id).await?;
     Ok(blocking_body("application/json", move |w| {
         let (mesh, _) = mesh_of(&rec).map_err(|e| std::io::Error::other(e.detail))?;
@@ -224,38 +240,69 @@ struct FieldsDoc<'a> {
     fields: &'a StepFields,
 }
 
+/// The query of `/jobs/{id}/fields`.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FieldsQuery {
+    /// A stored step's number or `last` (the default). Checked once the job is known to be
+    /// a succeeded simulation: an unknown job is 404 whatever the step says.
+    step: Option<String>,
+    /// A comma-separated subset of [`FIELD_NAMES`] (default: all; empty items are skipped).
+    fields: Option<FieldList>,
+    /// `1`/`true` adds the mesh, `0`/`false` (the default) does not.
+    mesh: Option<Flag>,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(try_from = "String")]
+struct FieldList(Vec<String>);
+
+impl TryFrom<String> for FieldList {
+    type Error = String;
+    fn try_from(list: String) -> Result<Self, String> {
+        let wanted: Vec<String> = list
+            .split(',')
+            .map(|s| s.trim().to_string())
+            .filter(|s| !s.is_empty())
+            .collect();
+        match wanted.iter().find(|f| !FIELD_NAMES.contains(&f.as_str())) {
+            Some(bad) => Err(format!(
+                "unknown field {bad:?}; fields are {}",
+                FIELD_NAMES.join(", ")
+            )),
+            None => Ok(FieldList(wanted)),
+        }
+    }
+}
+
+#[derive(serde::Deserialize)]
+#[serde(try_from = "String")]
+struct Flag(bool);
+
+impl TryFrom<String> for Flag {
+    type Error = String;
+    fn try_from(o: String) -> Result<Self, String> {
+        match o.as_str() {
+            "0" | "false" => Ok(Flag(false)),
+            "1" | "true" => Ok(Flag(true)),
+            _ => Err(format!("mesh must be 1 or 0, not {o:?}")),
+        }
+    }
+}
+
 /// `?step=N|last&fields=u,w,zeta,sigma,von_mises,contact&mesh=1`.
 pub async fn fields(
     State(state): State<AppState>,
     Path(id): Path<String>,
-    Query(q): Query<HashMap<String, String>>,
-) -> Result<Response, ApiError> {
-    only_params(&q, &["step", "fields", "mesh"])?;
-    let wanted: Vec<String> = match q.get("fields") {
-        Some(list) => list
-            .split(',')
-            .map(|s| s.trim().to_string())
-            .filter(|s| !s.is_empty())
-            .collect(),
+    Params(q): Params<FieldsQuery>,
+) -> Result<Response, Problem> {
+    let wanted: Vec<String> = match q.fields {
+        Some(list) => list.0,
         None => FIELD_NAMES.iter().map(|s| s.to_string()).collect(),
     };
-    if let Some(bad) = wanted.iter().find(|f| !FIELD_NAMES.contains(&f.as_str())) {
-        return Err(ApiError::bad_request(format!(
-            "unknown field {bad:?}; fields are {}",
-            FIELD_NAMES.join(", ")
-        )));
-    }
-    let with_mesh = match q.get("mesh").map(String::as_str) {
-        None | Some("0") | Some("false") => false,
-        Some("1") | Some("true") => true,
-        Some(o) => {
-            return Err(ApiError::bad_request(format!(
-                "mesh must be 1 or 0, not {o:?}"
-            )))
-        }
-    };
+    let with_mesh = q.mesh.is_some_and(|m| m.0);
     let rec = simulation(&state, &id).await?;
-    let spec = q.get("step").cloned().unwrap_or_else(|| "last".into());
+    let spec = q.step.unwrap_or_else(|| "last".into());
     let st = state.clone();
     let job = rec.id;
     let mut f = blocking(move || {
@@ -305,11 +352,11 @@ pub async fn fields(
 pub async fn vtu(
     State(state): State<AppState>,
     Path((id, file)): Path<(String, String)>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, Problem> {
     let spec = file
         .strip_suffix(".vtu")
         .ok_or_else(|| {
-            ApiError::not_found(format!(
+            Problem::not_found(format!(
                 "{file:?}: fields files are named N.vtu or last.vtu"
             ))
         })?
@@ -331,7 +378,7 @@ pub async fn vtu(
 pub async fn pvd(
     State(state): State<AppState>,
     Path(id): Path<String>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, Problem> {
     let rec = simulation(&state, &id).await?;
     let st = state.clone();
     let id = rec.id;
@@ -346,27 +393,39 @@ pub async fn pvd(
     }))
 }
 
-/// One uncompressed tar (POSIX ustar) with scene.json, summary.json, result.pvd and
-/// fields/step_NNNNNN.vtu for every stored step; each member is rendered just before it is
-/// written.
+/// One uncompressed tar (POSIX ustar) whose members all sit in one folder named after the
+/// job: `<id>/scene.json`, `<id>/summary.json`, `<id>/result.pvd` and
+/// `<id>/fields/step_NNNNNN.vtu` for every stored step. Each member is rendered just before
+/// it is written, so the archive is streamed, never held whole.
 pub async fn archive(
     State(state): State<AppState>,
     Path(id): Path<String>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, Problem> {
     let rec = simulation(&state, &id).await?;
     let st = state.clone();
     let mut resp = blocking_body("application/x-tar", move |w| {
-        let io = |e: ApiError| std::io::Error::other(e.detail);
+        let io = |e: Problem| std::io::Error::other(e.detail);
         let id = rec.id;
         let steps = stored_steps(&st, id).map_err(io)?;
         let (mesh, k) = mesh_of(&rec).map_err(io)?;
-        tar_member(
-            w,
+        let mut tar = tar::Builder::new(w);
+        let mtime = crate::store::now() as u64;
+        let mut member = |name: &str, data: &[u8]| {
+            let mut h = tar::Header::new_ustar();
+            h.set_entry_type(tar::EntryType::Regular);
+            h.set_mode(0o644);
+            h.set_uid(0);
+            h.set_gid(0);
+            h.set_size(data.len() as u64);
+            h.set_mtime(mtime);
+            tar.append_data(&mut h, format!("{id}/{name}"), data)
+        };
+        member(
             "scene.json",
             &serde_json::to_vec_pretty(&rec.scene).unwrap_or_default(),
         )?;
         let summary = st.rt.results.read(id, SUMMARY_FILE)?.unwrap_or_default();
-        tar_member(w, "summary.json", &summary)?;
+        member("summary.json", &summary)?;
         let name = |n: usize| format!("fields/step_{n:06}.vtu");
         let mut pvd = Vec::new();
         write_pvd(
@@ -376,14 +435,14 @@ pub async fn archive(
                 .map(|&n| (n as f64 * k, name(n)))
                 .collect::<Vec<_>>(),
         )?;
-        tar_member(w, "result.pvd", &pvd)?;
+        member("result.pvd", &pvd)?;
         for n in steps {
             let f = load_step(&st, id, n).map_err(io)?;
             let mut buf = Vec::new();
             write_vtu(&mut buf, &mesh.nodes, &mesh.triangles, &f)?;
-            tar_member(w, &name(n), &buf)?;
+            member(&name(n), &buf)?;
         }
-        w.write_all(&[0u8; 1024])
+        tar.finish()
     });
     let disp = format!(
         "attachment; filename=\"contact-sim-{}.tar\"",
@@ -394,26 +453,4 @@ pub async fn archive(
         HeaderValue::from_str(&disp).expect("ASCII"),
     );
     Ok(resp)
-}
-
-/// Writes one regular-file member of a ustar archive (names < 100 bytes).
-fn tar_member(w: &mut dyn Write, name: &str, data: &[u8]) -> std::io::Result<()> {
-    let mut h = [0u8; 512];
-    h[..name.len()].copy_from_slice(name.as_bytes());
-    h[100..108].copy_from_slice(b"0000644\0");
-    h[108..116].copy_from_slice(b"0000000\0");
-    h[116..124].copy_from_slice(b"0000000\0");
-    h[124..136].copy_from_slice(format!("{:011o}\0", data.len()).as_bytes());
-    let mtime = crate::store::now() as u64;
-    h[136..148].copy_from_slice(format!("{mtime:011o}\0").as_bytes());
-    h[156] = b'0';
-    h[257..263].copy_from_slice(b"ustar\0");
-    h[263..265].copy_from_slice(b"00");
-    h[148..156].copy_from_slice(b"        ");
-    let sum: u32 = h.iter().map(|&b| b as u32).sum();
-    h[148..156].copy_from_slice(format!("{sum:06o}\0 ").as_bytes());
-    w.write_all(&h)?;
-    w.write_all(data)?;
-    let pad = (512 - data.len() % 512) % 512;
-    w.write_all(&vec![0u8; pad])
 }

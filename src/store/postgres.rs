@@ -328,14 +328,14 @@ fn listen(config: Config, wake: Wake) {
         let mut client = match config.connect(NoTls) {
             Ok(c) => c,
             Err(e) => {
-                eprintln!("contact-sim: job notifications: cannot connect: {e}");
+                tracing::warn!("job notifications: cannot connect: {e}");
                 std::thread::sleep(backoff);
                 backoff = (backoff * 2).min(Duration::from_secs(5));
                 continue;
             }
         };
         if let Err(e) = client.batch_execute(&format!("LISTEN {CHANNEL}")) {
-            eprintln!("contact-sim: job notifications: LISTEN failed: {e}");
+            tracing::warn!("job notifications: LISTEN failed: {e}");
             std::thread::sleep(backoff);
             continue;
         }
@@ -359,7 +359,7 @@ fn listen(config: Config, wake: Wake) {
                     }
                 }
                 Err(e) => {
-                    eprintln!("contact-sim: job notifications: connection lost: {e}");
+                    tracing::warn!("job notifications: connection lost: {e}");
                     break;
                 }
                 Ok(None) => {
