@@ -620,12 +620,13 @@ fn invalid_leases_are_rejected(f: &Fixture) {
     assert!(store.claim("w", 1.0, 3).unwrap().is_some());
 }
 
-/// Four workers claim 50 jobs at once, two through the fixture's handle and two through
+/// Six workers claim 50 jobs at once, two through the fixture's handle and four through
 /// connections of their own: each job is claimed (at its first attempt) and finished once.
 fn concurrent_claims_take_each_job_once(f: &Fixture) {
     let jobs: HashSet<Uuid> = (0..50).map(|n| enqueue(&*f.store, n).id).collect();
-    let own: Vec<Box<dyn Store>> = (0..2).map(|_| (f.connect)()).collect();
-    let handles: Vec<&dyn Store> = vec![&*f.store, &*f.store, &*own[0], &*own[1]];
+    let own: Vec<Box<dyn Store>> = (0..4).map(|_| (f.connect)()).collect();
+    let mut handles: Vec<&dyn Store> = vec![&*f.store, &*f.store];
+    handles.extend(own.iter().map(|s| &**s));
     let claimed: Vec<Uuid> = std::thread::scope(|s| {
         let workers: Vec<_> = handles
             .into_iter()

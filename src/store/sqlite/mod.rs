@@ -482,7 +482,8 @@ impl Store for SqliteStore {
 
     /// In one immediate transaction, takes the oldest job (lowest `seq`) that is either
     /// `queued` (and not cancel-requested) or `running` with an expired lease
-    /// (`lease_until < now`: its worker died or hung).
+    /// (`lease_until < now`: its worker died or hung), and applies the claim policy
+    /// (`super::claim`, the same for both backends):
     ///
     /// * If that job was already claimed `max_attempts` times in a row without saving a
     ///   new checkpoint in between (and none since), it is marked `failed` with a
