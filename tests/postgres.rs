@@ -1,9 +1,10 @@
 //! The shared PostgreSQL job store, on a real server from Debian's packages (started by
 //! the test, see `service_support::postgres`; skipped when absent unless `CI` is set).
 //!
-//! * `pg_store_contract`: the store's semantics, statement by statement (the same rules the
-//!   SQLite store's unit tests check), plus concurrent claims from separate connections and
-//!   reconnection after the server restarts.
+//! * `pg_store_contract`: the job store's contract (`service_support::store_contract`, the
+//!   one tests/store.rs runs against SQLite), each case on a fresh database of one server.
+//! * `pg_store_migrations_and_reconnection`: migrations applied once and a newer schema
+//!   refused; reconnection after the server stops and starts again.
 //! * `three_workers_one_api`: one API-only node and three worker processes on one database:
 //!   50 jobs, each finished exactly once, spread over the workers.
 //! * `kill_9_worker_mid_job`: the worker running a long job is killed; another worker
@@ -16,260 +17,69 @@ mod service_support;
 
 use contact_core::output::stored::decode_step;
 use contact_sim::store::postgres::PgStore;
-use contact_sim::store::{Enqueued, JobStatus, NewJob, Progress, Store, StoreError};
+use contact_sim::store::{Enqueued, JobStatus, NewJob, Store, StoreError};
 use serde_json::{json, Value};
 use service_support::postgres::*;
+use service_support::store_contract::{self, Fixture};
 use service_support::*;
 use std::collections::{HashMap, HashSet};
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
-
-fn new_job(n: usize, key: Option<&str>) -> NewJob {
-    NewJob {
-        scene: json!({"name": format!("job {n}"), "n": n}),
-        scene_hash: format!("hash-{n}"),
-        steps: 10,
-        idempotency_key: key.map(str::to_string),
-        request_hash: key.map(|k| format!("req-{k}")),
-    }
-}
-
-fn enqueue(store: &PgStore, n: usize) -> uuid::Uuid {
-    match store.enqueue(new_job(n, None)).unwrap() {
-        Enqueued::New(j) => j.id,
-        other => panic!("{other:?}"),
-    }
-}
-
-/// Finishes every claimable job (so that a section starts with an empty queue).
-fn drain(store: &PgStore) {
-    while let Some(j) = store.claim("drain", 60.0, 100).unwrap() {
-        store.finish(j.id, JobStatus::Cancelled, None).unwrap();
-    }
-}
 
 #[test]
 fn pg_store_contract() {
     let Some(pg) = Postgres::start("contract") else {
         return;
     };
+    let cases = store_contract::run("PostgreSQL", |case| {
+        let url = pg.create_database(case);
+        Fixture {
+            store: Box::new(PgStore::connect(&url).unwrap()),
+            connect: Box::new(move || Box::new(PgStore::connect(&url).unwrap())),
+        }
+    });
+    eprintln!("PostgreSQL: {cases} contract cases passed");
+}
+
+/// What only the PostgreSQL store has: versioned migrations in the database, and a
+/// connection that comes back by itself after the server went away.
+#[test]
+fn pg_store_migrations_and_reconnection() {
+    let Some(pg) = Postgres::start("migrations") else {
+        return;
+    };
     let store = PgStore::connect(&pg.url()).unwrap();
 
-    // Migrations: applied once, idempotent at the next connect; a newer schema is refused.
+    // Migrations: applied once, idempotent at the next connect.
     assert_eq!(store.schema_version().unwrap(), 1);
     let again = PgStore::connect(&pg.url()).unwrap();
     assert_eq!(again.schema_version().unwrap(), 1);
 
-    // Enqueue, get, idempotency keys.
-    let r = match store.enqueue(new_job(1, Some("k1"))).unwrap() {
-        Enqueued::New(r) => r,
-        other => panic!("{other:?}"),
+    let job = NewJob {
+        scene: json!({"name": "job"}),
+        scene_hash: "hash".into(),
+        steps: 10,
+        idempotency_key: None,
+        request_hash: None,
     };
-    assert_eq!(
-        (r.status, r.attempt, r.progress.steps, r.scene["n"].as_u64()),
-        (JobStatus::Queued, 0, 10, Some(1))
-    );
-    assert_eq!(store.get(r.id).unwrap().unwrap(), r);
-    assert!(store.get(uuid::Uuid::new_v4()).unwrap().is_none());
-    assert!(
-        matches!(store.enqueue(new_job(1, Some("k1"))).unwrap(), Enqueued::Existing(e) if e.id == r.id)
-    );
-    let mut other_body = new_job(2, Some("k1"));
-    other_body.request_hash = Some("different".into());
-    assert!(matches!(store.enqueue(other_body).unwrap(), Enqueued::KeyConflict(e) if e.id == r.id));
-
-    // Claims: oldest first, attempt counted, heartbeat only for the holder.
-    let id2 = enqueue(&store, 2);
-    let c = store.claim("w-a", 60.0, 3).unwrap().unwrap();
-    assert_eq!((c.id, c.status, c.attempt), (r.id, JobStatus::Running, 1));
-    assert_eq!(c.worker.as_deref(), Some("w-a"));
-    assert!(c.lease_until.unwrap() > contact_sim::store::now() + 50.0);
-    assert!(store.heartbeat(r.id, "w-a", 60.0).unwrap());
-    assert!(!store.heartbeat(r.id, "w-b", 60.0).unwrap());
-    assert_eq!(store.claim("w-b", 60.0, 3).unwrap().unwrap().id, id2);
-    assert!(store.claim("w-c", 60.0, 3).unwrap().is_none());
-
-    // Checkpoints: round trip, only while running, dropped at finish.
-    assert!(store.load_checkpoint(r.id).unwrap().is_none());
-    store.checkpoint(r.id, 3, b"state-3").unwrap();
-    store.checkpoint(r.id, 5, b"state-5").unwrap();
-    assert_eq!(
-        store.load_checkpoint(r.id).unwrap(),
-        Some((5, b"state-5".to_vec()))
-    );
-    let rec = store.get(r.id).unwrap().unwrap();
-    assert_eq!((rec.last_checkpoint_step, rec.progress.step), (Some(5), 5));
-    store
-        .set_progress(
-            r.id,
-            Progress {
-                step: 6,
-                steps: 10,
-                last_residual: Some(f64::NAN),
-            },
-        )
-        .unwrap();
-    assert_eq!(
-        store.get(r.id).unwrap().unwrap().progress.last_residual,
-        None
-    );
-    store.finish(r.id, JobStatus::Succeeded, None).unwrap();
-    // The first final status wins; a late checkpoint does not come back.
-    store
-        .finish(r.id, JobStatus::Failed, Some(json!({"title": "late"})))
-        .unwrap();
-    store.checkpoint(r.id, 7, b"late").unwrap();
-    let done = store.get(r.id).unwrap().unwrap();
-    assert_eq!(
-        (
-            done.status,
-            done.error.is_none(),
-            done.lease_until,
-            done.last_checkpoint_step
-        ),
-        (JobStatus::Succeeded, true, None, None)
-    );
-    assert!(store.load_checkpoint(r.id).unwrap().is_none());
-    assert!(!store.heartbeat(r.id, "w-a", 60.0).unwrap());
-    assert!(matches!(
-        store.finish(id2, JobStatus::Running, None),
-        Err(StoreError::Db(_))
-    ));
-    assert!(store.claim("w", f64::NAN, 3).is_err());
-
-    // Cancellation: a queued job at once (never claimed), a running one by request.
-    let q = enqueue(&store, 3);
-    assert_eq!(
-        store.request_cancel(q).unwrap().unwrap().status,
-        JobStatus::Cancelled
-    );
-    let running = store.request_cancel(id2).unwrap().unwrap();
-    assert_eq!(
-        (running.status, running.cancel_requested),
-        (JobStatus::Running, true)
-    );
-    assert!(
-        !store.heartbeat(id2, "w-b", 60.0).unwrap(),
-        "cancel seen at heartbeat"
-    );
-    assert!(store
-        .request_cancel(uuid::Uuid::new_v4())
-        .unwrap()
-        .is_none());
-    // The cancel-requested job's worker dies: the next claim records it cancelled.
-    store.heartbeat(id2, "w-b", 0.0).unwrap();
-    std::thread::sleep(Duration::from_millis(20));
-    assert!(store.claim("w-c", 60.0, 3).unwrap().is_none());
-    assert_eq!(
-        store.get(id2).unwrap().unwrap().status,
-        JobStatus::Cancelled
-    );
-
-    // A dead worker's job is claimed again with the next attempt; without new checkpoints
-    // it is dead-lettered after max_attempts claims in a row.
-    let d = enqueue(&store, 4);
-    for attempt in 1..=2 {
-        let j = store
-            .claim(&format!("w{attempt}"), 0.0, 2)
-            .unwrap()
-            .unwrap();
-        assert_eq!((j.id, j.attempt), (d, attempt));
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    assert!(store.claim("w3", 0.0, 2).unwrap().is_none());
-    let dead = store.get(d).unwrap().unwrap();
-    assert_eq!(dead.status, JobStatus::Failed);
-    assert_eq!(dead.error.as_ref().unwrap()["title"], "job abandoned");
-    // …but attempts that saved a checkpoint do not count.
-    let p = enqueue(&store, 5);
-    for attempt in 1..=6u32 {
-        let j = store.claim("w", 0.0, 2).unwrap().unwrap();
-        assert_eq!((j.id, j.attempt), (p, attempt));
-        store.checkpoint(p, attempt as usize, b"s").unwrap();
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    store.finish(p, JobStatus::Succeeded, None).unwrap();
-
-    // Releasing a restarted node's leases makes its jobs claimable at once.
-    let a = enqueue(&store, 6);
-    let b = enqueue(&store, 7);
-    store.claim("node1-w0", 600.0, 3).unwrap().unwrap();
-    store.claim("node10-w0", 600.0, 3).unwrap().unwrap();
-    assert_eq!(store.release_worker_leases("node1-").unwrap(), 1);
-    let again = store.claim("node2-w0", 600.0, 3).unwrap().unwrap();
-    assert_eq!((again.id, again.attempt), (a, 2));
-    for id in [a, b] {
-        store.finish(id, JobStatus::Succeeded, None).unwrap();
-    }
-
-    // Listing: newest first, pages by cursor, status filter; counts; find by hash; delete.
-    let page1 = store.list(None, None, 3).unwrap();
-    assert_eq!(page1.jobs.len(), 3);
-    assert_eq!(page1.jobs[0].id, b);
-    let mut seen: Vec<_> = page1.jobs.iter().map(|j| j.id).collect();
-    let mut next = page1.next.clone();
-    while let Some(c) = next {
-        let page = store.list(None, Some(&c), 3).unwrap();
-        seen.extend(page.jobs.iter().map(|j| j.id));
-        next = page.next;
-    }
-    assert_eq!(seen.len(), 7);
-    assert_eq!(seen.iter().collect::<HashSet<_>>().len(), 7);
-    assert!(store
-        .list(None, Some("garbage"), 3)
-        .unwrap()
-        .jobs
-        .is_empty());
-    let cancelled = store.list(Some(JobStatus::Cancelled), None, 10).unwrap();
-    assert_eq!(cancelled.jobs.len(), 2);
-    let counts: HashMap<_, _> = store.counts().unwrap().into_iter().collect();
-    assert_eq!(counts[&JobStatus::Succeeded], 4);
-    assert_eq!(counts[&JobStatus::Failed], 1);
-    assert_eq!(counts[&JobStatus::Queued], 0);
-    assert_eq!(
-        store.find_succeeded_by_hash("hash-6").unwrap().unwrap().id,
-        a
-    );
-    assert!(store.find_succeeded_by_hash("hash-4").unwrap().is_none());
-    assert!(store.delete(a).unwrap());
-    assert!(!store.delete(a).unwrap());
-    let q2 = enqueue(&store, 8);
-    assert!(!store.delete(q2).unwrap(), "a queued job is not deleted");
-    drain(&store);
-
-    // Concurrent claims from separate connections take every job exactly once.
-    let ids: HashSet<_> = (0..40).map(|n| enqueue(&store, 100 + n)).collect();
-    let claimed: Vec<uuid::Uuid> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..4)
-            .map(|w| {
-                let url = pg.url();
-                s.spawn(move || {
-                    let st = PgStore::connect(&url).unwrap();
-                    let mut mine = Vec::new();
-                    while let Some(j) = st.claim(&format!("c{w}"), 600.0, 3).unwrap() {
-                        mine.push(j.id);
-                    }
-                    mine
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().unwrap())
-            .collect()
-    });
-    assert_eq!(claimed.len(), 40);
-    assert_eq!(claimed.iter().copied().collect::<HashSet<_>>(), ids);
+    let Enqueued::New(done) = store.enqueue(job).unwrap() else {
+        panic!("not a new job");
+    };
+    assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, done.id);
+    store.finish(done.id, JobStatus::Succeeded, None).unwrap();
 
     // The server goes away: errors are "unavailable", not panics; it comes back: the same
     // store object reconnects by itself.
     pg.stop("fast");
-    match store.get(a) {
+    match store.get(done.id) {
         Err(StoreError::Unavailable(_)) => {}
         other => panic!("expected Unavailable, got {other:?}"),
     }
     pg.start_again();
-    assert_eq!(store.get(b).unwrap().unwrap().status, JobStatus::Succeeded);
+    assert_eq!(
+        store.get(done.id).unwrap().unwrap().status,
+        JobStatus::Succeeded
+    );
 
     // A database migrated by a newer build is refused.
     let mut raw = ::postgres::Client::connect(&pg.url(), ::postgres::NoTls).unwrap();

@@ -6,6 +6,7 @@
 //!
 //! All methods are blocking (call them from worker threads or `spawn_blocking`).
 
+mod claim;
 pub mod postgres;
 pub mod results;
 mod row;

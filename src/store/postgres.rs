@@ -9,8 +9,9 @@
 //!   job row every few seconds never copy it.
 //! * **Claiming is `SELECT … FOR UPDATE SKIP LOCKED`** on the oldest claimable row: workers
 //!   of any number of processes never wait on each other's claims and never claim the same
-//!   row (the row lock is held until the claiming transaction commits). The dead-letter and
-//!   cancel rules are the SQLite store's (see [`Store::claim`]).
+//!   row (the row lock is held until the claiming transaction commits). What becomes of the
+//!   claimed row (cancelled, dead letter, running) is both stores' one claim policy
+//!   (`super::claim`, see [`Store::claim`]).
 //! * **One clock.** Leases and timestamps use the database server's clock
 //!   (`clock_timestamp()`), so nodes with skewed clocks still agree on whose lease expired.
 //! * **Wake-ups by LISTEN/NOTIFY.** A submission runs `NOTIFY contact_sim_jobs` inside its
@@ -37,9 +38,10 @@ use postgres::fallible_iterator::FallibleIterator;
 use postgres::{Client, Config, GenericClient, NoTls, Row};
 use uuid::Uuid;
 
+use super::claim::{verdict, Candidate, Verdict};
 use super::row::{
-    abandoned_error, check_lease, into_page, json_text, page_bounds, status_counts, to_i64,
-    to_usize, RawJob, FINISHED,
+    check_lease, into_page, json_text, page_bounds, status_counts, to_i64, to_usize, RawJob,
+    FINISHED,
 };
 use super::{Enqueued, JobRecord, JobStatus, NewJob, Page, Progress, Store, StoreError, Wake};
 
@@ -409,39 +411,41 @@ impl PgStore {
                 return Ok(None);
             };
             let id: Uuid = row.try_get(0)?;
-            let attempt = i64::from(row.try_get::<_, i32>(1)?);
-            let cancel_requested: bool = row.try_get(2)?;
-            let stalls = i64::from(row.try_get::<_, i32>(3)?);
-            let progressed: bool = row.try_get(4)?;
-            if cancel_requested {
-                // A running job whose worker died after a cancel request.
-                tx.execute(
-                    format!(
-                        "UPDATE jobs SET status = 'cancelled', finished_at = {NOW_S},
-                                lease_until = NULL, last_checkpoint_step = NULL
-                         WHERE id = $1"
-                    )
-                    .as_str(),
-                    &[&id],
-                )?;
-                tx.execute("DELETE FROM checkpoints WHERE job = $1", &[&id])?;
-                continue;
-            }
-            if !progressed && stalls >= i64::from(max_attempts) {
-                let error = abandoned_error(attempt, stalls, max_attempts).to_string();
-                tx.execute(
-                    format!(
-                        "UPDATE jobs SET status = 'failed', finished_at = {NOW_S}, error = $2,
-                                lease_until = NULL, last_checkpoint_step = NULL
-                         WHERE id = $1"
-                    )
-                    .as_str(),
-                    &[&id, &error],
-                )?;
-                tx.execute("DELETE FROM checkpoints WHERE job = $1", &[&id])?;
-                continue;
-            }
-            let stalls = i32::try_from(if progressed { 1 } else { stalls + 1 }).unwrap_or(i32::MAX);
+            let candidate = Candidate {
+                attempt: i64::from(row.try_get::<_, i32>(1)?),
+                cancel_requested: row.try_get(2)?,
+                stalls: i64::from(row.try_get::<_, i32>(3)?),
+                progressed: row.try_get(4)?,
+            };
+            let stalls = match verdict(candidate, max_attempts) {
+                Verdict::Cancel => {
+                    tx.execute(
+                        format!(
+                            "UPDATE jobs SET status = 'cancelled', finished_at = {NOW_S},
+                                    lease_until = NULL, last_checkpoint_step = NULL
+                             WHERE id = $1"
+                        )
+                        .as_str(),
+                        &[&id],
+                    )?;
+                    tx.execute("DELETE FROM checkpoints WHERE job = $1", &[&id])?;
+                    continue;
+                }
+                Verdict::DeadLetter(error) => {
+                    tx.execute(
+                        format!(
+                            "UPDATE jobs SET status = 'failed', finished_at = {NOW_S}, error = $2,
+                                    lease_until = NULL, last_checkpoint_step = NULL
+                             WHERE id = $1"
+                        )
+                        .as_str(),
+                        &[&id, &error.to_string()],
+                    )?;
+                    tx.execute("DELETE FROM checkpoints WHERE job = $1", &[&id])?;
+                    continue;
+                }
+                Verdict::Run { stalls } => i32::try_from(stalls).unwrap_or(i32::MAX),
+            };
             let raw = tx.query_one(
                 format!(
                     "UPDATE jobs SET status = 'running', worker_id = $2, lease_until = {NOW_S} + $3,

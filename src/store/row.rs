@@ -1,5 +1,5 @@
 //! What both job-store backends share: the row as read before validation, its conversion
-//! into a [`JobRecord`], list cursors, and the dead-letter error.
+//! into a [`JobRecord`], and list cursors.
 
 use super::{JobRecord, JobStatus, Page, Progress, StoreError};
 use uuid::Uuid;
@@ -115,21 +115,6 @@ impl RawJob {
 
 /// SQL list of the final statuses (the same in both dialects).
 pub(super) const FINISHED: &str = "('succeeded', 'failed', 'cancelled')";
-
-/// The problem+json error of a dead-lettered job (see [`super::Store::claim`]).
-pub(super) fn abandoned_error(attempt: i64, stalls: i64, max_attempts: u32) -> serde_json::Value {
-    serde_json::json!({
-        "type": "about:blank",
-        "title": "job abandoned",
-        "status": 500,
-        "detail": format!(
-            "the job was started {attempt} times; its worker stopped renewing the \
-             lease before finishing (crash, kill or hang) {stalls} times in a row \
-             without saving a new checkpoint (max_attempts = {max_attempts}); it \
-             is not retried again"
-        ),
-    })
-}
 
 /// The `seq` bound and row count of a list query: jobs with `seq < before`, `limit + 1` of
 /// them (one more than asked tells whether another page follows). None for an unparsable

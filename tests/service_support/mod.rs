@@ -1,10 +1,12 @@
-//! Helpers of the service's hostile-input, load and crash tests: the real `contact-sim`
-//! binary started on an ephemeral port of 127.0.0.1 (its address read from its start-up
-//! line), a minimal HTTP/1.1 client that never panics and never waits forever, scenes, and
-//! the resident memory of a process.
+//! Helpers of the service's hostile-input, load, crash, PostgreSQL and store tests: the real
+//! `contact-sim` binary started on an ephemeral port of 127.0.0.1 (its address read from its
+//! start-up line), a minimal HTTP/1.1 client that never panics and never waits forever,
+//! scenes, the resident memory of a process, throwaway PostgreSQL servers, and the job
+//! store's contract.
 #![allow(dead_code)]
 
 pub mod postgres;
+pub mod store_contract;
 
 use serde_json::{json, Value};
 use std::collections::HashMap;

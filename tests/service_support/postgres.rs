@@ -108,7 +108,22 @@ impl Postgres {
 
     /// `postgres://contact@127.0.0.1:PORT/postgres`.
     pub fn url(&self) -> String {
-        format!("postgres://contact@127.0.0.1:{}/postgres", self.port)
+        self.url_of("postgres")
+    }
+
+    fn url_of(&self, database: &str) -> String {
+        format!("postgres://contact@127.0.0.1:{}/{database}", self.port)
+    }
+
+    /// Creates the empty database `name` (lower case letters, digits and `_`) and returns
+    /// its URL.
+    pub fn create_database(&self, name: &str) -> String {
+        let mut client = ::postgres::Client::connect(&self.url(), ::postgres::NoTls)
+            .unwrap_or_else(|e| panic!("connect to {}: {e}", self.url()));
+        client
+            .batch_execute(&format!("CREATE DATABASE {name}"))
+            .unwrap_or_else(|e| panic!("CREATE DATABASE {name}: {e}"));
+        self.url_of(name)
     }
 
     /// One of the server's programs, run as the `postgres` user when we are root.
