@@ -10,7 +10,7 @@ cd "$(dirname "$0")/.."
 
 version=4.32.5
 seed=${SCHEMATHESIS_SEED:-20261202}
-examples=${SCHEMATHESIS_EXAMPLES:-30}
+examples=${SCHEMATHESIS_EXAMPLES:-100}
 port=${SCHEMATHESIS_PORT:-18473}
 venv=target/schemathesis-venv
 bin=target/debug/contact-sim

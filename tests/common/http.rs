@@ -1,7 +1,8 @@
 //! HTTP for the tests that talk to a server from outside: well-formed requests through
 //! `ureq`, and raw bytes on a socket (answers read with `httparse`) for the tests that are
-//! about malformed input. Nothing here panics on a network error or waits forever: failures
-//! come back as text, for the caller to assert on.
+//! about malformed input. The `try_*` and `raw*` functions never panic and never wait
+//! forever: failures come back as text, for the caller to assert on; `http`, `get` and
+//! `post_json` panic with that text.
 
 use serde_json::Value;
 use std::collections::HashMap;
