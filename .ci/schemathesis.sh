@@ -2,8 +2,9 @@
 # Checks the served HTTP contract (GET /openapi.yaml) against the debug server with
 # schemathesis: the coverage, fuzzing and stateful phases (the stateful one follows the links
 # from POST /jobs to the job routes), a fixed seed and a bounded number of examples. Any
-# failure fails CI. The server runs on a loopback port with a throwaway data directory, one
-# worker and small per-job limits, so the jobs it accepts finish in milliseconds.
+# failure fails CI. The server runs on an ephemeral loopback port with a throwaway data
+# directory, one worker and small per-job limits, so the jobs it accepts finish in
+# milliseconds.
 # Needs python3 with venv (.ci/run installs it) and the package registry for pip.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -11,7 +12,6 @@ cd "$(dirname "$0")/.."
 version=4.32.5
 seed=${SCHEMATHESIS_SEED:-20261202}
 examples=${SCHEMATHESIS_EXAMPLES:-100}
-port=${SCHEMATHESIS_PORT:-18473}
 venv=target/schemathesis-venv
 bin=target/debug/contact-sim
 
@@ -23,7 +23,7 @@ fi
 cargo build --locked --bin contact-sim
 
 data=$(mktemp -d)
-"$bin" serve --addr "127.0.0.1:$port" --data-dir "$data" --workers 1 \
+"$bin" serve --addr 127.0.0.1:0 --data-dir "$data" --workers 1 \
   --max-nodes 200 --max-steps 32 --submit-rate 0 >"$data/server.log" 2>&1 &
 server=$!
 cleanup() {
@@ -32,10 +32,23 @@ cleanup() {
   rm -rf "$data"
 }
 trap cleanup EXIT
+# The ephemeral port, from the server's start-up line "listening on http://ADDR".
+url=""
+for _ in $(seq 300); do
+  url=$(grep -o 'listening on http://[^ ]*' "$data/server.log" | head -n1 | cut -d' ' -f3 || true)
+  [ -n "$url" ] && break
+  kill -0 "$server" 2>/dev/null || break
+  sleep 0.1
+done
+if [ -z "$url" ]; then
+  echo "contact-sim serve did not start:" >&2
+  cat "$data/server.log" >&2
+  exit 1
+fi
 
 status=0
 "$venv/bin/schemathesis" --config-file .ci/schemathesis.toml run \
-  "http://127.0.0.1:$port/openapi.yaml" --wait-for-schema 30 \
+  "$url/openapi.yaml" --wait-for-schema 30 \
   --phases coverage,fuzzing,stateful --seed "$seed" --max-examples "$examples" \
   --workers 1 --no-color --report-dir target/schemathesis-report --report junit \
   || status=$?
