@@ -5,13 +5,11 @@
 
 use contact_sim::Config;
 use serde_json::{json, Value};
-use std::collections::HashMap;
-use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 mod common;
+use common::http::{assert_problem, get, http, post_json, raw_request, wait_status};
 use common::server::Server;
 
 impl Server {
@@ -22,121 +20,6 @@ impl Server {
             max_nodes: 20_000,
             ..Config::default()
         })
-    }
-}
-
-struct Resp {
-    status: u16,
-    headers: HashMap<String, String>,
-    body: Vec<u8>,
-}
-
-impl Resp {
-    fn json(&self) -> Value {
-        serde_json::from_slice(&self.body)
-            .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&self.body)))
-    }
-    fn header(&self, name: &str) -> Option<&str> {
-        self.headers.get(name).map(String::as_str)
-    }
-}
-
-/// A minimal HTTP/1.1 client (Connection: close; chunked bodies decoded).
-fn http(addr: SocketAddr, method: &str, path: &str, headers: &[(&str, &str)], body: &[u8]) -> Resp {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
-    let mut req = format!(
-        "{method} {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\nContent-Length: {}\r\n",
-        body.len()
-    );
-    for (k, v) in headers {
-        req += &format!("{k}: {v}\r\n");
-    }
-    req += "\r\n";
-    s.write_all(req.as_bytes()).unwrap();
-    s.write_all(body).unwrap();
-    let mut raw = Vec::new();
-    s.read_to_end(&mut raw).unwrap();
-    let split = raw
-        .windows(4)
-        .position(|w| w == b"\r\n\r\n")
-        .expect("header end");
-    let head = String::from_utf8_lossy(&raw[..split]).to_string();
-    let mut lines = head.split("\r\n");
-    let status: u16 = lines
-        .next()
-        .unwrap()
-        .split(' ')
-        .nth(1)
-        .unwrap()
-        .parse()
-        .unwrap();
-    let headers: HashMap<String, String> = lines
-        .filter_map(|l| l.split_once(':'))
-        .map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim().to_string()))
-        .collect();
-    let mut body = raw[split + 4..].to_vec();
-    if headers
-        .get("transfer-encoding")
-        .is_some_and(|t| t.contains("chunked"))
-    {
-        let mut out = Vec::new();
-        let mut rest = &body[..];
-        loop {
-            let eol = rest
-                .windows(2)
-                .position(|w| w == b"\r\n")
-                .expect("chunk size line");
-            let size = usize::from_str_radix(std::str::from_utf8(&rest[..eol]).unwrap().trim(), 16)
-                .unwrap();
-            rest = &rest[eol + 2..];
-            if size == 0 {
-                break;
-            }
-            out.extend_from_slice(&rest[..size]);
-            rest = &rest[size + 2..];
-        }
-        body = out;
-    }
-    Resp {
-        status,
-        headers,
-        body,
-    }
-}
-
-fn get(addr: SocketAddr, path: &str) -> Resp {
-    http(addr, "GET", path, &[], b"")
-}
-
-fn post_json(addr: SocketAddr, path: &str, body: &Value) -> Resp {
-    http(
-        addr,
-        "POST",
-        path,
-        &[("Content-Type", "application/json")],
-        body.to_string().as_bytes(),
-    )
-}
-
-fn assert_problem(r: &Resp, status: u16) -> Value {
-    assert_eq!(r.status, status, "{}", String::from_utf8_lossy(&r.body));
-    assert_eq!(r.header("content-type"), Some("application/problem+json"));
-    let p = r.json();
-    assert_eq!(p["status"], status);
-    assert!(p["title"].is_string() && p["detail"].is_string());
-    p
-}
-
-fn wait_status(addr: SocketAddr, id: &str, want: &[&str], timeout: Duration) -> Value {
-    let t = Instant::now();
-    loop {
-        let j = get(addr, &format!("/jobs/{id}")).json();
-        if want.contains(&j["status"].as_str().unwrap()) {
-            return j;
-        }
-        assert!(t.elapsed() < timeout, "job {id} stuck in {}", j["status"]);
-        std::thread::sleep(Duration::from_millis(50));
     }
 }
 
@@ -396,18 +279,11 @@ fn bad_input_gets_problem_json_naming_the_field() {
         422,
     );
     assert_eq!(p["errors"][0]["pointer"], "/overrides/k");
+    // Sent raw: the server answers before it has read the whole body, and closes.
     let big = vec![b' '; 2 << 20];
-    assert_eq!(
-        http(
-            a,
-            "POST",
-            "/jobs",
-            &[("Content-Type", "application/json")],
-            &big
-        )
-        .status,
-        413
-    );
+    let ct = [("Content-Type", "application/json")];
+    let r = raw_request(a, "POST", "/jobs", &ct, &big, Duration::from_secs(60)).unwrap();
+    assert_eq!(r.status, 413);
 
     assert_problem(&get(a, "/jobs/00000000-0000-0000-0000-000000000000"), 404);
     assert_problem(&get(a, "/jobs/../../etc/passwd"), 404);
@@ -760,4 +636,145 @@ fn study_jobs_and_error_estimates_over_http() {
     assert_eq!(p["errors"][0]["pointer"], "/error_estimate", "{p}");
     server.stop();
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Every `$ref` in `doc` (an OpenAPI document or a schema), with the JSON pointer of the
+/// object that holds it.
+fn refs(doc: &Value, at: String, out: &mut Vec<(String, String)>) {
+    match doc {
+        Value::Object(m) => {
+            for (k, v) in m {
+                match (k.as_str(), v) {
+                    ("$ref", Value::String(r)) => out.push((at.clone(), r.clone())),
+                    _ => refs(
+                        v,
+                        format!("{at}/{}", k.replace('~', "~0").replace('/', "~1")),
+                        out,
+                    ),
+                }
+            }
+        }
+        Value::Array(a) => {
+            for (i, v) in a.iter().enumerate() {
+                refs(v, format!("{at}/{i}"), out);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// The methods of each route of `app()`, read from its source: `.route("PATH", get(..).post(..))`.
+fn router_routes() -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
+    let src = include_str!("../src/app.rs");
+    let src = src.split(".fallback(").next().unwrap();
+    src.split(".route(\"")
+        .skip(1)
+        .map(|s| {
+            let (path, handlers) = s.split_once('"').unwrap();
+            let methods = ["get", "post", "put", "patch", "delete"]
+                .into_iter()
+                .filter(|m| {
+                    handlers.match_indices(&format!("{m}(")).any(|(i, _)| {
+                        !handlers[..i]
+                            .chars()
+                            .next_back()
+                            .is_some_and(|c| c.is_alphanumeric() || c == '_')
+                    })
+                })
+                .map(String::from)
+                .collect();
+            (path.to_string(), methods)
+        })
+        .collect()
+}
+
+/// api/openapi.yaml describes the router: the same routes with the same methods; the query
+/// parameters it documents are the ones the handlers take (a documented one with its
+/// default, enum or example value is not refused; an undocumented one is); every `$ref`
+/// resolves (into this document or into the scene schema it references as
+/// `scene.schema.json`), and every link names an operation.
+#[test]
+fn openapi_describes_the_router() {
+    let spec: Value = serde_norway::from_str(include_str!("../api/openapi.yaml")).unwrap();
+    let scene: Value = serde_json::from_str(include_str!("../api/scene.schema.json")).unwrap();
+    let methods = ["get", "post", "put", "patch", "delete"];
+    let paths = spec["paths"].as_object().unwrap();
+    let documented: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> = paths
+        .iter()
+        .map(|(p, item)| {
+            let ms = item.as_object().unwrap().keys();
+            let ms = ms.filter(|m| methods.contains(&m.as_str())).cloned();
+            (p.clone(), ms.collect())
+        })
+        .collect();
+    let routes = router_routes();
+    assert!(routes.len() >= 14, "{routes:?}");
+    assert_eq!(
+        documented, routes,
+        "api/openapi.yaml (left) and the router (right) differ"
+    );
+
+    let mut all = Vec::new();
+    refs(&spec, String::new(), &mut all);
+    for (at, r) in &all {
+        let target = match r.split_once('#') {
+            Some(("", ptr)) => spec.pointer(ptr),
+            Some(("scene.schema.json", ptr)) => scene.pointer(ptr),
+            None if r == "scene.schema.json" => Some(&scene),
+            _ => None,
+        };
+        assert!(target.is_some(), "{at}: $ref {r} does not resolve");
+    }
+    let mut ids = std::collections::BTreeSet::new();
+    for item in paths.values() {
+        for (m, op) in item.as_object().unwrap() {
+            if methods.contains(&m.as_str()) {
+                let id = op["operationId"]
+                    .as_str()
+                    .expect("every operation has an id");
+                assert!(ids.insert(id.to_string()), "operationId {id} is used twice");
+            }
+        }
+    }
+    for (name, link) in spec["components"]["links"].as_object().unwrap() {
+        let id = link["operationId"].as_str().unwrap();
+        assert!(ids.contains(id), "link {name} names no operation ({id})");
+    }
+
+    let dir = temp_dir("openapi");
+    let srv = Server::start(&dir, 0);
+    let fill = |p: &str| {
+        p.replace("{id}", "00000000-0000-0000-0000-000000000000")
+            .replace("{file}", "last.vtu")
+            .replace("{name}", "paper-exp1")
+    };
+    for (path, item) in paths {
+        for (m, op) in item.as_object().unwrap() {
+            let query: Vec<&Value> = op["parameters"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter(|p| p["in"] == "query")
+                .collect();
+            if query.is_empty() {
+                continue;
+            }
+            let method = m.to_uppercase();
+            for p in query {
+                let (name, schema) = (p["name"].as_str().unwrap(), &p["schema"]);
+                let value = [&schema["default"], &schema["enum"][0], &schema["example"]]
+                    .into_iter()
+                    .find(|v| !v.is_null())
+                    .unwrap_or_else(|| panic!("{path} {name}: no default, enum or example"));
+                let value = value.as_str().map_or(value.to_string(), String::from);
+                let url = format!("{}?{name}={value}", fill(path));
+                let r = http(srv.addr, &method, &url, &[], b"");
+                assert_ne!(r.status, 400, "{method} {url}: {}", r.text());
+            }
+            let url = format!("{}?undocumented=1", fill(path));
+            assert_problem(&http(srv.addr, &method, &url, &[], b""), 400);
+        }
+    }
+    srv.stop();
+    std::fs::remove_dir_all(&dir).ok();
 }

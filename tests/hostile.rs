@@ -338,9 +338,11 @@ fn no_path_escapes_the_data_dir() {
         assert_eq!(r.status, 200, "{alias}");
         assert_eq!(r.json()["id"], id.as_str());
     }
+    // Sent as raw bytes: the request targets are hostile by design, and no client may
+    // normalise or refuse them.
     let mut statuses = std::collections::BTreeMap::new();
     for (m, path) in &requests {
-        let r = try_http(a, m, path, &[], b"", Duration::from_secs(30))
+        let r = raw_request(a, m, path, &[], b"", Duration::from_secs(30))
             .unwrap_or_else(|e| panic!("{m} {path}: {e}"));
         assert!(
             (400..500).contains(&r.status),
@@ -480,7 +482,7 @@ fn fuzz_the_http_surface() {
             true,
         );
     }
-    // 3. Wrong or odd content types.
+    // 3. Wrong or odd content types (some are not valid header values: sent raw).
     for ct in [
         "text/plain",
         "application/xml",
@@ -493,7 +495,7 @@ fn fuzz_the_http_surface() {
     ] {
         check(
             "content type",
-            try_http(
+            raw_request(
                 a,
                 "POST",
                 "/jobs",
@@ -510,12 +512,12 @@ fn fuzz_the_http_surface() {
     let many_ref: Vec<(&str, &str)> = many.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
     check(
         "huge header",
-        try_http(a, "GET", "/healthz", &[("X-Big", &huge)], b"", timeout),
+        raw_request(a, "GET", "/healthz", &[("X-Big", &huge)], b"", timeout),
         false,
     );
     check(
         "many headers",
-        try_http(a, "GET", "/healthz", &many_ref, b"", timeout),
+        raw_request(a, "GET", "/healthz", &many_ref, b"", timeout),
         false,
     );
     check(
@@ -573,7 +575,7 @@ fn fuzz_the_http_surface() {
         ),
         false,
     );
-    // 5. Bad query strings.
+    // 5. Bad query strings (as sent: no client re-encodes them).
     for q in [
         "limit=0",
         "limit=-1",
@@ -594,7 +596,7 @@ fn fuzz_the_http_surface() {
     ] {
         check(
             "bad query",
-            try_http(a, "GET", &format!("/jobs?{q}"), &[], b"", timeout),
+            raw_request(a, "GET", &format!("/jobs?{q}"), &[], b"", timeout),
             false,
         );
     }
@@ -608,7 +610,7 @@ fn fuzz_the_http_surface() {
     ] {
         check(
             "bad fields query",
-            try_http(
+            raw_request(
                 a,
                 "GET",
                 &format!("/jobs/{id}/fields?{q}"),
@@ -619,7 +621,7 @@ fn fuzz_the_http_surface() {
             false,
         );
     }
-    // 6. Unknown routes and bad UUIDs.
+    // 6. Unknown routes and bad UUIDs (raw request targets).
     for p in [
         "/client/",
         "/client/nope.js",
@@ -641,11 +643,12 @@ fn fuzz_the_http_surface() {
     ] {
         check(
             "unknown route",
-            try_http(a, "GET", p, &[], b"", timeout),
+            raw_request(a, "GET", p, &[], b"", timeout),
             false,
         );
     }
-    // 7. Every method on every route (allowed methods may succeed, the rest are 405).
+    // 7. Every method, standard or not, on every route (allowed methods may succeed, the rest
+    // are 405).
     let routes = [
         "/jobs".to_string(),
         format!("/jobs/{id}"),
@@ -680,7 +683,7 @@ fn fuzz_the_http_surface() {
                 // No body follows a HEAD answer: read headers only.
                 raw_head(a, route)
             } else {
-                try_http(a, m, route, &json_ct, body, timeout)
+                raw_request(a, m, route, &json_ct, body, timeout)
             };
             check(&format!("{m} {route}"), r, true);
         }

@@ -36,7 +36,8 @@ struct Tally {
 
 /// How many events the stream of `id` delivered within `for_`.
 fn sse(a: SocketAddr, id: &str, for_: Duration) -> Result<usize, String> {
-    Ok(sse_text(a, id, for_)?.matches("\nevent: ").count())
+    let text = sse_text(a, id, for_)?;
+    Ok(text.lines().filter(|l| l.starts_with("event: ")).count())
 }
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {

@@ -1,4 +1,5 @@
-//! Presets, health, Prometheus metrics and the OpenAPI document.
+//! Presets, health, Prometheus metrics, the OpenAPI document and the scene schema it
+//! references.
 
 use crate::problem::Problem;
 use crate::state::AppState;
@@ -12,6 +13,11 @@ use serde_json::{json, Value};
 use std::sync::atomic::Ordering;
 
 pub const OPENAPI: &str = include_str!("../../api/openapi.yaml");
+
+/// The scene format. The OpenAPI document references it by the relative URL
+/// `scene.schema.json`, which resolves to this route next to `/openapi.yaml` as it does to the
+/// file next to `api/openapi.yaml` in the repository.
+pub const SCENE_SCHEMA: &str = include_str!("../../api/scene.schema.json");
 
 pub async fn presets() -> Json<Value> {
     let list: Vec<Value> = presets::names()
@@ -82,6 +88,15 @@ pub async fn openapi() -> Response {
     r.headers_mut().insert(
         header::CONTENT_TYPE,
         HeaderValue::from_static("application/yaml"),
+    );
+    r
+}
+
+pub async fn scene_schema() -> Response {
+    let mut r = SCENE_SCHEMA.into_response();
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/schema+json"),
     );
     r
 }

@@ -1,4 +1,6 @@
-//! The in-process server of the HTTP API and browser tests.
+//! Shared by the tests that talk to a server from outside: HTTP (a client for well-formed
+//! requests, raw sockets for malformed ones) and the in-process server.
 #![allow(dead_code)]
 
+pub mod http;
 pub mod server;
