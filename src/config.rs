@@ -14,6 +14,9 @@ pub struct Config {
     /// Seconds a claimed job's lease lasts; a dead worker's job is claimed again this long
     /// after its last renewal (renewed every third of it while the job runs).
     pub lease_s: f64,
+    /// Claims in a row that may end without a new checkpoint (the worker died, was killed
+    /// or hung each time) before the job is failed as abandoned (dead letter).
+    pub max_attempts: u32,
     /// Worker threads (jobs run in parallel, each sequentially).
     pub workers: usize,
     /// Prefix of this node's worker names (leases of a previous run are released at start,
@@ -46,6 +49,7 @@ impl Default for Config {
             data_dir: PathBuf::from("./data"),
             store: None,
             lease_s: 30.0,
+            max_attempts: 3,
             workers: std::thread::available_parallelism().map_or(2, |n| n.get()),
             node: "local".into(),
             queue_capacity: 1000,

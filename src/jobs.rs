@@ -30,7 +30,6 @@ use tokio::sync::broadcast;
 use uuid::Uuid;
 
 /// A job interrupted this often in a row without a new checkpoint is dead-lettered.
-const MAX_ATTEMPTS: u32 = 3;
 const CHECKPOINT_EVERY: Duration = Duration::from_secs(1);
 /// Reference runs of studies kept in memory (an h = k = 1/128 one holds about 50 MB).
 const REFERENCES_KEPT: usize = 2;
@@ -246,7 +245,10 @@ impl Runtime {
 
     fn worker_loop(self: Arc<Self>, name: &str) {
         while !self.shutdown.load(Ordering::SeqCst) {
-            match self.store.claim(name, self.config.lease_s, MAX_ATTEMPTS) {
+            match self
+                .store
+                .claim(name, self.config.lease_s, self.config.max_attempts)
+            {
                 Ok(Some(job)) => self.run(job, name),
                 Ok(None) => {
                     let (m, cv) = &self.wake;

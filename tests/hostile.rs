@@ -398,7 +398,7 @@ fn fuzz_the_http_surface() {
     let id = r.json()["id"].as_str().unwrap().to_string();
     wait_status(a, &id, &["succeeded"], Duration::from_secs(60));
     let t0 = Instant::now();
-    let mut rng = Rng(0x5eed_1234_abcd_ef01);
+    let mut rng = Rng::seeded(0x5eed_1234_abcd_ef01);
     let timeout = Duration::from_secs(20);
     let mut sent = 0usize;
     let mut statuses = std::collections::BTreeMap::<u16, usize>::new();

@@ -49,7 +49,7 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 }
 
 fn client(a: SocketAddr, n: usize, deadline: Instant, tally: Arc<Mutex<Tally>>) {
-    let mut rng = Rng(0x1234_5678 + n as u64 * 0x9e37_79b9);
+    let mut rng = Rng::seeded(0x1234_5678 + n as u64 * 0x9e37_79b9);
     let mut mine: Vec<String> = Vec::new();
     let mut local = Tally::default();
     let timeout = Duration::from_secs(30);

@@ -27,6 +27,10 @@ pub struct NodeArgs {
     /// after its last renewal.
     #[arg(long = "lease-seconds", default_value_t = Config::default().lease_s)]
     pub lease_seconds: f64,
+    /// Claims in a row that may end without a new checkpoint (worker crashed, killed or
+    /// hung) before a job is failed as abandoned instead of being run again.
+    #[arg(long = "max-attempts", default_value_t = Config::default().max_attempts)]
+    pub max_attempts: u32,
 }
 
 impl NodeArgs {
@@ -39,6 +43,9 @@ impl NodeArgs {
                 "--lease-seconds {seconds}: must be between 0.3 and 86400"
             ));
         }
+        if self.max_attempts == 0 {
+            return Err("--max-attempts 0: must be at least 1".into());
+        }
         let defaults = Config::default();
         Ok(Config {
             data_dir: self.data_dir,
@@ -46,6 +53,7 @@ impl NodeArgs {
             node: node_name(self.node, self.store.is_some()),
             store: self.store,
             lease_s: seconds,
+            max_attempts: self.max_attempts,
             ..defaults
         })
     }

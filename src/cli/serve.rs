@@ -167,6 +167,8 @@ mod tests {
             "0.5",
             "--lease-seconds",
             "2",
+            "--max-attempts",
+            "9",
             "--store",
             "postgres://u@h/db",
             "--node",
@@ -181,6 +183,7 @@ mod tests {
         assert_eq!((config.max_steps, config.workers), (7, 0));
         assert_eq!(config.header_timeout, std::time::Duration::from_millis(500));
         assert_eq!(config.lease_s, 2.0);
+        assert_eq!(config.max_attempts, 9);
         assert_eq!(config.store.as_deref(), Some("postgres://u@h/db"));
         assert_eq!(config.node, "api");
         assert_eq!(config.max_nodes, Config::default().max_nodes);
@@ -192,5 +195,13 @@ mod tests {
         args.node.lease_seconds = 0.1;
         let err = args.config().unwrap_err();
         assert!(err.contains("--lease-seconds"), "{err}");
+    }
+
+    #[test]
+    fn zero_attempts_names_the_flag() {
+        let mut args = ServeArgs::default();
+        args.node.max_attempts = 0;
+        let err = args.config().unwrap_err();
+        assert!(err.contains("--max-attempts"), "{err}");
     }
 }

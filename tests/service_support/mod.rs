@@ -10,6 +10,8 @@ pub mod postgres;
 pub mod store_contract;
 
 pub use client::*;
+use proptest::prelude::RngExt;
+use proptest::test_runner::{RngAlgorithm, TestRng};
 use serde_json::{json, Value};
 use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
@@ -180,21 +182,24 @@ pub fn long_scene(name: &str, n: usize, steps: usize, stored: usize) -> Value {
     s
 }
 
-/// Small deterministic PRNG (xorshift64*), so failures reproduce.
-pub struct Rng(pub u64);
+/// Deterministic random choices of the service tests, so failures reproduce: proptest's
+/// ChaCha generator (the one the unit tests use) seeded from a number.
+pub struct Rng(TestRng);
 
 impl Rng {
+    pub fn seeded(seed: u64) -> Rng {
+        let mut bytes = [0u8; 32];
+        bytes[..8].copy_from_slice(&seed.to_le_bytes());
+        Rng(TestRng::from_seed(RngAlgorithm::ChaCha, &bytes))
+    }
     pub fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+        self.0.random()
     }
     pub fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
+        self.0.random_range(0..n)
     }
     pub fn bytes(&mut self, n: usize) -> Vec<u8> {
-        (0..n).map(|_| self.next() as u8).collect()
+        (0..n).map(|_| self.0.random()).collect()
     }
     pub fn pick<'a, T>(&mut self, xs: &'a [T]) -> &'a T {
         &xs[self.below(xs.len())]
