@@ -26,5 +26,3 @@ pub mod scene;
 pub mod solve;
 pub mod stress;
 pub mod study;
-#[cfg(test)]
-mod test_rng;

@@ -2,9 +2,15 @@
 
 use serde_json::Value;
 
+use super::fields::PART_VARIANTS;
+use super::formulas::{vector_field, Sampled};
 use super::read::{describe, index, join, point, required, variant_object, Cx};
-use super::{vector_field, Sampled, MAX_BOUNDARY_PARTS, PART_VARIANTS, SIDE_TOL};
 use crate::problem::{BoundaryKind, BoundaryPart, Segment, VectorField};
+
+/// Most boundary parts (their overlap check is quadratic in the count).
+pub(super) const MAX_BOUNDARY_PARTS: usize = 1000;
+/// Relative tolerance (times the rectangle's size) of "lies on a side" checks.
+const SIDE_TOL: f64 = 1e-12;
 
 /// The sides of the rectangle [0, W] × [0, H]: (name, fixed coordinate index, its value).
 fn sides(w: f64, h: f64) -> [(&'static str, usize, f64); 4] {

@@ -2,9 +2,15 @@
 //! (extreme numbers, "NaN"/"Inf"/"1e400" strings, deep nesting, giant arrays, formulas that
 //! divide by zero, very long formulas). Validation must answer Ok or Err — never panic — in
 //! bounded time; whatever it accepts must set up and take a step without panicking, and
-//! without NaN results (bad data is refused at its field).
+//! without NaN results (bad data is refused at its field). Arbitrary JSON and randomly edited
+//! presets: no panic, and every scene accepted conforms to `api/scene.schema.json`.
 
-use super::read::MAX_ERRORS;
+use super::boundary::MAX_BOUNDARY_PARTS;
+use super::fields::*;
+use super::friction::MAX_TABLE_POINTS;
+use super::output::MAX_OUTPUT_FIELDS;
+use super::read::{index, join, MAX_ERRORS};
+use super::tests::{example, schema_errors};
 use super::*;
 use crate::solve::stepper::Simulation;
 use crate::solve::{SolveError, SolverSettings};
@@ -241,7 +247,7 @@ fn hostile_scene() -> impl Strategy<Value = Value> {
 }
 
 /// Validation, and (for small accepted scenes) set-up and one step: never a panic, never a
-/// NaN result, always within `limit`.
+/// NaN result, always within `limit`; what is accepted conforms to the schema.
 fn exercise(doc: &Value, limit: Duration) -> Result<(), TestCaseError> {
     let start = Instant::now();
     let result = validate(doc);
@@ -261,6 +267,13 @@ fn exercise(doc: &Value, limit: Duration) -> Result<(), TestCaseError> {
         }
         Ok(p) => p,
     };
+    let errs = schema_errors(doc);
+    prop_assert!(
+        errs.is_empty(),
+        "accepted, but the schema refuses {}: {:?}",
+        doc,
+        errs
+    );
     let (nx, ny) = p.cells();
     if (nx + 1) * (ny + 1) > 2000 {
         return Ok(());
@@ -461,4 +474,186 @@ fn formulas_bad_between_the_samples_are_refused_at_their_field() {
     let mut doc = template(1, 16, 4);
     doc["initial"]["u0"] = json!(["1/(x - 0.0625)", 0]);
     assert_data_error(&doc, "/initial/u0/0", "evaluates to inf");
+}
+
+// -----------------------------------------------------------------------------------------
+// Arbitrary JSON and mutated presets: no panics, and whatever is accepted conforms to
+// api/scene.schema.json.
+
+fn known_keys() -> Vec<&'static str> {
+    let mut keys: Vec<&str> = [
+        TOP_FIELDS,
+        DOMAIN_FIELDS,
+        MESH_FIELDS,
+        TIME_FIELDS,
+        LOADS_FIELDS,
+        MATERIAL_FIELDS,
+        VISCOSITY_FIELDS,
+        DAMAGE_FIELDS,
+        SOURCE_FIELDS,
+        INITIAL_FIELDS,
+        OUTPUT_FIELDS,
+    ]
+    .concat();
+    for (_, f) in PART_VARIANTS
+        .iter()
+        .chain(ELASTICITY_VARIANTS)
+        .chain(FRICTION_VARIANTS)
+    {
+        keys.extend_from_slice(f);
+    }
+    keys.push("law");
+    keys
+}
+
+fn arb_json() -> impl Strategy<Value = Value> {
+    let leaf = prop_oneof![
+        Just(Value::Null),
+        any::<bool>().prop_map(Value::Bool),
+        any::<i64>().prop_map(Value::from),
+        any::<u64>().prop_map(Value::from),
+        any::<f64>().prop_map(Value::from), // NaN and inf become null
+        (-3.0f64..3.0).prop_map(Value::from),
+        prop::sample::select(vec![
+            "1/32",
+            "1/0",
+            "0/0",
+            "NaN",
+            "inf",
+            "-1",
+            "0",
+            "1e308",
+            "x",
+            "t",
+            "1/x",
+            "x^y^t",
+            "clamped",
+            "traction",
+            "contact",
+            "linear",
+            "von_mises",
+            "tresca",
+            "slip_weakening",
+            "piecewise_linear",
+            "diagonal",
+            "warn",
+            "zeta",
+        ])
+        .prop_map(Value::from),
+        ".{0,12}".prop_map(Value::String),
+    ];
+    leaf.prop_recursive(5, 96, 6, |inner| {
+        let key = prop_oneof![
+            4 => prop::sample::select(known_keys()).prop_map(String::from),
+            1 => ".{0,6}",
+        ];
+        prop_oneof![
+            prop::collection::vec(inner.clone(), 0..6).prop_map(Value::Array),
+            prop::collection::btree_map(key, inner, 0..8)
+                .prop_map(|m| Value::Object(m.into_iter().collect())),
+        ]
+    })
+}
+
+/// Every pointer in a document, the root excluded.
+fn pointers(v: &Value, ptr: &str, out: &mut Vec<String>) {
+    match v {
+        Value::Object(m) => {
+            for (k, c) in m {
+                let p = join(ptr, k);
+                out.push(p.clone());
+                pointers(c, &p, out);
+            }
+        }
+        Value::Array(a) => {
+            for (i, c) in a.iter().enumerate() {
+                let p = index(ptr, i);
+                out.push(p.clone());
+                pointers(c, &p, out);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// Replaces (or, in an object, sometimes removes) the value at a random place.
+fn mutate(doc: &mut Value, at: prop::sample::Index, with: Value, delete: bool) {
+    let mut ptrs = Vec::new();
+    pointers(doc, "", &mut ptrs);
+    if ptrs.is_empty() {
+        *doc = with;
+        return;
+    }
+    let ptr = &ptrs[at.index(ptrs.len())];
+    let (parent, key) = ptr.rsplit_once('/').unwrap();
+    if delete {
+        if let Some(Value::Object(m)) = doc.pointer_mut(parent) {
+            m.remove(&key.replace("~1", "/").replace("~0", "~"));
+            return;
+        }
+    }
+    if let Some(slot) = doc.pointer_mut(ptr) {
+        *slot = with;
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(512))]
+
+    #[test]
+    fn arbitrary_json_never_panics(doc in arb_json()) {
+        let _ = validate(&doc);
+        let mut wrapped = example();
+        if let Value::Object(m) = &doc {
+            for (k, v) in m {
+                wrapped[k.as_str()] = v.clone();
+            }
+        }
+        match validate(&wrapped) {
+            Ok(_) => {
+                let errs = schema_errors(&wrapped);
+                prop_assert!(errs.is_empty(), "accepted, but the schema refuses {}: {:?}", wrapped, errs);
+            }
+            Err(e) => {
+                prop_assert!(!e.0.is_empty());
+                for err in &e.0 {
+                    prop_assert!(err.pointer.is_empty() || err.pointer.starts_with('/'));
+                    prop_assert!(!err.message.is_empty() && !err.message.contains("internal error"));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn mutated_presets_never_panic(
+        which in prop::sample::select(presets::names()),
+        edits in prop::collection::vec((any::<prop::sample::Index>(), arb_json(), any::<bool>()), 1..4),
+    ) {
+        let mut doc = presets::get(which).unwrap();
+        for (at, with, delete) in edits {
+            mutate(&mut doc, at, with, delete);
+        }
+        match validate(&doc) {
+            Ok(p) => {
+                // Whatever passes is usable: counts are positive and data finite.
+                prop_assert!(p.steps >= 1 && p.cells_per_unit >= 1);
+                prop_assert!(p.k().is_finite() && p.k() > 0.0);
+                let (nx, ny) = p.cells();
+                prop_assert!(nx >= 1 && ny >= 1);
+                let errs = schema_errors(&doc);
+                prop_assert!(errs.is_empty(), "accepted, but the schema refuses {}: {:?}", doc, errs);
+            }
+            Err(e) => {
+                prop_assert!(!e.0.is_empty());
+                prop_assert!(e.0.iter().all(|err| !err.message.contains("internal error")), "{}", e);
+            }
+        }
+    }
+
+    #[test]
+    fn overrides_never_panic(doc in arb_json(), h in arb_json(), k in arb_json(), t in arb_json()) {
+        let mut doc = doc;
+        apply_overrides(&mut doc, &Overrides { h: Some(h), k: Some(k), t_end: Some(t) });
+        let _ = validate(&doc);
+    }
 }
