@@ -256,29 +256,20 @@ fn bad_input_gets_problem_json_naming_the_field() {
         "{pointers:?}"
     );
 
-    let p = assert_problem(
-        &post_json(a, "/jobs", &json!({"preset": "paper-exp9"})),
-        422,
-    );
-    assert_eq!(p["errors"][0]["pointer"], "/preset");
-    let p = assert_problem(
-        &post_json(
-            a,
-            "/jobs",
-            &json!({"preset": "paper-exp1", "overrides": {"h": "1/512"}}),
+    for (body, pointer) in [
+        (json!({"preset": "paper-exp9"}), "/preset"),
+        (
+            json!({"preset": "paper-exp1", "overrides": {"h": "1/512"}}),
+            "/overrides/h",
         ),
-        422,
-    );
-    assert_eq!(p["errors"][0]["pointer"], "/overrides/h");
-    let p = assert_problem(
-        &post_json(
-            a,
-            "/jobs",
-            &json!({"preset": "paper-exp1", "overrides": {"k": "1/0"}}),
+        (
+            json!({"preset": "paper-exp1", "overrides": {"k": "1/0"}}),
+            "/overrides/k",
         ),
-        422,
-    );
-    assert_eq!(p["errors"][0]["pointer"], "/overrides/k");
+    ] {
+        let p = assert_problem(&post_json(a, "/jobs", &body), 422);
+        assert_eq!(p["errors"][0]["pointer"], pointer, "{body}");
+    }
     // Sent raw: the server answers before it has read the whole body, and closes.
     let big = vec![b' '; 2 << 20];
     let ct = [("Content-Type", "application/json")];

@@ -119,14 +119,7 @@ fn kill_9_and_restart_loses_nothing() {
                 while !stop.load(Ordering::Relaxed) {
                     k += 1;
                     let scene = small_scene(&format!("crash-inflight-{round}-{k}"));
-                    let r = try_http(
-                        a,
-                        "POST",
-                        "/jobs",
-                        &[("Content-Type", "application/json")],
-                        scene.to_string().as_bytes(),
-                        Duration::from_secs(10),
-                    );
+                    let r = try_post_json(a, "/jobs", &scene, Duration::from_secs(10));
                     match r {
                         Ok(r) if r.status == 202 => {
                             got.push((r.json()["id"].as_str().unwrap().to_string(), scene))

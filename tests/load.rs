@@ -60,14 +60,7 @@ fn client(a: SocketAddr, n: usize, deadline: Instant, tally: Arc<Mutex<Tally>>) 
         let (what, r) = if roll < 20 || mine.is_empty() {
             k += 1;
             let scene = small_scene(&format!("load-{n}-{k}"));
-            let r = try_http(
-                a,
-                "POST",
-                "/jobs",
-                &[("Content-Type", "application/json")],
-                scene.to_string().as_bytes(),
-                timeout,
-            );
+            let r = try_post_json(a, "/jobs", &scene, timeout);
             local.post_ms.push(t.elapsed().as_secs_f64() * 1e3);
             if let Ok(r) = &r {
                 assert_eq!(r.status, 202, "submit: {}", r.text());

@@ -190,15 +190,11 @@ mod tests {
     }
 
     #[test]
-    fn a_lease_out_of_range_names_the_flag() {
+    fn node_flags_out_of_range_are_named() {
         let mut args = ServeArgs::default();
         args.node.lease_seconds = 0.1;
         let err = args.config().unwrap_err();
         assert!(err.contains("--lease-seconds"), "{err}");
-    }
-
-    #[test]
-    fn zero_attempts_names_the_flag() {
         let mut args = ServeArgs::default();
         args.node.max_attempts = 0;
         let err = args.config().unwrap_err();

@@ -116,6 +116,24 @@ pub fn get(addr: SocketAddr, path: &str) -> Resp {
     http(addr, "GET", path, &[], b"")
 }
 
+/// A JSON document POSTed with a deadline: Err when the server does not answer in time
+/// (or dies while answering).
+pub fn try_post_json(
+    addr: SocketAddr,
+    path: &str,
+    body: &Value,
+    timeout: Duration,
+) -> Result<Resp, String> {
+    try_http(
+        addr,
+        "POST",
+        path,
+        &[("Content-Type", "application/json")],
+        body.to_string().as_bytes(),
+        timeout,
+    )
+}
+
 pub fn post_json(addr: SocketAddr, path: &str, body: &Value) -> Resp {
     http(
         addr,

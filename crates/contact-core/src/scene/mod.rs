@@ -55,14 +55,14 @@ pub use ratio::parse_ratio;
 
 use serde_json::Value;
 
-use crate::problem::{OutputSpec, Problem, SmallnessPolicy, VectorField};
+use crate::problem::{OutputSpec, Problem, SmallnessPolicy};
 use boundary::boundary;
 use damage::damage;
 use domain::domain;
 use fields::{SMALLNESS, TOP_FIELDS};
 use formulas::check_samples;
 use friction::friction;
-use loads::{initial, loads};
+use loads::{vector_section, INITIAL, LOADS};
 use material::material;
 use mesh::mesh;
 use output::{all_fields, output};
@@ -129,10 +129,7 @@ fn scene(cx: &mut Cx, doc: &Value) -> Option<Problem> {
         "the clamped, traction and contact segments",
     )
     .and_then(|v| boundary(cx, v, "/boundary", dims, &mut sampled));
-    let body_force = match top.get("loads") {
-        None => Some(VectorField::constant([0.0, 0.0])),
-        Some(v) => loads(cx, v, "/loads", &mut sampled),
-    };
+    let body_force = vector_section(cx, top, &LOADS, &mut sampled);
     let material = required(cx, top, "", "material", "viscosity and elasticity")
         .and_then(|v| material(cx, v, "/material"));
     let friction = match top.get("friction") {
@@ -152,10 +149,7 @@ fn scene(cx: &mut Cx, doc: &Value) -> Option<Problem> {
         None => Some(None),
         Some(v) => damage(cx, v, "/damage", &mut sampled).map(Some),
     };
-    let u0 = match top.get("initial") {
-        None => Some(VectorField::constant([0.0, 0.0])),
-        Some(v) => initial(cx, v, "/initial", &mut sampled),
-    };
+    let u0 = vector_section(cx, top, &INITIAL, &mut sampled);
     let output = match top.get("output") {
         None => Some(OutputSpec {
             every: 1,
@@ -183,55 +177,25 @@ fn scene(cx: &mut Cx, doc: &Value) -> Option<Problem> {
         }
     }
 
-    let (
-        Some(name),
-        Some((width, height)),
-        Some((t_end, steps)),
-        Some((cells_per_unit, pattern)),
-        Some(boundary),
-        Some(body_force),
-        Some(material),
-        Some(friction),
-        Some(smallness),
-        Some(damage),
-        Some(u0),
-        Some(output),
-        Some(error_estimate),
-    ) = (
-        name,
-        dims,
-        time,
-        mesh,
-        boundary,
-        body_force,
-        material,
-        friction,
-        smallness,
-        damage,
-        u0,
-        output,
-        error_estimate,
-    )
-    else {
-        return None;
-    };
+    // Every section has reported its errors by now; the problem exists only if none failed.
+    let ((width, height), (t_end, steps), (cells_per_unit, pattern)) = (dims?, time?, mesh?);
     let problem = Problem {
-        name,
+        name: name?,
         width,
         height,
         cells_per_unit,
         pattern,
         t_end,
         steps,
-        boundary,
-        body_force,
-        material,
-        friction,
-        smallness,
-        damage,
-        u0,
-        output,
-        error_estimate,
+        boundary: boundary?,
+        body_force: body_force?,
+        material: material?,
+        friction: friction?,
+        smallness: smallness?,
+        damage: damage?,
+        u0: u0?,
+        output: output?,
+        error_estimate: error_estimate?,
     };
     if problem.error_estimate {
         if let Some(why) = crate::estimate::unsupported(&problem) {
