@@ -23,7 +23,7 @@ fi
 cargo build --locked --bin contact-sim
 
 data=$(mktemp -d)
-"$bin" serve --addr 127.0.0.1:0 --data-dir "$data" --workers 1 \
+RUST_LOG=info "$bin" serve --addr 127.0.0.1:0 --data-dir "$data" --workers 1 \
   --max-nodes 200 --max-steps 32 --submit-rate 0 >"$data/server.log" 2>&1 &
 server=$!
 cleanup() {

@@ -54,6 +54,9 @@ impl Proc {
     fn spawn(args: &[&str], ready: &str) -> Proc {
         let mut child = Command::new(env!("CARGO_BIN_EXE_contact-sim"))
             .args(args)
+            // The start-up lines waited for are logged at info: a quieter RUST_LOG in the
+            // caller's environment must not hide them.
+            .env("RUST_LOG", "info")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
