@@ -231,6 +231,79 @@ $Elements
 $EndElements
 ";
 
+/// Writes binary MSH values in one byte order.
+struct Binary {
+    out: Vec<u8>,
+    big_endian: bool,
+}
+
+impl Binary {
+    fn raw(&mut self, mut le: Vec<u8>) -> &mut Self {
+        if self.big_endian {
+            le.reverse();
+        }
+        self.out.extend(le);
+        self
+    }
+    fn text(&mut self, t: &str) -> &mut Self {
+        self.out.extend_from_slice(t.as_bytes());
+        self
+    }
+    fn ints(&mut self, v: &[i32]) -> &mut Self {
+        v.iter().fold(self, |w, x| w.raw(x.to_le_bytes().to_vec()))
+    }
+    fn sizes(&mut self, v: &[u64]) -> &mut Self {
+        v.iter().fold(self, |w, x| w.raw(x.to_le_bytes().to_vec()))
+    }
+    fn doubles(&mut self, v: &[f64]) -> &mut Self {
+        v.iter().fold(self, |w, x| w.raw(x.to_le_bytes().to_vec()))
+    }
+}
+
+/// [`SQUARE`] as a binary file in either byte order.
+fn square_binary(big_endian: bool) -> Vec<u8> {
+    let mut w = Binary {
+        out: Vec::new(),
+        big_endian,
+    };
+    w.text("$MeshFormat\n4.1 1 8\n").ints(&[1]);
+    w.text("\n$EndMeshFormat\n$PhysicalNames\n2\n1 1 \"bottom\"\n2 2 \"body\"\n");
+    w.text("$EndPhysicalNames\n$Entities\n")
+        .sizes(&[0, 1, 1, 0]);
+    for (max_y, physical) in [(0.0, 1), (1.0, 2)] {
+        w.ints(&[1]).doubles(&[0.0, 0.0, 0.0, 1.0, max_y, 0.0]);
+        w.sizes(&[1]).ints(&[physical]).sizes(&[0]);
+    }
+    w.text("\n$EndEntities\n$Nodes\n").sizes(&[1, 4, 1, 4]);
+    w.ints(&[2, 1, 0]).sizes(&[4, 1, 2, 3, 4]);
+    for p in [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]] {
+        w.doubles(&[p[0], p[1], 0.0]);
+    }
+    w.text("\n$EndNodes\n$Elements\n").sizes(&[2, 3, 1, 3]);
+    w.ints(&[1, 1, 1]).sizes(&[1, 1, 1, 2]);
+    w.ints(&[2, 1, 2]).sizes(&[2, 2, 1, 2, 3, 3, 1, 3, 4]);
+    w.text("\n$EndElements\n");
+    w.out
+}
+
+#[test]
+fn binary_squares_of_both_byte_orders_read_as_the_ascii_square() {
+    let ascii = read(SQUARE.as_bytes()).unwrap();
+    assert_eq!(read(&square_binary(false)).unwrap(), ascii);
+    assert_eq!(read(&square_binary(true)).unwrap(), ascii);
+}
+
+#[test]
+fn every_truncation_of_the_binary_square_is_an_error() {
+    for big_endian in [false, true] {
+        let data = square_binary(big_endian);
+        let complete = data.len() - 1;
+        for len in 0..complete {
+            assert!(read(&data[..len]).is_err(), "prefix of {len} bytes read");
+        }
+    }
+}
+
 fn square_with(from: &str, to: &str) -> Result<MshMesh, MshError> {
     assert!(SQUARE.contains(from));
     read(SQUARE.replacen(from, to, 1).as_bytes())

@@ -19,7 +19,8 @@ It writes, next to this script:
                               triangle groups "base", "top", "side"; volume group "body".
 
 Fixed options (random seed, meshing algorithms, sizes) make the output reproducible for a given
-gmsh version. Tests read the committed files and never run gmsh.
+gmsh version (the committed files come from gmsh 4.15.2). Tests read the committed files and
+never run gmsh.
 """
 
 import math
