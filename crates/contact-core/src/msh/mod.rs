@@ -279,12 +279,13 @@ impl<'a> Reader<'a> {
         self.loc(self.pos)
     }
 
-    /// The location of the next item (past whitespace in ASCII).
-    fn here(&mut self) -> Location {
+    /// The offset of the next item (past whitespace in ASCII); made a [`Location`] only on
+    /// error, since counting lines on every item would be quadratic.
+    fn mark(&mut self) -> usize {
         if self.binary.is_none() {
             self.skip_ws();
         }
-        self.at()
+        self.pos
     }
 
     fn loc(&self, pos: usize) -> Location {
@@ -394,7 +395,7 @@ impl<'a> Reader<'a> {
 
     /// A count of items of at least `item_bytes` each, bounded by the bytes left.
     fn count(&mut self, what: &'static str, item_bytes: usize) -> Result<usize, MshError> {
-        let at = self.here();
+        let at = self.mark();
         let count = self.size(what)?;
         let remaining = self.remaining();
         let fits = usize::try_from(count)
@@ -403,7 +404,7 @@ impl<'a> Reader<'a> {
             .is_some_and(|b| b <= remaining);
         if !fits {
             return Err(MshError::HugeCount {
-                at,
+                at: self.loc(at),
                 what,
                 count,
                 remaining,
@@ -425,10 +426,9 @@ impl<'a> Reader<'a> {
 
     fn read(mut self) -> Result<MshMesh, MshError> {
         self.skip_ws();
-        if !self.data[self.pos..].starts_with(b"$MeshFormat") {
+        if self.token("$MeshFormat").ok() != Some(b"$MeshFormat".as_slice()) {
             return Err(MshError::NotMsh);
         }
-        self.token("$MeshFormat")?;
         self.mesh_format()?;
         let mut names: Option<Vec<PhysicalName>> = None;
         let mut entities: Option<HashMap<(i32, i32), Vec<i32>>> = None;
@@ -573,14 +573,14 @@ impl<'a> Reader<'a> {
                 } else if self.data.get(self.pos..self.pos + 2) == Some(b"\r\n") {
                     self.pos += 2;
                 }
-                let at = self.here();
+                let at = self.mark();
                 let one: [u8; 4] = self.bytes("the byte-order integer 1")?;
                 let big_endian = match (u32::from_le_bytes(one), u32::from_be_bytes(one)) {
                     (1, _) => false,
                     (_, 1) => true,
                     _ => {
                         return Err(MshError::BadHeader {
-                            at,
+                            at: self.loc(at),
                             what: "the binary integer 1 that fixes the byte order is missing",
                         });
                     }
@@ -608,12 +608,12 @@ impl<'a> Reader<'a> {
     }
 
     fn physical_names_ascii(&mut self) -> Result<Vec<PhysicalName>, MshError> {
-        let at = self.here();
+        let at = self.mark();
         // dimension, tag, and a quoted name: at least 8 bytes.
         let count = self.count("the number of physical names", 8)?;
         if count > MAX_PHYSICAL_GROUPS {
             return Err(MshError::TooMany {
-                at,
+                at: self.loc(at),
                 what: "physical names",
                 count: count as u64,
                 limit: MAX_PHYSICAL_GROUPS,
@@ -621,11 +621,11 @@ impl<'a> Reader<'a> {
         }
         let mut names: Vec<PhysicalName> = Vec::with_capacity(count);
         for _ in 0..count {
-            let at = self.here();
+            let at = self.mark();
             let dim: usize = self.ascii("the dimension of a physical name")?;
             if dim > 3 {
                 return Err(MshError::BadEntityDim {
-                    at,
+                    at: self.loc(at),
                     dim: dim as i32,
                 });
             }
@@ -642,7 +642,11 @@ impl<'a> Reader<'a> {
                 .ok_or_else(|| self.syntax(start, "a name in double quotes", line))?;
             self.pos = start + line_end;
             if names.iter().any(|n| n.dim == dim && n.tag == tag) {
-                return Err(MshError::DuplicatePhysicalName { at, dim, tag });
+                return Err(MshError::DuplicatePhysicalName {
+                    at: self.loc(at),
+                    dim,
+                    tag,
+                });
             }
             names.push(PhysicalName {
                 dim,
@@ -666,7 +670,7 @@ impl<'a> Reader<'a> {
         let mut groups: HashMap<(i32, i32), ()> = HashMap::new();
         for (dim, &count) in counts.iter().enumerate() {
             for _ in 0..count {
-                let at = self.here();
+                let at = self.mark();
                 let tag = self.int("an entity tag")?;
                 let boxes = if dim == 0 { 3 } else { 6 };
                 for _ in 0..boxes {
@@ -684,7 +688,7 @@ impl<'a> Reader<'a> {
                 }
                 if groups.len() > MAX_PHYSICAL_GROUPS {
                     return Err(MshError::TooMany {
-                        at,
+                        at: self.loc(at),
                         what: "physical groups",
                         count: groups.len() as u64,
                         limit: MAX_PHYSICAL_GROUPS,
@@ -714,10 +718,13 @@ impl<'a> Reader<'a> {
         let mut tags = Vec::with_capacity(declared);
         let mut index = HashMap::with_capacity(declared);
         for _ in 0..blocks {
-            let at = self.here();
+            let at = self.mark();
             let dim = self.int("the entity dimension of a node block")?;
             if !(0..=3).contains(&dim) {
-                return Err(MshError::BadEntityDim { at, dim });
+                return Err(MshError::BadEntityDim {
+                    at: self.loc(at),
+                    dim,
+                });
             }
             self.int("the entity tag of a node block")?;
             let parametric = self.int("the parametric flag")?;
@@ -728,18 +735,24 @@ impl<'a> Reader<'a> {
             )?;
             let first = tags.len();
             for _ in 0..n {
-                let at = self.here();
+                let at = self.mark();
                 let tag = self.size("a node tag")?;
                 if tag == 0 {
-                    return Err(MshError::ZeroTag { at, what: "a node" });
+                    return Err(MshError::ZeroTag {
+                        at: self.loc(at),
+                        what: "a node",
+                    });
                 }
                 if index.insert(tag, tags.len()).is_some() {
-                    return Err(MshError::DuplicateNode { at, node: tag });
+                    return Err(MshError::DuplicateNode {
+                        at: self.loc(at),
+                        node: tag,
+                    });
                 }
                 tags.push(tag);
             }
             for &tag in &tags[first..] {
-                let at = self.here();
+                let at = self.mark();
                 let mut p = [0.0; 3];
                 for c in &mut p {
                     *c = self.double("a node coordinate")?;
@@ -748,7 +761,10 @@ impl<'a> Reader<'a> {
                     self.double("a parametric coordinate")?;
                 }
                 if p.iter().any(|c| !c.is_finite()) {
-                    return Err(MshError::NonFinite { at, node: tag });
+                    return Err(MshError::NonFinite {
+                        at: self.loc(at),
+                        node: tag,
+                    });
                 }
                 coords.push(p);
             }
@@ -784,18 +800,18 @@ impl<'a> Reader<'a> {
         let mut unsupported: Vec<(i32, usize, &'static str)> = Vec::new();
         let mut total = 0u64;
         for _ in 0..blocks {
-            let at = self.here();
+            let at = self.mark();
             let entity_dim = self.int("the entity dimension of an element block")?;
             if !(0..=3).contains(&entity_dim) {
                 return Err(MshError::BadEntityDim {
-                    at,
+                    at: self.loc(at),
                     dim: entity_dim,
                 });
             }
             let entity = self.int("the entity tag of an element block")?;
             if !entities.contains_key(&(entity_dim, entity)) {
                 return Err(MshError::MissingEntity {
-                    at,
+                    at: self.loc(at),
                     dim: entity_dim,
                     tag: entity,
                 });
@@ -804,11 +820,14 @@ impl<'a> Reader<'a> {
             let Some(&(_, per, type_dim, name)) =
                 ELEMENT_TYPES.iter().find(|t| t.0 == element_type)
             else {
-                return Err(MshError::UnknownElementType { at, element_type });
+                return Err(MshError::UnknownElementType {
+                    at: self.loc(at),
+                    element_type,
+                });
             };
             if type_dim as i32 != entity_dim {
                 return Err(MshError::ElementDimMismatch {
-                    at,
+                    at: self.loc(at),
                     element_type,
                     type_dim,
                     entity_dim,
@@ -836,11 +855,11 @@ impl<'a> Reader<'a> {
                 kept[s].entities.reserve(n);
             }
             for _ in 0..n {
-                let at = self.here();
+                let at = self.mark();
                 let tag = self.size("an element tag")?;
                 if tag == 0 {
                     return Err(MshError::ZeroTag {
-                        at,
+                        at: self.loc(at),
                         what: "an element",
                     });
                 }
@@ -886,7 +905,7 @@ impl<'a> Reader<'a> {
         let name = &tok[1..];
         let mut end = b"\n$End".to_vec();
         end.extend_from_slice(name);
-        let at = self.here();
+        let at = self.mark();
         let rest = &self.data[self.pos..];
         match rest.windows(end.len()).position(|w| w == end.as_slice()) {
             Some(i) => {
@@ -894,7 +913,7 @@ impl<'a> Reader<'a> {
                 Ok(())
             }
             None => Err(MshError::UnterminatedSection {
-                at,
+                at: self.loc(at),
                 name: String::from_utf8_lossy(&tok[..tok.len().min(40)]).into_owned(),
             }),
         }

@@ -461,7 +461,7 @@ fn truncations_of_the_binary_plate_are_errors() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 1024, ..ProptestConfig::default() })]
 
     #[test]
     fn mutated_squares_never_panic(
