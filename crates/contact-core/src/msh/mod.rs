@@ -19,14 +19,20 @@
 //! 0-based indices), the cells of the highest dimension (triangles in 2D, where all z = 0, or
 //! tetrahedra in 3D) as index arrays in file order, and the facet elements (lines in 2D,
 //! triangles in 3D) grouped by physical group, with the group's tag and its name from
-//! `$PhysicalNames`. The reader checks only the file's consistency; mesh quality (orientation,
-//! degenerate cells, connectivity) is the caller's.
+//! `$PhysicalNames`; a facet element in no physical group is left out. The reader checks only
+//! the file's consistency; mesh quality (orientation, degenerate cells, connectivity) is the
+//! caller's.
 //!
 //! The input is untrusted: every count from a header is checked against the bytes left
 //! before anything is allocated from it, and every failure is a [`MshError`] naming the
 //! section and the line and byte offset — never a panic.
+//!
+//! Written here rather than on the `mshio` crate (0.4.2, last release 2020): its header parser
+//! unwraps the data size parsed as a `u8` (`4.1 0 999` panics) and accepts any data size as
+//! the width of `size_t`; guarding it would mean parsing the headers first. It also skips
+//! `$PhysicalNames`, which the scenes bind boundary parts to, and pulls in nom 5 and num 0.3.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fmt;
 
 #[cfg(test)]
@@ -558,15 +564,15 @@ impl<'a> Reader<'a> {
         }
         let file_type: u32 = self.ascii("the file type (0 or 1)")?;
         let data_size: usize = self.ascii("the data size")?;
+        if data_size != 4 && data_size != 8 {
+            return Err(MshError::BadHeader {
+                at: self.at(),
+                what: "the data size (the width of size_t) must be 4 or 8",
+            });
+        }
         match file_type {
             0 => {}
             1 => {
-                if data_size != 4 && data_size != 8 {
-                    return Err(MshError::BadHeader {
-                        at: self.at(),
-                        what: "the data size (the width of size_t) must be 4 or 8",
-                    });
-                }
                 // The integer 1 follows the line, in the writer's byte order.
                 if self.data.get(self.pos) == Some(&b'\n') {
                     self.pos += 1;
@@ -667,7 +673,7 @@ impl<'a> Reader<'a> {
             *c = self.count("the number of entities", item)?;
         }
         let mut out: HashMap<(i32, i32), Vec<i32>> = HashMap::new();
-        let mut groups: HashMap<(i32, i32), ()> = HashMap::new();
+        let mut groups: HashSet<(i32, i32)> = HashSet::new();
         for (dim, &count) in counts.iter().enumerate() {
             for _ in 0..count {
                 let at = self.mark();
@@ -681,9 +687,7 @@ impl<'a> Reader<'a> {
                 let mut tags = Vec::with_capacity(n);
                 for _ in 0..n {
                     let t = self.int("a physical tag")?;
-                    // gmsh writes a negative tag for a group of the reversed entity.
-                    let t = t.checked_abs().unwrap_or(i32::MAX);
-                    groups.insert((dim as i32, t), ());
+                    groups.insert((dim as i32, t));
                     tags.push(t);
                 }
                 if groups.len() > MAX_PHYSICAL_GROUPS {

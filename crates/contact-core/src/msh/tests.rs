@@ -328,6 +328,13 @@ fn other_versions_are_refused_by_name() {
     assert_eq!(e, MshError::UnsupportedVersion("2.2".into()));
     assert!(e.to_string().contains("2.2") && e.to_string().contains("4.1"));
     assert_eq!(read(b"solid x\n").unwrap_err(), MshError::NotMsh);
+    for header in ["4.1 0 999", "4.1 1 0", "4.1 2 8", "4.1 0 -8"] {
+        let e = square_with("4.1 0 8", header).unwrap_err();
+        assert!(
+            matches!(e, MshError::BadHeader { .. } | MshError::Syntax { .. }),
+            "{header}: {e}"
+        );
+    }
 }
 
 #[test]
