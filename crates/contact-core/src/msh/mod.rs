@@ -27,10 +27,11 @@
 //! before anything is allocated from it, and every failure is a [`MshError`] naming the
 //! section and the line and byte offset — never a panic.
 //!
-//! Written here rather than on the `mshio` crate (0.4.2, last release 2020): its header parser
-//! unwraps the data size parsed as a `u8` (`4.1 0 999` panics) and accepts any data size as
-//! the width of `size_t`; guarding it would mean parsing the headers first. It also skips
-//! `$PhysicalNames`, which the scenes bind boundary parts to, and pulls in nom 5 and num 0.3.
+//! Written here rather than on the `mshio` crate (0.4.2, last release 2020): a binary header
+//! whose data size is not 1, 2, 4, 8 or 16 (e.g. `4.1 1 0`) makes it panic
+//! (`unimplemented!` in its integer parser), so every header would have to be parsed before
+//! handing the bytes over; it also skips `$PhysicalNames`, which the scenes bind boundary
+//! parts to, and it pulls in nom 5 and num 0.3.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fmt;
