@@ -19,6 +19,7 @@ pub mod fem;
 pub mod laws;
 pub mod linalg;
 pub mod mesh;
+pub mod msh;
 pub mod output;
 pub mod problem;
 pub mod run;
