@@ -1,5 +1,5 @@
 //! A reader of gmsh MSH 4.1 files (ASCII and binary, both byte orders) into a neutral mesh
-//! structure, for imported body shapes (SCHEME.md, "General meshes and 3D", mesh (c)).
+//! structure, for body shapes made with gmsh and imported into scenes.
 //!
 //! Format pieces read:
 //! - `$MeshFormat`: version (only 4.1; 2.2 and others are refused by name), file type
