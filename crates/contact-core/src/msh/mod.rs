@@ -457,39 +457,29 @@ impl<'a> Reader<'a> {
             }
             match tok {
                 b"$MeshFormat" => return Err(MshError::DuplicateSection("$MeshFormat")),
-                b"$PhysicalNames" => {
-                    if names.is_some() {
-                        return Err(MshError::DuplicateSection("$PhysicalNames"));
-                    }
+                b"$PhysicalNames" => set_once(&mut names, "$PhysicalNames", || {
                     self.section = "$PhysicalNames";
-                    names = Some(self.physical_names()?);
-                }
-                b"$Entities" => {
-                    if entities.is_some() {
-                        return Err(MshError::DuplicateSection("$Entities"));
-                    }
+                    self.physical_names()
+                })?,
+                b"$Entities" => set_once(&mut entities, "$Entities", || {
                     self.section = "$Entities";
-                    entities = Some(self.entities()?);
-                }
-                b"$Nodes" => {
-                    if nodes.is_some() {
-                        return Err(MshError::DuplicateSection("$Nodes"));
-                    }
+                    self.entities()
+                })?,
+                b"$Nodes" => set_once(&mut nodes, "$Nodes", || {
                     self.section = "$Nodes";
-                    nodes = Some(self.nodes()?);
-                }
+                    self.nodes()
+                })?,
                 b"$Elements" => {
-                    if elements.is_some() {
-                        return Err(MshError::DuplicateSection("$Elements"));
-                    }
                     let Some(ents) = &entities else {
                         return Err(MshError::SectionOrder("$Entities", "$Elements"));
                     };
                     let Some(Nodes { index, .. }) = &nodes else {
                         return Err(MshError::SectionOrder("$Nodes", "$Elements"));
                     };
-                    self.section = "$Elements";
-                    elements = Some(self.elements(ents, index)?);
+                    set_once(&mut elements, "$Elements", || {
+                        self.section = "$Elements";
+                        self.elements(ents, index)
+                    })?
                 }
                 _ if tok.first() == Some(&b'$') && !tok.starts_with(b"$End") => {
                     self.skip_section(tok)?
@@ -923,4 +913,17 @@ impl<'a> Reader<'a> {
             }),
         }
     }
+}
+
+/// Reads a section into its slot, refusing a second copy of the section.
+fn set_once<T>(
+    slot: &mut Option<T>,
+    section: &'static str,
+    read: impl FnOnce() -> Result<T, MshError>,
+) -> Result<(), MshError> {
+    if slot.is_some() {
+        return Err(MshError::DuplicateSection(section));
+    }
+    *slot = Some(read()?);
+    Ok(())
 }
