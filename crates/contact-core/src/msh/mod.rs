@@ -374,6 +374,24 @@ impl<'a> Reader<'a> {
     }
 
     /// A C `size_t` (4 or 8 bytes in binary).
+    /// A node or element tag (`expected` names it in errors) and where it starts: a size
+    /// that must not be 0.
+    fn tag(
+        &mut self,
+        expected: &'static str,
+        what: &'static str,
+    ) -> Result<(u64, usize), MshError> {
+        let at = self.mark();
+        let tag = self.size(expected)?;
+        if tag == 0 {
+            return Err(MshError::ZeroTag {
+                at: self.loc(at),
+                what,
+            });
+        }
+        Ok((tag, at))
+    }
+
     fn size(&mut self, expected: &'static str) -> Result<u64, MshError> {
         match self.binary {
             None => self.ascii(expected),
@@ -730,14 +748,7 @@ impl<'a> Reader<'a> {
             )?;
             let first = tags.len();
             for _ in 0..n {
-                let at = self.mark();
-                let tag = self.size("a node tag")?;
-                if tag == 0 {
-                    return Err(MshError::ZeroTag {
-                        at: self.loc(at),
-                        what: "a node",
-                    });
-                }
+                let (tag, at) = self.tag("a node tag", "a node")?;
                 if index.insert(tag, tags.len()).is_some() {
                     return Err(MshError::DuplicateNode {
                         at: self.loc(at),
@@ -850,14 +861,7 @@ impl<'a> Reader<'a> {
                 kept[s].entities.reserve(n);
             }
             for _ in 0..n {
-                let at = self.mark();
-                let tag = self.size("an element tag")?;
-                if tag == 0 {
-                    return Err(MshError::ZeroTag {
-                        at: self.loc(at),
-                        what: "an element",
-                    });
-                }
+                let (tag, _) = self.tag("an element tag", "an element")?;
                 for _ in 0..per {
                     let node = self.size("a node tag of an element")?;
                     let Some(&i) = index.get(&node) else {
