@@ -39,6 +39,9 @@ impl Resp {
     }
 }
 
+/// The deadline of [`http`], [`get`] and [`post_json`], which panic past it.
+const HTTP_TIMEOUT: Duration = Duration::from_secs(120);
+
 /// An agent for one exchange: statuses are answers (not errors), no redirects, no pooling
 /// across calls, and `timeout` for the whole exchange, body included.
 fn config(timeout: Duration) -> ureq::config::Config {
@@ -50,14 +53,16 @@ fn config(timeout: Duration) -> ureq::config::Config {
         .build()
 }
 
-fn exchange(
-    agent: &ureq::Agent,
+/// One request; the whole exchange within `timeout`.
+pub fn try_http(
     addr: SocketAddr,
     method: &str,
     path: &str,
     headers: &[(&str, &str)],
     body: &[u8],
+    timeout: Duration,
 ) -> Result<Resp, String> {
+    let agent = ureq::Agent::new_with_config(config(timeout));
     let mut req = ureq::http::Request::builder()
         .method(method)
         .uri(format!("http://{addr}{path}"));
@@ -88,19 +93,6 @@ fn exchange(
     })
 }
 
-/// One request; the whole exchange within `timeout`.
-pub fn try_http(
-    addr: SocketAddr,
-    method: &str,
-    path: &str,
-    headers: &[(&str, &str)],
-    body: &[u8],
-    timeout: Duration,
-) -> Result<Resp, String> {
-    let agent = ureq::Agent::new_with_config(config(timeout));
-    exchange(&agent, addr, method, path, headers, body)
-}
-
 pub fn http(
     addr: SocketAddr,
     method: &str,
@@ -108,7 +100,7 @@ pub fn http(
     headers: &[(&str, &str)],
     body: &[u8],
 ) -> Resp {
-    try_http(addr, method, path, headers, body, Duration::from_secs(120))
+    try_http(addr, method, path, headers, body, HTTP_TIMEOUT)
         .unwrap_or_else(|e| panic!("{method} {path}: {e}"))
 }
 
@@ -135,13 +127,7 @@ pub fn try_post_json(
 }
 
 pub fn post_json(addr: SocketAddr, path: &str, body: &Value) -> Resp {
-    http(
-        addr,
-        "POST",
-        path,
-        &[("Content-Type", "application/json")],
-        body.to_string().as_bytes(),
-    )
+    try_post_json(addr, path, body, HTTP_TIMEOUT).unwrap_or_else(|e| panic!("POST {path}: {e}"))
 }
 
 /// As [`try_http`], from the local address `from` (every 127/8 address is loopback on
