@@ -15,9 +15,6 @@ pub struct Problem {
     pub title: &'static str,
     pub status: u16,
     pub detail: String,
-    /// The occurrence (a URI reference), when there is one worth naming.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub instance: Option<String>,
     /// What is wrong where: one entry per offending field of the request body.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub errors: Option<Vec<FieldError>>,
@@ -41,7 +38,6 @@ impl Problem {
             title,
             status: status.as_u16(),
             detail: detail.into(),
-            instance: None,
             errors: None,
             retry_after: None,
         }
