@@ -56,7 +56,7 @@ fn whole_lifecycle_over_http() {
             .as_array()
             .unwrap()
             .len(),
-        4
+        contact_core::scene::presets::names().len()
     );
 
     let r = post_json(

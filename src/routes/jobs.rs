@@ -166,11 +166,7 @@ fn check_limits(
     is_preset: bool,
 ) -> Result<(), Problem> {
     let cfg = &state.rt.config;
-    let (nx, ny) = p.cells();
-    let mut nodes = (nx + 1) * (ny + 1);
-    if p.pattern == contact_core::problem::MeshPattern::Cross {
-        nodes += nx * ny;
-    }
+    let nodes = p.n_nodes();
     let (hptr, kptr) = if is_preset {
         ("/overrides/h", "/overrides/k")
     } else {
@@ -197,7 +193,15 @@ fn check_limits(
     let f = p.output.fields;
     let per_node = 2 * f.u as usize + 2 * f.w as usize + f.zeta as usize;
     let per_cell = 3 * f.sigma as usize + f.von_mises as usize;
-    let per_step = 8 * (per_node * nodes + per_cell * nx * ny * 4) as u64 + 64;
+    // Cells: at most 4 per rectangle cell (the cross pattern); ≈ 2 per node on any triangulation.
+    let cells = match &p.body {
+        None => {
+            let (nx, ny) = p.cells();
+            4 * nx * ny
+        }
+        Some(_) => 2 * nodes,
+    };
+    let per_step = 8 * (per_node * nodes + per_cell * cells) as u64 + 64;
     let stored = (1..=p.steps)
         .filter(|&n| p.output.stores(n, p.steps))
         .count() as u64;

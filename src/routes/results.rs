@@ -98,10 +98,7 @@ fn with_type(bytes: Vec<u8>, content_type: &'static str) -> Response {
 fn mesh_of(rec: &JobRecord) -> Result<(Mesh, f64), Problem> {
     let p = contact_core::scene::validate(&rec.scene)
         .map_err(|e| Problem::internal(format!("stored scene: {e}")))?;
-    let (nx, ny) = p.cells();
-    let mut mesh = Mesh::rectangle(p.width, p.height, nx, ny, p.pattern);
-    mesh.tag_boundary(&p.boundary.iter().map(|b| b.segment).collect::<Vec<_>>());
-    Ok((mesh, p.k()))
+    Ok((p.mesh(), p.k()))
 }
 
 fn stored_steps(state: &AppState, id: Uuid) -> Result<Vec<usize>, Problem> {
@@ -371,7 +368,7 @@ pub async fn vtu(
     .await?;
     Ok(blocking_body("application/xml", move |w| {
         let (mesh, _) = mesh_of(&rec).map_err(|e| std::io::Error::other(e.detail))?;
-        write_vtu(w, &mesh.nodes, &mesh.triangles, &f)
+        write_vtu(w, &mesh.nodes, mesh.triangles(), &f)
     }))
 }
 
@@ -439,7 +436,7 @@ pub async fn archive(
         for n in steps {
             let f = load_step(&st, id, n).map_err(io)?;
             let mut buf = Vec::new();
-            write_vtu(&mut buf, &mesh.nodes, &mesh.triangles, &f)?;
+            write_vtu(&mut buf, &mesh.nodes, mesh.triangles(), &f)?;
             member(&name(n), &buf)?;
         }
         tar.finish()

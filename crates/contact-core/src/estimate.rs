@@ -33,7 +33,7 @@ pub fn unsupported(p: &Problem) -> Option<String> {
             "the cross pattern's meshes are not nested; use diagonal or anti_diagonal".into(),
         );
     }
-    if p.cells_per_unit % 2 != 0 || p.steps % 2 != 0 {
+    if !p.cells_per_unit.is_multiple_of(2) || !p.steps.is_multiple_of(2) {
         return Some(format!(
             "needs a run at (2h, 2k) on the nested coarse mesh: 1/h = {} and the number of steps N = {} must both be even",
             p.cells_per_unit, p.steps
@@ -105,7 +105,10 @@ impl ErrorEstimator {
         let p = &fine.problem;
         let coarse = Simulation::new(coarsened(p, 2), settings)?;
         let (nx, ny) = p.cells();
-        let coarser = if p.cells_per_unit % 4 == 0 && p.steps % 4 == 0 && nx % 4 == 0 && ny % 4 == 0
+        let coarser = if p.cells_per_unit.is_multiple_of(4)
+            && p.steps.is_multiple_of(4)
+            && nx % 4 == 0
+            && ny % 4 == 0
         {
             Some(Simulation::new(coarsened(p, 4), settings)?)
         } else {
@@ -128,7 +131,7 @@ impl ErrorEstimator {
         let start = Instant::now();
         let n = fine.state.step;
         self.advance(n)?;
-        if n % 2 == 0 && (stored || fine.finished()) {
+        if n.is_multiple_of(2) && (stored || fine.finished()) {
             let row = self.estimate(fine);
             if stored {
                 self.rows.push(row.clone());
@@ -154,11 +157,11 @@ impl ErrorEstimator {
     }
 
     fn advance(&mut self, n: usize) -> Result<(), SolveError> {
-        if n % 2 == 0 && self.coarse.state.step < n / 2 {
+        if n.is_multiple_of(2) && self.coarse.state.step < n / 2 {
             self.coarse.step()?;
         }
         if let Some(c) = self.coarser.as_mut() {
-            if n % 4 == 0 && c.state.step < n / 4 {
+            if n.is_multiple_of(4) && c.state.step < n / 4 {
                 c.step()?;
             }
         }
@@ -189,7 +192,7 @@ impl ErrorEstimator {
         if let Some(c) = self
             .coarser
             .as_ref()
-            .filter(|c| n % 4 == 0 && c.state.step == n / 4)
+            .filter(|c| n.is_multiple_of(4) && c.state.step == n / 4)
         {
             let (w4, z4) = lift(c);
             let d2_w = norms::strain_norm(mesh, geo, &diff(&w2, &w4));

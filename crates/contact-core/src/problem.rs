@@ -5,7 +5,12 @@
 //! non-overlapping parts, ...), so the numerics never re-validates. Units are whatever the user's are, consistently (the paper's data is
 //! dimensionless).
 
+use std::sync::Arc;
+
 use crate::expr::Expr;
+pub use crate::mesh::support::Support;
+use crate::mesh::Mesh;
+pub use crate::mesh::{MeshPattern, Segment};
 
 /// A scalar datum f(x, y, t): a constant or a user formula parsed once.
 #[derive(Debug, Clone)]
@@ -60,24 +65,6 @@ impl VectorField {
     }
 }
 
-/// How each square cell of the structured mesh is cut into triangles.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum MeshPattern {
-    /// Lower-left → upper-right diagonal (the default; docs/numerics.md#the-three-patterns).
-    Diagonal,
-    /// Lower-right → upper-left diagonal.
-    AntiDiagonal,
-    /// Both diagonals: four triangles around an added cell-centre node.
-    Cross,
-}
-
-/// A straight piece of the rectangle's boundary, from `a` to `b`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Segment {
-    pub a: [f64; 2],
-    pub b: [f64; 2],
-}
-
 /// What a boundary part imposes.
 #[derive(Debug, Clone)]
 pub enum BoundaryKind {
@@ -92,7 +79,8 @@ pub enum BoundaryKind {
 #[derive(Debug, Clone)]
 pub struct BoundaryPart {
     pub kind: BoundaryKind,
-    pub segment: Segment,
+    /// Which boundary facets the part holds.
+    pub support: Support,
 }
 
 /// Viscosity operator A(τ) = 2η τ + ξ tr(τ) I of (4.1).
@@ -180,7 +168,7 @@ pub struct OutputSpec {
 impl OutputSpec {
     /// Is step n (1..=steps) stored?
     pub fn stores(&self, n: usize, steps: usize) -> bool {
-        (self.every > 0 && n % self.every == 0) || (self.last && n == steps)
+        (self.every > 0 && n.is_multiple_of(self.every)) || (self.last && n == steps)
     }
 }
 
@@ -188,10 +176,13 @@ impl OutputSpec {
 #[derive(Debug, Clone)]
 pub struct Problem {
     pub name: String,
-    /// Rectangle [0, width] × [0, height].
+    /// The body when it is not a rectangle: a given mesh. None: the rectangle below.
+    pub body: Option<Arc<Body>>,
+    /// Rectangle [0, width] × [0, height] (for a [`Body`], its bounding box's extents).
     pub width: f64,
     pub height: f64,
     /// n = round(1/h) cells per unit length; width·n and height·n are integers (checked).
+    /// Unused for a [`Body`].
     pub cells_per_unit: usize,
     pub pattern: MeshPattern,
     pub t_end: f64,
@@ -214,7 +205,74 @@ pub struct Problem {
     pub error_estimate: bool,
 }
 
+/// A body given as a mesh (imported from gmsh or meshed from a polygon), its boundary
+/// facets already tagged with the problem's parts, refined `refine` times before use.
+#[derive(Debug, Clone)]
+pub struct Body {
+    /// Where it came from, for summaries: `mesh <id or file>` or `polygon`.
+    pub source: String,
+    pub base: Mesh,
+    pub refine: usize,
+}
+
+impl Body {
+    /// The mesh the scheme runs on: `base` after `refine` red refinements.
+    pub fn mesh(&self) -> Mesh {
+        (0..self.refine).fold(self.base.clone(), |m, _| m.refine())
+    }
+
+    /// Its node count, without refining: each refinement adds one node per edge.
+    pub fn n_nodes(&self) -> usize {
+        let (mut n, mut e, mut c) = (self.base.n_nodes(), edges(&self.base), self.base.n_cells());
+        for _ in 0..self.refine {
+            // A triangle's red refinement: every edge splits in two, each cell adds 3 edges.
+            n += e;
+            e = 2 * e + 3 * c;
+            c *= 4;
+        }
+        n
+    }
+}
+
+/// Edges of a triangulation from Euler's formula: E = (3C + B)/2 with B boundary edges.
+fn edges(m: &Mesh) -> usize {
+    (3 * m.n_cells() + m.facets.len()) / 2
+}
+
 impl Problem {
+    /// The mesh the scheme runs on, boundary facets tagged.
+    pub fn mesh(&self) -> Mesh {
+        match &self.body {
+            Some(b) => b.mesh(),
+            None => {
+                let (nx, ny) = self.cells();
+                let mut mesh = Mesh::rectangle(self.width, self.height, nx, ny, self.pattern);
+                let supports: Vec<_> = self.boundary.iter().map(|p| p.support.clone()).collect();
+                // Validation tagged this rectangle once already; it cannot fail now.
+                mesh.tag_boundary(&supports).expect(
+                    "boundary parts were checked on this mesh when the scene was validated",
+                );
+                mesh
+            }
+        }
+    }
+
+    /// Nodes of [`Problem::mesh`], without building it.
+    pub fn n_nodes(&self) -> usize {
+        match &self.body {
+            Some(b) => b.n_nodes(),
+            None => {
+                let (nx, ny) = self.cells();
+                let centres = if self.pattern == MeshPattern::Cross {
+                    nx * ny
+                } else {
+                    0
+                };
+                (nx + 1) * (ny + 1) + centres
+            }
+        }
+    }
+
     /// Time step k = T/N.
     pub fn k(&self) -> f64 {
         self.t_end / self.steps as f64

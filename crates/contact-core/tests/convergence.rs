@@ -133,7 +133,8 @@ fn error_estimate_brackets_the_true_error() {
     let mut est = ErrorEstimator::new(&sim, Default::default()).unwrap();
     while !sim.finished() {
         sim.step().unwrap();
-        est.after_step(&sim, sim.state.step % 4 == 0).unwrap();
+        est.after_step(&sim, sim.state.step.is_multiple_of(4))
+            .unwrap();
     }
     let e = est.finish();
     let fin = e.final_.clone().unwrap();

@@ -80,9 +80,9 @@ fn experiment_1_matches_a_direct_linear_solve() {
         let t = (sim.state.step + 1) as f64 * sim.problem.k();
         sim.step().unwrap();
         // f = ∫ f0·v + ∫_Γ2 f2·v − (B(ε(u_{n−1}), ζ̄_{n−1}), ε(v)).
-        let b: Vec<_> = (0..mesh.triangles.len())
+        let b: Vec<_> = (0..mesh.n_cells())
             .map(|e| {
-                let zbar = mesh.triangles[e].iter().map(|&i| z_prev[i]).sum::<f64>() / 3.0;
+                let zbar = mesh.triangle(e).iter().map(|&i| z_prev[i]).sum::<f64>() / 3.0;
                 elastic_stress(
                     &sim.problem.material.elasticity,
                     &geo.strain(&mesh, e, &u_prev),

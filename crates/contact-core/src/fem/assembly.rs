@@ -3,32 +3,75 @@
 //!   depend on damage), factored once;
 //! - the P1 mass M and stiffness (Laplacian) K of the damage equation (3.10).
 
+#![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
+
 use super::{DofMap, Geometry, Slot};
 use crate::linalg::Csr;
 use crate::mesh::Mesh;
 
 /// (A ε(w), ε(v)) with A(τ) = 2η τ + ξ tr(τ) I on the free DOFs (3.13):
-/// K[(a,c),(b,d)] = |T| [η (δ_cd ∇ψ_a·∇ψ_b + ∂_d ψ_a ∂_c ψ_b) + ξ ∂_c ψ_a ∂_d ψ_b].
+/// K[(a,c),(b,d)] = |T| [η (δ_cd ∇ψ_a·∇ψ_b + ∂_d ψ_a ∂_c ψ_b) + ξ ∂_c ψ_a ∂_d ψ_b],
+/// rotated into the contact frames of [`DofMap`] (K_loc = Qᵀ K Q on the cells that touch one).
 /// With η = 1/2, ξ = 0 it is the Gram matrix of the V-norm ‖ε(·)‖_L2.
-pub fn viscous_stiffness(mesh: &Mesh, geo: &Geometry, dofs: &DofMap, eta: f64, xi: f64) -> Csr {
+pub fn viscous_stiffness<const D: usize>(
+    mesh: &Mesh<D>,
+    geo: &Geometry<D>,
+    dofs: &DofMap<D>,
+    eta: f64,
+    xi: f64,
+) -> Csr {
     let n = dofs.n_free();
-    let mut t = Vec::with_capacity(mesh.triangles.len() * 36);
-    for (e, tri) in mesh.triangles.iter().enumerate() {
-        let (g, area) = (&geo.grads[e], geo.area[e]);
-        for a in 0..3 {
-            for c in 0..2 {
-                let Slot::Free(i) = dofs.slot[2 * tri[a] + c] else {
+    let nd = (D + 1) * D;
+    let mut t = Vec::with_capacity(mesh.n_cells() * nd * nd);
+    let mut ke = vec![0.0; nd * nd];
+    for (e, cell) in mesh.cells().enumerate() {
+        let (g, m) = (geo.grads(e), geo.measure[e]);
+        let entry = |a: usize, c: usize, b: usize, d: usize| {
+            let mut gab = g[a][0] * g[b][0];
+            for k in 1..D {
+                gab += g[a][k] * g[b][k];
+            }
+            let delta = if c == d { gab } else { 0.0 };
+            m * (eta * (delta + g[a][d] * g[b][c]) + xi * g[a][c] * g[b][d])
+        };
+        if cell.iter().all(|&v| dofs.frame(v).is_none()) {
+            for a in 0..=D {
+                for c in 0..D {
+                    let Slot::Free(i) = dofs.slot[D * cell[a] + c] else {
+                        continue;
+                    };
+                    for b in 0..=D {
+                        for d in 0..D {
+                            let Slot::Free(j) = dofs.slot[D * cell[b] + d] else {
+                                continue;
+                            };
+                            t.push((i, j, entry(a, c, b, d)));
+                        }
+                    }
+                }
+            }
+            continue;
+        }
+        for a in 0..=D {
+            for c in 0..D {
+                for b in 0..=D {
+                    for d in 0..D {
+                        ke[(a * D + c) * nd + b * D + d] = entry(a, c, b, d);
+                    }
+                }
+            }
+        }
+        rotate(&mut ke, nd, cell, dofs);
+        for a in 0..=D {
+            for c in 0..D {
+                let Slot::Free(i) = dofs.slot[D * cell[a] + c] else {
                     continue;
                 };
-                for b in 0..3 {
-                    let gab = g[a][0] * g[b][0] + g[a][1] * g[b][1];
-                    for d in 0..2 {
-                        let Slot::Free(j) = dofs.slot[2 * tri[b] + d] else {
-                            continue;
-                        };
-                        let delta = if c == d { gab } else { 0.0 };
-                        let v = area * (eta * (delta + g[a][d] * g[b][c]) + xi * g[a][c] * g[b][d]);
-                        t.push((i, j, v));
+                for b in 0..=D {
+                    for d in 0..D {
+                        if let Slot::Free(j) = dofs.slot[D * cell[b] + d] {
+                            t.push((i, j, ke[(a * D + c) * nd + b * D + d]));
+                        }
                     }
                 }
             }
@@ -37,28 +80,58 @@ pub fn viscous_stiffness(mesh: &Mesh, geo: &Geometry, dofs: &DofMap, eta: f64, x
     Csr::from_triplets(n, n, t)
 }
 
-/// Consistent P1 mass matrix M_ab = ∫ ψ_a ψ_b = |T|/12 (1 + δ_ab).
-pub fn mass(mesh: &Mesh, geo: &Geometry) -> Csr {
+/// Ke ← Qᵀ Ke Q for the element matrix of `cell` (row-major, nd × nd), with Q the
+/// block-diagonal map from each vertex's frame components to Cartesian ones.
+fn rotate<const D: usize>(ke: &mut [f64], nd: usize, cell: &[usize], dofs: &DofMap<D>) {
+    for (a, &v) in cell.iter().enumerate() {
+        let Some(q) = dofs.frame(v) else { continue };
+        // Rows of block a: (Q_a Ke)[r] = Σ_c q[r][c] Ke[c].
+        for col in 0..nd {
+            let old: [f64; D] = std::array::from_fn(|c| ke[(a * D + c) * nd + col]);
+            for r in 0..D {
+                ke[(a * D + r) * nd + col] = (0..D).map(|c| q[r][c] * old[c]).sum();
+            }
+        }
+        // Columns of block a.
+        for row in 0..nd {
+            let old: [f64; D] = std::array::from_fn(|c| ke[row * nd + a * D + c]);
+            for r in 0..D {
+                ke[row * nd + a * D + r] = (0..D).map(|c| q[r][c] * old[c]).sum();
+            }
+        }
+    }
+}
+
+/// Consistent P1 mass matrix M_ab = ∫ ψ_a ψ_b = |T| (1 + δ_ab) / ((D + 1)(D + 2)).
+pub fn mass<const D: usize>(mesh: &Mesh<D>, geo: &Geometry<D>) -> Csr {
+    let denom = ((D + 1) * (D + 2)) as f64;
     scalar_matrix(mesh, |e, a, b| {
-        geo.area[e] / 12.0 * if a == b { 2.0 } else { 1.0 }
+        geo.measure[e] / denom * if a == b { 2.0 } else { 1.0 }
     })
 }
 
 /// P1 stiffness (Laplacian) K_ab = ∫ ∇ψ_a·∇ψ_b.
-pub fn laplacian(mesh: &Mesh, geo: &Geometry) -> Csr {
+pub fn laplacian<const D: usize>(mesh: &Mesh<D>, geo: &Geometry<D>) -> Csr {
     scalar_matrix(mesh, |e, a, b| {
-        let g = &geo.grads[e];
-        geo.area[e] * (g[a][0] * g[b][0] + g[a][1] * g[b][1])
+        let g = geo.grads(e);
+        let mut dot = g[a][0] * g[b][0];
+        for k in 1..D {
+            dot += g[a][k] * g[b][k];
+        }
+        geo.measure[e] * dot
     })
 }
 
-fn scalar_matrix(mesh: &Mesh, entry: impl Fn(usize, usize, usize) -> f64) -> Csr {
+fn scalar_matrix<const D: usize>(
+    mesh: &Mesh<D>,
+    entry: impl Fn(usize, usize, usize) -> f64,
+) -> Csr {
     let n = mesh.n_nodes();
-    let mut t = Vec::with_capacity(mesh.triangles.len() * 9);
-    for (e, tri) in mesh.triangles.iter().enumerate() {
-        for a in 0..3 {
-            for b in 0..3 {
-                t.push((tri[a], tri[b], entry(e, a, b)));
+    let mut t = Vec::with_capacity(mesh.n_cells() * (D + 1) * (D + 1));
+    for (e, cell) in mesh.cells().enumerate() {
+        for a in 0..=D {
+            for b in 0..=D {
+                t.push((cell[a], cell[b], entry(e, a, b)));
             }
         }
     }
@@ -78,7 +151,7 @@ pub fn combine(a: f64, x: &Csr, b: f64, y: &Csr) -> Csr {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::problem::MeshPattern;
+    use crate::mesh::MeshPattern;
 
     fn meshes() -> Vec<Mesh> {
         [
@@ -143,7 +216,7 @@ mod tests {
             let sig_eps = 2.0 * eta * (exx * exx + eyy * eyy + 2.0 * exy * exy) + xi * tr * tr;
             assert!((energy - 2.0 * sig_eps).abs() < 1e-12);
             // Each element's strain is the exact one.
-            for t in 0..mesh.triangles.len() {
+            for t in 0..mesh.n_cells() {
                 let e = geo.strain(&mesh, t, &u);
                 assert!((e[(0, 0)] - exx).abs() < 1e-13 && (e[(0, 1)] - exy).abs() < 1e-13);
             }

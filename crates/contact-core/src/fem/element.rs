@@ -1,67 +1,147 @@
-//! The linear triangle: areas and the constant gradients of the barycentric basis functions,
-//! computed once per mesh.
+//! The linear simplex (triangle in 2D, tetrahedron in 3D): measures and the constant
+//! gradients of the barycentric basis functions, computed once per mesh.
 
-use crate::laws::Tensor2;
+#![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
+
+use nalgebra::SMatrix;
+
 use crate::mesh::Mesh;
 
-/// Per-triangle data: |T| and ∇ψ_a (a = 0, 1, 2), constant on T.
+/// Per-cell data: |T| and ∇ψ_a (a = 0..=D), constant on T.
 #[derive(Debug, Clone)]
-pub struct Geometry {
-    pub area: Vec<f64>,
-    pub grads: Vec<[[f64; 2]; 3]>,
+pub struct Geometry<const D: usize = 2> {
+    /// |T| (area or volume; positive whatever the cell's orientation).
+    pub measure: Vec<f64>,
+    /// ∇ψ_a of every cell, D + 1 per cell, flat (see [`Geometry::grads`]).
+    grads: Vec<[f64; D]>,
 }
 
-impl Geometry {
-    pub fn new(mesh: &Mesh) -> Geometry {
-        let mut area = Vec::with_capacity(mesh.triangles.len());
-        let mut grads = Vec::with_capacity(mesh.triangles.len());
-        for tri in &mesh.triangles {
-            let p = tri.map(|i| mesh.nodes[i]);
-            let two_a = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1])
-                - (p[2][0] - p[0][0]) * (p[1][1] - p[0][1]);
-            let g = |a: usize| {
-                let (q, r) = (p[(a + 1) % 3], p[(a + 2) % 3]);
-                [(q[1] - r[1]) / two_a, (r[0] - q[0]) / two_a]
-            };
-            area.push(0.5 * two_a);
-            grads.push([g(0), g(1), g(2)]);
+impl<const D: usize> Geometry<D> {
+    pub fn new(mesh: &Mesh<D>) -> Geometry<D> {
+        let mut measure = Vec::with_capacity(mesh.n_cells());
+        let mut grads = Vec::with_capacity(mesh.n_cells() * (D + 1));
+        for cell in mesh.cells() {
+            let (m, g) = simplex(cell, &mesh.nodes);
+            measure.push(m);
+            grads.extend_from_slice(&g[..=D]);
         }
-        Geometry { area, grads }
+        Geometry { measure, grads }
     }
 
-    /// ε(v)|_T = sym(Σ_a v_a ⊗ ∇ψ_a) of a nodal vector field v (interleaved x, y per node).
+    /// ∇ψ_a (a = 0..=D) on cell e.
     #[inline]
-    pub fn strain(&self, mesh: &Mesh, t: usize, v: &[f64]) -> Tensor2<f64> {
-        let g = &self.grads[t];
-        let (mut xx, mut yy, mut xy) = (0.0, 0.0, 0.0);
-        for (a, &n) in mesh.triangles[t].iter().enumerate() {
-            let (vx, vy) = (v[2 * n], v[2 * n + 1]);
-            xx += vx * g[a][0];
-            yy += vy * g[a][1];
-            xy += 0.5 * (vx * g[a][1] + vy * g[a][0]);
+    pub fn grads(&self, e: usize) -> &[[f64; D]] {
+        &self.grads[(D + 1) * e..(D + 1) * (e + 1)]
+    }
+
+    /// ε(v)|_T = sym(Σ_a v_a ⊗ ∇ψ_a) of a nodal vector field v (D components per node,
+    /// interleaved).
+    #[inline]
+    pub fn strain(&self, mesh: &Mesh<D>, t: usize, v: &[f64]) -> SMatrix<f64, D, D> {
+        let g = self.grads(t);
+        let mut e = SMatrix::<f64, D, D>::zeros();
+        for (a, &n) in mesh.cell(t).iter().enumerate() {
+            let va = &v[D * n..D * n + D];
+            for i in 0..D {
+                e[(i, i)] += va[i] * g[a][i];
+                for j in i + 1..D {
+                    e[(i, j)] += 0.5 * (va[i] * g[a][j] + va[j] * g[a][i]);
+                }
+            }
         }
-        Tensor2::new(xx, xy, xy, yy)
+        for i in 0..D {
+            for j in i + 1..D {
+                e[(j, i)] = e[(i, j)];
+            }
+        }
+        e
+    }
+}
+
+/// |T| and the gradients of the barycentric functions of one simplex (entries past D unused).
+fn simplex<const D: usize>(cell: &[usize], nodes: &[[f64; D]]) -> (f64, [[f64; D]; 4]) {
+    let mut g = [[0.0; D]; 4];
+    match D {
+        2 => {
+            let p = [nodes[cell[0]], nodes[cell[1]], nodes[cell[2]]];
+            let two_a = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1])
+                - (p[2][0] - p[0][0]) * (p[1][1] - p[0][1]);
+            for (a, ga) in g.iter_mut().take(3).enumerate() {
+                let (q, r) = (p[(a + 1) % 3], p[(a + 2) % 3]);
+                ga[0] = (q[1] - r[1]) / two_a;
+                ga[1] = (r[0] - q[0]) / two_a;
+            }
+            (0.5 * two_a.abs(), g)
+        }
+        _ => {
+            // J's columns are x_a − x_0; the rows of J⁻¹ are ∇ψ_1..∇ψ_3 and ∇ψ_0 = −Σ ∇ψ_a.
+            let j: [[f64; 3]; 3] = std::array::from_fn(|r| {
+                std::array::from_fn(|c| nodes[cell[c + 1]][r] - nodes[cell[0]][r])
+            });
+            let cof = |r: usize, c: usize| {
+                let (r1, r2, c1, c2) = ((r + 1) % 3, (r + 2) % 3, (c + 1) % 3, (c + 2) % 3);
+                j[r1][c1] * j[r2][c2] - j[r1][c2] * j[r2][c1]
+            };
+            let det = j[0][0] * cof(0, 0) + j[0][1] * cof(0, 1) + j[0][2] * cof(0, 2);
+            for a in 1..=3 {
+                for c in 0..3 {
+                    // (J⁻¹)[a−1][c] = cof(c, a−1) / det.
+                    let v = cof(c, a - 1) / det;
+                    g[a][c] = v;
+                    g[0][c] -= v;
+                }
+            }
+            (det.abs() / 6.0, g)
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::problem::MeshPattern;
+    use crate::mesh::MeshPattern;
 
     #[test]
     fn gradients_reproduce_linear_functions() {
         let mesh = Mesh::rectangle(2.0, 1.0, 3, 2, MeshPattern::Cross);
         let geo = Geometry::new(&mesh);
-        for (t, tri) in mesh.triangles.iter().enumerate() {
+        for (t, tri) in mesh.triangles().iter().enumerate() {
             // f = 3x − 2y + 1: Σ f(x_a) ∇ψ_a = (3, −2).
             let mut g = [0.0; 2];
             for (a, &n) in tri.iter().enumerate() {
                 let f = 3.0 * mesh.nodes[n][0] - 2.0 * mesh.nodes[n][1] + 1.0;
-                g[0] += f * geo.grads[t][a][0];
-                g[1] += f * geo.grads[t][a][1];
+                g[0] += f * geo.grads(t)[a][0];
+                g[1] += f * geo.grads(t)[a][1];
             }
             assert!((g[0] - 3.0).abs() < 1e-12 && (g[1] + 2.0).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn tetrahedron_gradients_and_volume() {
+        // A skewed tetrahedron, either orientation: f = x − 2y + 3z has gradient (1, −2, 3).
+        let nodes = vec![
+            [0.1, 0.0, 0.2],
+            [1.0, 0.1, 0.0],
+            [0.2, 0.9, 0.1],
+            [0.3, 0.2, 1.1],
+        ];
+        for cells in [vec![0, 1, 2, 3], vec![0, 2, 1, 3]] {
+            let mesh = Mesh::<3>::from_cells(nodes.clone(), cells).unwrap();
+            let geo = Geometry::new(&mesh);
+            let v = crate::mesh::signed_measure(&nodes);
+            assert!((geo.measure[0] - v.abs()).abs() < 1e-15);
+            let mut g = [0.0; 3];
+            for (a, &n) in mesh.cell(0).iter().enumerate() {
+                let p = nodes[n];
+                let f = p[0] - 2.0 * p[1] + 3.0 * p[2];
+                (0..3).for_each(|c| g[c] += f * geo.grads(0)[a][c]);
+            }
+            assert!(
+                (g[0] - 1.0).abs() < 1e-12
+                    && (g[1] + 2.0).abs() < 1e-12
+                    && (g[2] - 3.0).abs() < 1e-12
+            );
         }
     }
 }

@@ -14,8 +14,8 @@ pub fn add_body_force(mesh: &Mesh, geo: &Geometry, f0: &VectorField, t: f64, out
         return;
     }
     let constant = f0.is_constant_in_space().then(|| f0.eval(0.0, 0.0, t));
-    for (e, tri) in mesh.triangles.iter().enumerate() {
-        let w = geo.area[e] / 3.0;
+    for (e, tri) in mesh.triangles().iter().enumerate() {
+        let w = geo.measure[e] / 3.0;
         match constant {
             Some(f) => {
                 for &n in tri {
@@ -42,7 +42,7 @@ pub fn add_body_force(mesh: &Mesh, geo: &Geometry, f0: &VectorField, t: f64, out
 pub fn add_tractions(mesh: &Mesh, parts: &[BoundaryPart], t: f64, out: &mut [f64]) {
     // 2-point Gauss on [0, 1]: nodes (1 ∓ 1/√3)/2, weights 1/2.
     let g = 0.5 / 3f64.sqrt();
-    for e in &mesh.boundary_edges {
+    for e in &mesh.facets {
         let Some(BoundaryKind::Traction(f2)) = e.part.map(|p| &parts[p].kind) else {
             continue;
         };
@@ -54,11 +54,14 @@ pub fn add_tractions(mesh: &Mesh, parts: &[BoundaryPart], t: f64, out: &mut [f64
         // Contributions to the endpoints [p, q].
         let (fp, fq) = if f2.is_constant_in_space() {
             let f = at(0.5);
-            (f.map(|v| 0.5 * e.length * v), f.map(|v| 0.5 * e.length * v))
+            (
+                f.map(|v| 0.5 * e.measure * v),
+                f.map(|v| 0.5 * e.measure * v),
+            )
         } else {
             let (s1, s2) = (0.5 - g, 0.5 + g);
             let (f1, f2v) = (at(s1), at(s2));
-            let w = 0.5 * e.length;
+            let w = 0.5 * e.measure;
             (
                 [0, 1].map(|c| w * (f1[c] * (1.0 - s1) + f2v[c] * (1.0 - s2))),
                 [0, 1].map(|c| w * (f1[c] * s1 + f2v[c] * s2)),
@@ -105,7 +108,7 @@ pub fn find_non_finite(
                 return Some(fault);
             }
         } else {
-            for tri in &mesh.triangles {
+            for tri in mesh.triangles() {
                 for a in 0..3 {
                     let (p, q) = (mesh.nodes[tri[a]], mesh.nodes[tri[(a + 1) % 3]]);
                     if let Some(fault) = check(f0, None, 0.5 * (p[0] + q[0]), 0.5 * (p[1] + q[1])) {
@@ -116,7 +119,7 @@ pub fn find_non_finite(
         }
     }
     let g = 0.5 / 3f64.sqrt();
-    for e in &mesh.boundary_edges {
+    for e in &mesh.facets {
         let Some((p, BoundaryKind::Traction(f2))) = e.part.map(|p| (p, &parts[p].kind)) else {
             continue;
         };
@@ -138,10 +141,10 @@ pub fn find_non_finite(
 
 /// Adds −(B_T, ε(ψ_a e_c)) = −|T| (B_T ∇ψ_a)_c for per-element stresses `b` (B symmetric).
 pub fn add_stress_divergence(mesh: &Mesh, geo: &Geometry, b: &[Tensor2<f64>], out: &mut [f64]) {
-    for (e, tri) in mesh.triangles.iter().enumerate() {
-        let (s, area) = (&b[e], geo.area[e]);
+    for (e, tri) in mesh.triangles().iter().enumerate() {
+        let (s, area) = (&b[e], geo.measure[e]);
         for (a, &n) in tri.iter().enumerate() {
-            let g = geo.grads[e][a];
+            let g = geo.grads(e)[a];
             out[2 * n] -= area * (s[(0, 0)] * g[0] + s[(0, 1)] * g[1]);
             out[2 * n + 1] -= area * (s[(1, 0)] * g[0] + s[(1, 1)] * g[1]);
         }
@@ -159,8 +162,8 @@ pub fn damage_source(
     out: &mut [f64],
 ) {
     out.iter_mut().for_each(|v| *v = 0.0);
-    for (e, tri) in mesh.triangles.iter().enumerate() {
-        let w = geo.area[e] / 3.0;
+    for (e, tri) in mesh.triangles().iter().enumerate() {
+        let w = geo.measure[e] / 3.0;
         for a in 0..3 {
             let (i, j) = (tri[a], tri[(a + 1) % 3]);
             let f = phi(e, 0.5 * (zeta[i] + zeta[j]));
@@ -174,7 +177,7 @@ pub fn damage_source(
 mod tests {
     use super::*;
     use crate::expr::Expr;
-    use crate::problem::{MeshPattern, ScalarField, Segment};
+    use crate::problem::{MeshPattern, ScalarField, Segment, Support};
 
     #[test]
     fn constant_and_linear_loads_integrate_exactly() {
@@ -210,12 +213,12 @@ mod tests {
                 ScalarField::Expr(Expr::parse("y").unwrap()),
                 ScalarField::Const(1.0),
             ])),
-            segment: Segment {
+            support: Support::Segment(Segment {
                 a: [2.0, 0.0],
                 b: [2.0, 1.0],
-            },
+            }),
         }];
-        m.tag_boundary(&[parts[0].segment]);
+        m.tag_boundary(&[parts[0].support.clone()]).unwrap();
         out.iter_mut().for_each(|v| *v = 0.0);
         add_tractions(&m, &parts, 0.0, &mut out);
         let sx: f64 = out.iter().step_by(2).sum();

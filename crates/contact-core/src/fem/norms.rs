@@ -6,8 +6,8 @@ use crate::mesh::Mesh;
 
 /// ‖ε(v)‖_L2 = (Σ_T |T| ε:ε)^½ for a global nodal vector field v.
 pub fn strain_norm(mesh: &Mesh, geo: &Geometry, v: &[f64]) -> f64 {
-    (0..mesh.triangles.len())
-        .map(|t| geo.area[t] * geo.strain(mesh, t, v).norm_squared())
+    (0..mesh.n_cells())
+        .map(|t| geo.measure[t] * geo.strain(mesh, t, v).norm_squared())
         .sum::<f64>()
         .sqrt()
 }

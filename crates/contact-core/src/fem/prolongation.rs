@@ -2,8 +2,7 @@
 //! (docs/numerics.md#nesting-and-prolongation: meshes of h and h/2 are nested, so this is exact for P1 fields). Used by
 //! convergence studies to compare a coarse solution with the reference on the fine mesh.
 
-use crate::mesh::Mesh;
-use crate::problem::MeshPattern;
+use crate::mesh::{Grid, Mesh, MeshPattern, Nesting};
 
 /// Values at the fine mesh's nodes of the P1 field with nodal values `coarse_values`
 /// (`comps` values per node, interleaved) on `coarse`. Both meshes cover the same rectangle
@@ -15,15 +14,14 @@ pub fn prolongate(
     comps: usize,
     fine: &Mesh,
 ) -> Option<Vec<f64>> {
-    if coarse.pattern != fine.pattern || coarse.pattern == MeshPattern::Cross {
-        return None;
+    if let Some(nest) = &fine.nesting {
+        return (nest.coarse_nodes == coarse.n_nodes())
+            .then(|| refined(nest, coarse_values, comps));
     }
-    if fine.nx % coarse.nx != 0 || fine.ny % coarse.ny != 0 {
-        return None;
-    }
+    let (coarse, fine) = nested_grids(coarse, fine)?;
     let (rx, ry) = (fine.nx / coarse.nx, fine.ny / coarse.ny);
     let cgrid = |i: usize, j: usize| j * (coarse.nx + 1) + i;
-    let mut out = Vec::with_capacity(fine.n_nodes() * comps);
+    let mut out = Vec::with_capacity((fine.nx + 1) * (fine.ny + 1) * comps);
     for j in 0..=fine.ny {
         for i in 0..=fine.nx {
             // Coarse cell containing the fine node, and local coordinates (s, t) in [0, 1]²,
@@ -56,24 +54,46 @@ pub fn prolongate(
     Some(out)
 }
 
+/// The grids of two structured meshes of one rectangle whose cells nest (same diagonal
+/// pattern, fine cell counts multiples of the coarse ones).
+fn nested_grids(coarse: &Mesh, fine: &Mesh) -> Option<(Grid, Grid)> {
+    let (c, f) = (coarse.grid?, fine.grid?);
+    let nested = c.pattern == f.pattern
+        && c.pattern != MeshPattern::Cross
+        && f.nx % c.nx == 0
+        && f.ny % c.ny == 0;
+    nested.then_some((c, f))
+}
+
+/// A red refinement's nodal values: coarse nodes keep theirs, midpoints take the mean.
+fn refined(nest: &Nesting, coarse_values: &[f64], comps: usize) -> Vec<f64> {
+    let mut out = coarse_values[..nest.coarse_nodes * comps].to_vec();
+    for &[a, b] in &nest.midpoints {
+        for c in 0..comps {
+            out.push(0.5 * (coarse_values[comps * a + c] + coarse_values[comps * b + c]));
+        }
+    }
+    out
+}
+
 /// For every triangle of `fine`, the triangle of `coarse` containing it (nested meshes of
 /// the same diagonal pattern, as for [`prolongate`]). On a fine triangle T, the interpolant
 /// of a coarse P1 field is the coarse field itself, so ε(I v)|_T = ε(v)|_parent(T): strain
 /// errors need no interpolation at all.
-pub fn parent_triangles(coarse: &Mesh, fine: &Mesh) -> Option<Vec<u32>> {
-    if coarse.pattern != fine.pattern || coarse.pattern == MeshPattern::Cross {
-        return None;
+pub fn parent_triangles(coarse_mesh: &Mesh, fine_mesh: &Mesh) -> Option<Vec<u32>> {
+    if let Some(nest) = &fine_mesh.nesting {
+        return (nest.coarse_nodes == coarse_mesh.n_nodes()
+            && fine_mesh.n_cells() == 4 * coarse_mesh.n_cells())
+        .then(|| (0..fine_mesh.n_cells()).map(|t| (t / 4) as u32).collect());
     }
-    if fine.nx % coarse.nx != 0 || fine.ny % coarse.ny != 0 {
-        return None;
-    }
+    let (coarse, fine) = nested_grids(coarse_mesh, fine_mesh)?;
     let (rx, ry) = (fine.nx / coarse.nx, fine.ny / coarse.ny);
     // Centroids of a cell's two triangles, in thirds of the cell (see Mesh::rectangle).
     let centroids: [[usize; 2]; 2] = match fine.pattern {
         MeshPattern::Diagonal => [[2, 1], [1, 2]],
         _ => [[1, 1], [2, 2]],
     };
-    let mut parents = Vec::with_capacity(fine.triangles.len());
+    let mut parents = Vec::with_capacity(fine_mesh.n_cells());
     for j in 0..fine.ny {
         for i in 0..fine.nx {
             let (ci, cj) = (i / rx, j / ry);
@@ -122,8 +142,8 @@ mod tests {
             }
             // Integral of the field is preserved (it is the same function).
             let integral = |m: &Mesh, v: &[f64]| -> f64 {
-                (0..m.triangles.len())
-                    .map(|t| m.area(t) * m.triangles[t].iter().map(|&i| v[i]).sum::<f64>() / 3.0)
+                (0..m.n_cells())
+                    .map(|t| m.area(t) * m.triangle(t).iter().map(|&i| v[i]).sum::<f64>() / 3.0)
                     .sum()
             };
             assert!((integral(&coarse, &cz) - integral(&fine, &fz)).abs() < 1e-12);
@@ -137,12 +157,12 @@ mod tests {
             let coarse = Mesh::rectangle(2.0, 1.0, 4, 2, pattern);
             let fine = Mesh::rectangle(2.0, 1.0, 12, 6, pattern);
             let parents = parent_triangles(&coarse, &fine).unwrap();
-            assert_eq!(parents.len(), fine.triangles.len());
+            assert_eq!(parents.len(), fine.n_cells());
             for (t, &p) in parents.iter().enumerate() {
-                let c = fine.triangles[t].iter().fold([0.0; 2], |a, &n| {
+                let c = fine.triangle(t).iter().fold([0.0; 2], |a, &n| {
                     [a[0] + fine.nodes[n][0] / 3.0, a[1] + fine.nodes[n][1] / 3.0]
                 });
-                let q = coarse.triangles[p as usize].map(|n| coarse.nodes[n]);
+                let q = coarse.triangle(p as usize).map(|n| coarse.nodes[n]);
                 let cross = |a: [f64; 2], b: [f64; 2]| {
                     (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
                 };

@@ -1,29 +1,64 @@
-//! Geometry only: nodes, triangles and boundary edges tagged with the boundary part that
-//! contains them. The structured generator (docs/numerics.md#mesh-patterns-refinement-and-nesting): n = round(1/h) cells per unit
-//! length, every square cell cut by its lower-left → upper-right diagonal (default), so the
-//! meshes of h and h/2 are nested.
+//! Geometry only: nodes, simplicial cells (triangles in 2D, tetrahedra in 3D) and boundary
+//! facets tagged with the boundary part that contains them, for any dimension `D` (2 or 3).
+//!
+//! Where meshes come from (docs/numerics.md#meshes):
+//! - [`Mesh::rectangle`]: the structured generator. n = round(1/h) cells per unit length,
+//!   every square cell cut by its lower-left → upper-right diagonal (default), so the meshes
+//!   of h and h/2 are nested.
+//! - [`Mesh::from_cells`] (used by [`import`] for gmsh files and by the polygon mesher): any
+//!   conforming simplicial mesh, checked by [`quality`] and with its boundary facets found
+//!   as the faces that belong to one cell only.
+//! - [`Mesh::refine`] ([`refine`]): uniform (red) refinement, nested by construction.
+//!
+//! Boundary parts are tagged once on the mesh given by the user ([`support`]); refinement
+//! hands each child facet its parent's tag, so curved parts stay selected although the new
+//! nodes lie on chords.
 
-use crate::problem::{MeshPattern, Segment};
+#![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
-/// A boundary edge of the mesh.
+pub mod import;
+pub mod polygon;
+pub mod quality;
+pub mod refine;
+pub mod support;
+
+pub use quality::MeshError;
+
+/// How each square cell of the structured mesh is cut into triangles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MeshPattern {
+    /// Lower-left → upper-right diagonal (the default; docs/numerics.md#the-three-patterns).
+    Diagonal,
+    /// Lower-right → upper-left diagonal.
+    AntiDiagonal,
+    /// Both diagonals: four triangles around an added cell-centre node.
+    Cross,
+}
+
+/// A straight piece of the rectangle's boundary, from `a` to `b`.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BoundaryEdge {
-    /// End nodes, ordered so that the body lies to the left (counter-clockwise boundary).
-    pub nodes: [usize; 2],
-    /// Outward unit normal.
-    pub normal: [f64; 2],
-    pub length: f64,
-    /// Index of the boundary part that contains the edge, None if traction-free.
+pub struct Segment {
+    pub a: [f64; 2],
+    pub b: [f64; 2],
+}
+
+/// A boundary facet: an edge in 2D, a triangle in 3D.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Facet<const D: usize> {
+    /// Vertices, ordered so that the outward normal follows them (2D: the body lies to the
+    /// left of p → q; 3D: counter-clockwise seen from outside).
+    pub nodes: [usize; D],
+    /// Outward unit normal ν_F.
+    pub normal: [f64; D],
+    /// |F|: length (2D) or area (3D).
+    pub measure: f64,
+    /// Index of the boundary part that contains the facet, None if traction-free.
     pub part: Option<usize>,
 }
 
-/// A triangulation of the rectangle [0, width] × [0, height].
-#[derive(Debug, Clone)]
-pub struct Mesh {
-    pub nodes: Vec<[f64; 2]>,
-    /// Counter-clockwise vertex triples.
-    pub triangles: Vec<[usize; 3]>,
-    pub boundary_edges: Vec<BoundaryEdge>,
+/// The lattice of a structured rectangle mesh (what nesting of rectangles relies on).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Grid {
     pub width: f64,
     pub height: f64,
     /// Cells along x and y.
@@ -32,8 +67,169 @@ pub struct Mesh {
     pub pattern: MeshPattern,
 }
 
-impl Mesh {
-    /// Structured mesh of nx × ny square (or rectangular) cells.
+/// A named set of boundary facets: a physical group of an imported mesh.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Group {
+    /// The name from `$PhysicalNames`, or the physical tag written as a number.
+    pub name: String,
+    /// Indices into [`Mesh::facets`].
+    pub facets: Vec<usize>,
+}
+
+/// How a red refinement relates to its coarse mesh: the first `coarse_nodes` nodes are the
+/// coarse nodes, node `coarse_nodes + k` is the midpoint of coarse edge `midpoints[k]`, and
+/// the children of coarse cell c are cells 2^D·c .. 2^D·c + 2^D − 1.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Nesting {
+    pub coarse_nodes: usize,
+    pub midpoints: Vec<[usize; 2]>,
+}
+
+/// A conforming simplicial mesh of a body in R^D.
+#[derive(Debug, Clone)]
+pub struct Mesh<const D: usize = 2> {
+    pub nodes: Vec<[f64; D]>,
+    /// D + 1 node indices per cell, flat; all cells have the orientation of the first.
+    cells: Vec<usize>,
+    pub facets: Vec<Facet<D>>,
+    pub groups: Vec<Group>,
+    /// Set for the structured rectangle.
+    pub grid: Option<Grid>,
+    /// Set for a red refinement of another mesh.
+    pub nesting: Option<Nesting>,
+}
+
+impl<const D: usize> Mesh<D> {
+    /// Vertices per cell.
+    pub const CELL: usize = D + 1;
+
+    pub fn n_nodes(&self) -> usize {
+        self.nodes.len()
+    }
+
+    pub fn n_cells(&self) -> usize {
+        self.cells.len() / (D + 1)
+    }
+
+    /// The vertices of cell e.
+    #[inline]
+    pub fn cell(&self, e: usize) -> &[usize] {
+        &self.cells[(D + 1) * e..(D + 1) * (e + 1)]
+    }
+
+    /// The cells in order, D + 1 vertices each.
+    pub fn cells(&self) -> std::slice::ChunksExact<'_, usize> {
+        self.cells.chunks_exact(D + 1)
+    }
+
+    /// The smallest box [min, max] that holds every node.
+    pub fn bounding_box(&self) -> ([f64; D], [f64; D]) {
+        let mut lo = [f64::INFINITY; D];
+        let mut hi = [f64::NEG_INFINITY; D];
+        for p in &self.nodes {
+            for c in 0..D {
+                lo[c] = lo[c].min(p[c]);
+                hi[c] = hi[c].max(p[c]);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// The length of the bounding box's diagonal: the scale of geometric tolerances.
+    pub fn diameter(&self) -> f64 {
+        let (lo, hi) = self.bounding_box();
+        (0..D).map(|c| (hi[c] - lo[c]).powi(2)).sum::<f64>().sqrt()
+    }
+
+    /// Tags every boundary facet with the part that selects it (docs/numerics.md#boundary-tagging).
+    pub fn tag_boundary(&mut self, supports: &[support::Support]) -> Result<(), support::TagError> {
+        support::tag(self, supports)
+    }
+
+    /// One uniform (red) refinement ([`refine`]).
+    pub fn refine(&self) -> Mesh<D> {
+        refine::red(self)
+    }
+
+    /// A mesh of the given cells, checked ([`quality`]) and with its boundary facets found.
+    pub fn from_cells(nodes: Vec<[f64; D]>, cells: Vec<usize>) -> Result<Mesh<D>, MeshError> {
+        quality::build(nodes, cells)
+    }
+
+    pub(crate) fn from_parts(
+        nodes: Vec<[f64; D]>,
+        cells: Vec<usize>,
+        facets: Vec<Facet<D>>,
+        groups: Vec<Group>,
+        nesting: Option<Nesting>,
+    ) -> Mesh<D> {
+        debug_assert_eq!(cells.len() % (D + 1), 0);
+        Mesh {
+            nodes,
+            cells,
+            facets,
+            groups,
+            grid: None,
+            nesting,
+        }
+    }
+}
+
+/// Signed measure of a simplex: half the 2D cross product, or a sixth of the 3D triple
+/// product (positive for counter-clockwise / right-handed vertex order).
+pub fn signed_measure<const D: usize>(p: &[[f64; D]]) -> f64 {
+    let d = |k: usize, c: usize| p[k][c] - p[0][c];
+    match D {
+        2 => 0.5 * (d(1, 0) * d(2, 1) - d(2, 0) * d(1, 1)),
+        3 => {
+            (d(1, 0) * (d(2, 1) * d(3, 2) - d(2, 2) * d(3, 1))
+                - d(1, 1) * (d(2, 0) * d(3, 2) - d(2, 2) * d(3, 0))
+                + d(1, 2) * (d(2, 0) * d(3, 1) - d(2, 1) * d(3, 0)))
+                / 6.0
+        }
+        _ => unreachable!("meshes are 2D or 3D"),
+    }
+}
+
+/// The outward unit normal and measure of the facet `f` of a cell whose remaining vertex is
+/// `opposite`, with the facet's vertices reordered to follow the normal ([`Facet::nodes`]).
+pub fn facet_frame<const D: usize>(
+    nodes: &[[f64; D]],
+    mut f: [usize; D],
+    opposite: [f64; D],
+) -> ([usize; D], [f64; D], f64) {
+    let p = nodes[f[0]];
+    let mut n = [0.0; D];
+    match D {
+        2 => {
+            let q = nodes[f[1]];
+            n[0] = q[1] - p[1];
+            n[1] = p[0] - q[0];
+        }
+        3 => {
+            let (q, r) = (nodes[f[1]], nodes[f[2]]);
+            let (a, b) = (
+                [q[0] - p[0], q[1] - p[1], q[2] - p[2]],
+                [r[0] - p[0], r[1] - p[1], r[2] - p[2]],
+            );
+            n[0] = a[1] * b[2] - a[2] * b[1];
+            n[1] = a[2] * b[0] - a[0] * b[2];
+            n[2] = a[0] * b[1] - a[1] * b[0];
+        }
+        _ => unreachable!("meshes are 2D or 3D"),
+    }
+    let inward: f64 = (0..D).map(|c| n[c] * (opposite[c] - p[c])).sum();
+    if inward > 0.0 {
+        f.swap(D - 2, D - 1);
+        n.iter_mut().for_each(|v| *v = -*v);
+    }
+    let len = n.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let measure = if D == 2 { len } else { 0.5 * len };
+    (f, n.map(|v| v / len), measure)
+}
+
+impl Mesh<2> {
+    /// Structured mesh of nx × ny square (or rectangular) cells of [0, width] × [0, height].
     pub fn rectangle(width: f64, height: f64, nx: usize, ny: usize, pattern: MeshPattern) -> Mesh {
         assert!(nx >= 1 && ny >= 1);
         let hx = width / nx as f64;
@@ -47,7 +243,7 @@ impl Mesh {
             }
         }
         let per_cell = if pattern == MeshPattern::Cross { 4 } else { 2 };
-        let mut triangles = Vec::with_capacity(nx * ny * per_cell);
+        let mut cells = Vec::with_capacity(3 * nx * ny * per_cell);
         for j in 0..ny {
             for i in 0..nx {
                 let (a, b, c, d) = (
@@ -57,28 +253,22 @@ impl Mesh {
                     grid(i, j + 1),
                 );
                 match pattern {
-                    MeshPattern::Diagonal => {
-                        triangles.push([a, b, c]);
-                        triangles.push([a, c, d]);
-                    }
-                    MeshPattern::AntiDiagonal => {
-                        triangles.push([a, b, d]);
-                        triangles.push([b, c, d]);
-                    }
+                    MeshPattern::Diagonal => cells.extend_from_slice(&[a, b, c, a, c, d]),
+                    MeshPattern::AntiDiagonal => cells.extend_from_slice(&[a, b, d, b, c, d]),
                     MeshPattern::Cross => {
                         let m = nodes.len();
                         nodes.push([(i as f64 + 0.5) * hx, (j as f64 + 0.5) * hy]);
-                        triangles.extend_from_slice(&[[a, b, m], [b, c, m], [c, d, m], [d, a, m]]);
+                        cells.extend_from_slice(&[a, b, m, b, c, m, c, d, m, d, a, m]);
                     }
                 }
             }
         }
-        let mut boundary_edges = Vec::with_capacity(2 * (nx + ny));
-        let mut edge = |p: usize, q: usize, normal: [f64; 2], length: f64| {
-            boundary_edges.push(BoundaryEdge {
+        let mut facets = Vec::with_capacity(2 * (nx + ny));
+        let mut edge = |p: usize, q: usize, normal: [f64; 2], measure: f64| {
+            facets.push(Facet {
                 nodes: [p, q],
                 normal,
-                length,
+                measure,
                 part: None,
             })
         };
@@ -96,41 +286,39 @@ impl Mesh {
         }
         Mesh {
             nodes,
-            triangles,
-            boundary_edges,
-            width,
-            height,
-            nx,
-            ny,
-            pattern,
+            cells,
+            facets,
+            groups: Vec::new(),
+            grid: Some(Grid {
+                width,
+                height,
+                nx,
+                ny,
+                pattern,
+            }),
+            nesting: None,
         }
     }
 
-    /// Tags each boundary edge with the first part whose segment contains it (docs/numerics.md#boundary-tagging: "a
-    /// boundary edge belongs to the part that contains it"); parts do not overlap (validated).
-    pub fn tag_boundary(&mut self, segments: &[Segment]) {
-        let tol = 1e-9 * self.width.max(self.height);
-        for e in &mut self.boundary_edges {
-            let (p, q) = (self.nodes[e.nodes[0]], self.nodes[e.nodes[1]]);
-            e.part = segments
-                .iter()
-                .position(|s| on_segment(p, s, tol) && on_segment(q, s, tol));
-        }
+    /// The triangles as vertex triples.
+    pub fn triangles(&self) -> &[[usize; 3]] {
+        self.cells.as_chunks::<3>().0
     }
 
-    pub fn n_nodes(&self) -> usize {
-        self.nodes.len()
+    /// The vertices of triangle t.
+    #[inline]
+    pub fn triangle(&self, t: usize) -> [usize; 3] {
+        self.triangles()[t]
     }
 
-    /// Area of triangle t.
+    /// Area of triangle t (positive for counter-clockwise vertices).
     pub fn area(&self, t: usize) -> f64 {
-        let [a, b, c] = self.triangles[t].map(|i| self.nodes[i]);
-        0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]))
+        signed_measure(&self.triangle(t).map(|i| self.nodes[i]))
     }
 }
 
 /// Is point p on the closed segment s (within tol)?
-fn on_segment(p: [f64; 2], s: &Segment, tol: f64) -> bool {
+pub(crate) fn on_segment(p: [f64; 2], s: &Segment, tol: f64) -> bool {
     let d = [s.b[0] - s.a[0], s.b[1] - s.a[1]];
     let len2 = d[0] * d[0] + d[1] * d[1];
     let v = [p[0] - s.a[0], p[1] - s.a[1]];
@@ -141,42 +329,4 @@ fn on_segment(p: [f64; 2], s: &Segment, tol: f64) -> bool {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn counts_areas_and_orientation() {
-        for (pattern, tri_per_cell, extra) in [
-            (MeshPattern::Diagonal, 2, 0),
-            (MeshPattern::AntiDiagonal, 2, 0),
-            (MeshPattern::Cross, 4, 1),
-        ] {
-            let m = Mesh::rectangle(2.0, 1.0, 8, 4, pattern);
-            assert_eq!(m.n_nodes(), 9 * 5 + extra * 32);
-            assert_eq!(m.triangles.len(), tri_per_cell * 32);
-            let total: f64 = (0..m.triangles.len()).map(|t| m.area(t)).sum();
-            assert!((total - 2.0).abs() < 1e-13);
-            assert!((0..m.triangles.len()).all(|t| m.area(t) > 0.0));
-            let perimeter: f64 = m.boundary_edges.iter().map(|e| e.length).sum();
-            assert!((perimeter - 6.0).abs() < 1e-13);
-        }
-    }
-
-    #[test]
-    fn tagging_uses_containment() {
-        let mut m = Mesh::rectangle(2.0, 1.0, 4, 2, MeshPattern::Diagonal);
-        // Experiment 2's Γ3 = [0, 1) × {0}: the two bottom edges left of x = 1.
-        let seg = Segment {
-            a: [0.0, 0.0],
-            b: [1.0, 0.0],
-        };
-        m.tag_boundary(&[seg]);
-        let tagged: Vec<_> = m
-            .boundary_edges
-            .iter()
-            .filter(|e| e.part == Some(0))
-            .collect();
-        assert_eq!(tagged.len(), 2);
-        assert!(tagged.iter().all(|e| e.normal == [0.0, -1.0]));
-    }
-}
+mod tests;

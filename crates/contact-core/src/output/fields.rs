@@ -16,12 +16,8 @@ impl<'a> MeshJson<'a> {
     pub fn new(mesh: &'a Mesh) -> Self {
         MeshJson {
             nodes: &mesh.nodes,
-            triangles: &mesh.triangles,
-            boundary_edges: mesh
-                .boundary_edges
-                .iter()
-                .map(|e| (e.nodes, e.part))
-                .collect(),
+            triangles: mesh.triangles(),
+            boundary_edges: mesh.facets.iter().map(|e| (e.nodes, e.part)).collect(),
         }
     }
 }

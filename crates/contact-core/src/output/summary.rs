@@ -13,9 +13,21 @@ use serde::Serialize;
 pub struct MeshInfo {
     pub nodes: usize,
     pub triangles: usize,
+    /// Rectangle: n = round(1/h); 0 for a given mesh.
     pub cells_per_unit: usize,
+    /// Rectangle: 1/n; a given mesh: its longest cell edge.
     pub h: f64,
+    /// Rectangle: the diagonal pattern; a given mesh: "unstructured".
     pub pattern: &'static str,
+    /// A given mesh: where it came from ("mesh <id or file>", "polygon").
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
+    /// A given mesh: the red refinements applied to it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refine: Option<usize>,
+    /// Γ3 nodes whose contact frame is rotated (normal not along an axis).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rotated_frames: Option<usize>,
     /// Free velocity DOFs (interior + Γ3 tangential).
     pub unknowns: usize,
     pub contact_dofs: usize,
@@ -127,14 +139,21 @@ impl Summary {
             version: env!("CARGO_PKG_VERSION"),
             mesh: MeshInfo {
                 nodes: sim.mesh.n_nodes(),
-                triangles: sim.mesh.triangles.len(),
+                triangles: sim.mesh.n_cells(),
                 cells_per_unit: p.cells_per_unit,
-                h: 1.0 / p.cells_per_unit as f64,
-                pattern: match p.pattern {
-                    MeshPattern::Diagonal => "diagonal",
-                    MeshPattern::AntiDiagonal => "anti_diagonal",
-                    MeshPattern::Cross => "cross",
+                h: match &p.body {
+                    None => 1.0 / p.cells_per_unit as f64,
+                    Some(_) => crate::mesh::quality::figures(&sim.mesh).max_cell_size,
                 },
+                pattern: match (&p.body, p.pattern) {
+                    (Some(_), _) => "unstructured",
+                    (None, MeshPattern::Diagonal) => "diagonal",
+                    (None, MeshPattern::AntiDiagonal) => "anti_diagonal",
+                    (None, MeshPattern::Cross) => "cross",
+                },
+                source: p.body.as_ref().map(|b| b.source.clone()),
+                refine: p.body.as_ref().map(|b| b.refine),
+                rotated_frames: p.body.as_ref().map(|_| sim.dofs.frames.len()),
                 unknowns: sim.dofs.n_free(),
                 contact_dofs: sim.dofs.n_contact(),
                 factor_n,

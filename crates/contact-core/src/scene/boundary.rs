@@ -1,11 +1,17 @@
-//! Boundary parts: each a straight segment on one side of the rectangle, parts not overlapping.
+//! Boundary parts. Each selects boundary facets in one of three ways
+//! (docs/numerics.md#boundary-tagging): a straight segment `from`/`to` (on a rectangle: on
+//! one side, parts not overlapping), a physical `group` of an imported mesh, or the zero set
+//! of a formula `on` where the formula `where` is ≥ 0. Whether every part selects facets,
+//! and no facet two parts, is checked on the mesh itself once it exists (`scene/mod.rs`).
 
 use serde_json::Value;
 
+use super::domain::Shape;
 use super::fields::PART_VARIANTS;
 use super::formulas::{vector_field, Sampled};
 use super::read::{describe, index, join, point, required, variant_object, Cx};
-use crate::problem::{BoundaryKind, BoundaryPart, Segment, VectorField};
+use crate::expr::Expr;
+use crate::problem::{BoundaryKind, BoundaryPart, Segment, Support, VectorField};
 
 /// Most boundary parts (their overlap check is quadratic in the count).
 pub(super) const MAX_BOUNDARY_PARTS: usize = 1000;
@@ -53,9 +59,13 @@ pub(super) fn boundary(
     cx: &mut Cx,
     v: &Value,
     ptr: &str,
-    dims: Option<(f64, f64)>,
+    shape: Option<&Shape>,
     sampled: &mut Vec<Sampled>,
 ) -> Option<Vec<BoundaryPart>> {
+    let dims = match shape {
+        Some(Shape::Rectangle { width, height }) => Some((*width, *height)),
+        _ => None,
+    };
     let Some(items) = v.as_array() else {
         cx.err(
             ptr,
@@ -92,15 +102,98 @@ pub(super) fn boundary(
             continue;
         };
         has_clamped |= ty == "clamped";
-        let from = required(cx, m, &pptr, "from", "the start point [x, y]")
-            .and_then(|p| point(cx, p, &join(&pptr, "from")));
-        let to = required(cx, m, &pptr, "to", "the end point [x, y]")
-            .and_then(|p| point(cx, p, &join(&pptr, "to")));
-        let segment = match (from, to, dims) {
-            (Some(a), Some(b), Some((w, h))) => place(cx, &pptr, a, b, w, h),
+        let ways: Vec<&str> = ["from", "group", "on"]
+            .into_iter()
+            .filter(|k| m.contains_key(*k) || (*k == "from" && m.contains_key("to")))
+            .collect();
+        let support = match ways.as_slice() {
+            ["group"] | ["on"] if m.contains_key("to") => {
+                cx.err(
+                    &join(&pptr, "to"),
+                    "to belongs to a segment part {from, to}",
+                );
+                None
+            }
+            ["group"] if m.contains_key("where") => {
+                cx.err(
+                    &join(&pptr, "where"),
+                    "where belongs to a part selected by a formula \"on\"",
+                );
+                None
+            }
+            ["group"] => match (&m["group"], shape) {
+                (Value::String(g), Some(Shape::Mesh { .. })) if !g.is_empty() => {
+                    Some(Support::Group(g.clone()))
+                }
+                (Value::String(_), Some(Shape::Mesh { .. })) | (_, Some(Shape::Mesh { .. })) => {
+                    cx.err(
+                        &join(&pptr, "group"),
+                        format!(
+                            "group must be the name of a physical group, got {}",
+                            describe(&m["group"])
+                        ),
+                    );
+                    None
+                }
+                _ => {
+                    cx.err(
+                        &join(&pptr, "group"),
+                        "groups exist only on an imported mesh (domain.mesh)",
+                    );
+                    None
+                }
+            },
+            ["on"] => {
+                let on = formula(cx, &m["on"], &join(&pptr, "on"));
+                let within = match m.get("where") {
+                    None => Some(None),
+                    Some(w) => formula(cx, w, &join(&pptr, "where")).map(Some),
+                };
+                match (on, within) {
+                    (Some(on), Some(within)) => Some(Support::Zero { on, within }),
+                    _ => None,
+                }
+            }
+            ["from"] if m.contains_key("where") => {
+                cx.err(
+                    &join(&pptr, "where"),
+                    "where belongs to a part selected by a formula \"on\"",
+                );
+                None
+            }
+            ["from"] => None.or_else(|| {
+                let from = required(cx, m, &pptr, "from", "the start point [x, y]")
+                    .and_then(|p| point(cx, p, &join(&pptr, "from")));
+                let to = required(cx, m, &pptr, "to", "the end point [x, y]")
+                    .and_then(|p| point(cx, p, &join(&pptr, "to")));
+                Some(Support::Segment(Segment { a: from?, b: to? }))
+            }),
+            [] => {
+                cx.err(&pptr, "a boundary part needs its facets: a segment {from, to}, a group, or a formula on (with an optional where)");
+                None
+            }
+            _ => {
+                cx.err(
+                    &pptr,
+                    format!(
+                        "give one way of selecting facets, got {}",
+                        ways.join(" and ")
+                    ),
+                );
+                None
+            }
+        };
+        let segment = match (&support, dims) {
+            (Some(Support::Segment(s)), Some((w, h))) => place(cx, &pptr, s.a, s.b, w, h),
+            (Some(Support::Segment(s)), None) if shape.is_some() => Some((*s, None)),
             _ => None,
         };
-        placed.push(segment.as_ref().map(|(_, p)| *p));
+        let support = match (support, &segment) {
+            (Some(Support::Segment(_)), Some((s, _))) => Some(Support::Segment(*s)),
+            (Some(Support::Segment(_)), None) => None,
+            (other, _) => other,
+        };
+        placed.push(segment.as_ref().and_then(|(_, p)| *p));
         let kind = match ty {
             "clamped" => Some(BoundaryKind::Clamped),
             "contact" => Some(BoundaryKind::Contact),
@@ -113,8 +206,8 @@ pub(super) fn boundary(
                 }
             },
         };
-        match (kind, segment) {
-            (Some(kind), Some((segment, _))) => parts.push(BoundaryPart { kind, segment }),
+        match (kind, support) {
+            (Some(kind), Some(support)) => parts.push(BoundaryPart { kind, support }),
             _ => all_ok = false,
         }
     }
@@ -153,7 +246,7 @@ pub(super) fn boundary(
     if types_known && !has_clamped {
         cx.err(
             ptr,
-            "at least one clamped segment is required: without Γ1 the velocity problem is \
+            "at least one clamped part is required: without Γ1 the velocity problem is \
              singular (Korn's inequality)",
         );
         all_ok = false;
@@ -170,7 +263,7 @@ fn place(
     b: [f64; 2],
     w: f64,
     h: f64,
-) -> Option<(Segment, Placed)> {
+) -> Option<(Segment, Option<Placed>)> {
     let tol = SIDE_TOL * w.max(h);
     let (ma, mb) = (sides_of(a, w, h, tol), sides_of(b, w, h, tol));
     let outside = |p: [f64; 2]| {
@@ -221,5 +314,33 @@ fn place(
         );
         return None;
     }
-    Some((Segment { a, b }, Placed { side, lo, hi }))
+    Some((Segment { a, b }, Some(Placed { side, lo, hi })))
+}
+
+/// A formula in x and y (no t: the boundary does not move).
+fn formula(cx: &mut Cx, v: &Value, ptr: &str) -> Option<Expr> {
+    let Some(src) = v.as_str() else {
+        cx.err(
+            ptr,
+            format!(
+                "expected a formula in x and y such as \"x^2 + y^2 - 2.25\", got {}",
+                describe(v)
+            ),
+        );
+        return None;
+    };
+    match Expr::parse(src) {
+        Ok(e) if e.uses_t() => {
+            cx.err(
+                ptr,
+                format!("\"{src}\" uses t; a boundary part is fixed in time (x and y only)"),
+            );
+            None
+        }
+        Ok(e) => Some(e),
+        Err(why) => {
+            cx.err(ptr, format!("\"{src}\" is not a formula: {why}"));
+            None
+        }
+    }
 }

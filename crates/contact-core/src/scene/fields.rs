@@ -18,14 +18,18 @@ pub(super) const TOP_FIELDS: &[&str] = &[
     "output",
     "error_estimate",
 ];
-pub(super) const DOMAIN_FIELDS: &[&str] = &["width", "height", "rectangle"];
+pub(super) const DOMAIN_FIELDS: &[&str] =
+    &["width", "height", "rectangle", "mesh", "polygon", "holes"];
 pub(super) const RECTANGLE_FIELDS: &[&str] = &["width", "height"];
-pub(super) const MESH_FIELDS: &[&str] = &["h", "pattern"];
+pub(super) const MESH_FIELDS: &[&str] = &["h", "pattern", "refine"];
 pub(super) const TIME_FIELDS: &[&str] = &["t_end", "T", "k", "N", "steps"];
 pub(super) const PART_VARIANTS: &[(&str, &[&str])] = &[
-    ("clamped", &["type", "from", "to"]),
-    ("traction", &["type", "from", "to", "f2"]),
-    ("contact", &["type", "from", "to"]),
+    ("clamped", &["type", "from", "to", "group", "on", "where"]),
+    (
+        "traction",
+        &["type", "from", "to", "group", "on", "where", "f2"],
+    ),
+    ("contact", &["type", "from", "to", "group", "on", "where"]),
 ];
 pub(super) const LOADS_FIELDS: &[&str] = &["f0"];
 pub(super) const MATERIAL_FIELDS: &[&str] = &["viscosity", "elasticity"];

@@ -105,7 +105,19 @@ pub(super) fn vector_field(
 
 /// Evaluates a formula on a small grid (SAMPLES² points of the rectangle, or 2·SAMPLES − 1
 /// points of a segment) at t = 0, T/2 and T, and reports the first bad value.
-pub(super) fn check_samples(cx: &mut Cx, s: &Sampled, w: f64, h: f64, t_end: Option<f64>) {
+/// The SAMPLES × SAMPLES grid of the rectangle [0, w] × [0, h].
+pub(super) fn grid_points(w: f64, h: f64) -> Vec<[f64; 2]> {
+    let n = SAMPLES - 1;
+    let mut points = Vec::with_capacity(SAMPLES * SAMPLES);
+    for i in 0..=n {
+        for j in 0..=n {
+            points.push([w * i as f64 / n as f64, h * j as f64 / n as f64]);
+        }
+    }
+    points
+}
+
+pub(super) fn check_samples(cx: &mut Cx, s: &Sampled, body: &[[f64; 2]], t_end: Option<f64>) {
     let times: Vec<f64> = match (s.in_time, t_end) {
         (true, Some(t)) => vec![0.0, 0.5 * t, t],
         _ => vec![0.0],
@@ -122,14 +134,7 @@ pub(super) fn check_samples(cx: &mut Cx, s: &Sampled, w: f64, h: f64, t_end: Opt
                 ]);
             }
         }
-        None => {
-            let n = SAMPLES - 1;
-            for i in 0..=n {
-                for j in 0..=n {
-                    points.push([w * i as f64 / n as f64, h * j as f64 / n as f64]);
-                }
-            }
-        }
+        None => points.extend_from_slice(body),
     }
     for &t in &times {
         for &[x, y] in &points {

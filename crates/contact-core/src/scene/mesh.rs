@@ -1,9 +1,12 @@
-//! The `mesh` section: n = round(1/h) cells per unit length and the triangle pattern.
+//! The `mesh` section. For a rectangle: n = round(1/h) cells per unit length and the
+//! triangle pattern. For a polygon: the size h and `refine`. For an imported mesh the
+//! section is optional and carries only `refine`: r uniform (red) refinements.
 
 use serde_json::Value;
 
+use super::domain::Shape;
 use super::fields::{MESH_FIELDS, PATTERNS};
-use super::read::{choice, join, object, ratio, required, Cx, Range};
+use super::read::{choice, describe, integer, join, object, ratio, required, Cx, Range};
 use super::WHOLE_TOL;
 use crate::problem::MeshPattern;
 
@@ -11,13 +14,98 @@ use crate::problem::MeshPattern;
 /// service), far inside the range where `usize` conversions are safe.
 const MAX_CELLS_PER_SIDE: f64 = 1.0e6;
 
-/// (n, pattern) with n = round(1/h); W·n and H·n must be whole.
-pub(super) fn mesh(
+/// Most red refinements (each multiplies the cell count by 4).
+pub(super) const MAX_REFINE: u64 = 8;
+
+/// The discretisation the `mesh` section asks for.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct MeshSpec {
+    /// Rectangle: n = round(1/h); 0 otherwise.
+    pub cells_per_unit: usize,
+    pub pattern: MeshPattern,
+    /// Polygon: the meshing size.
+    pub h: Option<f64>,
+    pub refine: usize,
+}
+
+/// Reads the section (absent: `None` value) for the shape it meshes.
+pub(super) fn mesh_section(
     cx: &mut Cx,
-    v: &Value,
+    v: Option<&Value>,
     ptr: &str,
-    dims: Option<(f64, f64)>,
-) -> Option<(usize, MeshPattern)> {
+    shape: Option<&Shape>,
+) -> Option<MeshSpec> {
+    let rect = match shape {
+        Some(Shape::Rectangle { width, height }) => Some((*width, *height)),
+        _ => None,
+    };
+    let imported = matches!(shape, Some(Shape::Mesh { .. }));
+    let Some(v) = v else {
+        if imported {
+            return Some(MeshSpec {
+                cells_per_unit: 0,
+                pattern: MeshPattern::Diagonal,
+                h: None,
+                refine: 0,
+            });
+        }
+        cx.err(ptr, "mesh is required: the mesh size h");
+        return None;
+    };
+    let refine = match object(cx, v, ptr, "mesh", MESH_FIELDS)?.get("refine") {
+        None => Some(0),
+        Some(r) if shape.is_some() && rect.is_some() => {
+            let _ = r;
+            cx.err(
+                &join(ptr, "refine"),
+                "refine applies to imported and polygon meshes; a rectangle is refined by a smaller h",
+            );
+            None
+        }
+        Some(r) => integer(cx, r, &join(ptr, "refine"), 0).and_then(|r| {
+            if r > MAX_REFINE {
+                cx.err(&join(ptr, "refine"), format!("refine must be at most {MAX_REFINE} (each refinement multiplies the cells by 4), got {r}"));
+                None
+            } else {
+                Some(r as usize)
+            }
+        }),
+    };
+    if rect.is_none() && shape.is_some() {
+        let m = object(cx, v, ptr, "mesh", MESH_FIELDS)?;
+        if let Some(p) = m.get("pattern") {
+            cx.err(
+                &join(ptr, "pattern"),
+                format!("pattern applies to rectangles only, got {}", describe(p)),
+            );
+            return None;
+        }
+        if imported {
+            if m.contains_key("h") {
+                cx.err(
+                    &join(ptr, "h"),
+                    "an imported mesh has its own cells: give refine, not h",
+                );
+                return None;
+            }
+            return Some(MeshSpec {
+                cells_per_unit: 0,
+                pattern: MeshPattern::Diagonal,
+                h: None,
+                refine: refine?,
+            });
+        }
+        let hptr = join(ptr, "h");
+        let h = required(cx, m, ptr, "h", "the mesh size, e.g. \"1/8\"")
+            .and_then(|hv| ratio(cx, hv, &hptr, Range::Positive));
+        return Some(MeshSpec {
+            cells_per_unit: 0,
+            pattern: MeshPattern::Diagonal,
+            h: Some(h?),
+            refine: refine?,
+        });
+    }
+    let dims = rect;
     let m = object(cx, v, ptr, "mesh", MESH_FIELDS)?;
     let pattern = match m.get("pattern") {
         None => Some(MeshPattern::Diagonal),
@@ -75,5 +163,10 @@ pub(super) fn mesh(
             }
             fits.then_some(n as usize)
         });
-    Some((cells?, pattern?))
+    Some(MeshSpec {
+        cells_per_unit: cells?,
+        pattern: pattern?,
+        h: None,
+        refine: refine?,
+    })
 }

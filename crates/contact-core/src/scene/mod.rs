@@ -53,18 +53,22 @@ pub use friction::DEFAULT_FRICTION;
 pub use overrides::{apply_overrides, Overrides};
 pub use ratio::parse_ratio;
 
+use std::sync::Arc;
+
 use serde_json::Value;
 
-use crate::problem::{OutputSpec, Problem, SmallnessPolicy};
+use crate::mesh::Mesh;
+use crate::problem::{Body, OutputSpec, Problem, SmallnessPolicy};
 use boundary::boundary;
 use damage::damage;
 use domain::domain;
+use domain::Shape;
 use fields::{SMALLNESS, TOP_FIELDS};
 use formulas::check_samples;
 use friction::friction;
 use loads::{vector_section, INITIAL, LOADS};
 use material::material;
-use mesh::mesh;
+use mesh::mesh_section;
 use output::{all_fields, output};
 use read::{choice, describe, object, required, Cx};
 use time::time;
@@ -74,10 +78,38 @@ const MAX_NAME_LEN: usize = 200;
 /// Relative tolerance of "is a whole number" checks (t_end/k, 1/h, width/h).
 const WHOLE_TOL: f64 = 1e-9;
 
+/// Where the names of `domain.mesh` come from: the CLI reads files next to the scene, the
+/// service looks up uploaded meshes by id. Both also know the meshes bundled with the
+/// presets ([`presets::bundled_mesh`]).
+pub trait MeshFiles {
+    /// The checked 2D mesh called `name`, or a sentence saying why there is none.
+    fn load(&self, name: &str) -> Result<Mesh, String>;
+}
+
+/// Only the meshes bundled with the presets.
+pub struct Bundled;
+
+impl MeshFiles for Bundled {
+    fn load(&self, name: &str) -> Result<Mesh, String> {
+        match presets::bundled_mesh(name) {
+            Some(bytes) => crate::mesh::import::import::<2>(bytes).map_err(|e| format!("mesh \"{name}\": {e}")),
+            None => Err(format!(
+                "no mesh \"{name}\" here: give the id of a mesh uploaded with POST /meshes, or (from the command line) a .msh file next to the scene"
+            )),
+        }
+    }
+}
+
 /// Validates a scene document and turns it into a [`Problem`], or reports every problem found.
+/// `domain.mesh` may name only the meshes bundled with the presets ([`validate_with`]).
 pub fn validate(doc: &Value) -> Result<Problem, ValidationErrors> {
+    validate_with(doc, &Bundled)
+}
+
+/// [`validate`], with the meshes of `domain.mesh` looked up in `files`.
+pub fn validate_with(doc: &Value, files: &dyn MeshFiles) -> Result<Problem, ValidationErrors> {
     let mut cx = Cx::default();
-    let problem = scene(&mut cx, doc);
+    let problem = scene(&mut cx, doc, files);
     match problem {
         Some(p) if cx.errors.is_empty() => Ok(p),
         _ => {
@@ -90,7 +122,7 @@ pub fn validate(doc: &Value) -> Result<Problem, ValidationErrors> {
 }
 
 /// Reads every section (reporting into `cx`), samples the formulas, assembles the problem.
-fn scene(cx: &mut Cx, doc: &Value) -> Option<Problem> {
+fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
     let top = object(cx, doc, "", "a scene", TOP_FIELDS)?;
     let mut sampled = Vec::new();
 
@@ -109,8 +141,14 @@ fn scene(cx: &mut Cx, doc: &Value) -> Option<Problem> {
         None => Some("scene".to_string()),
         Some(v) => scene_name(cx, v, "/name"),
     };
-    let dims = required(cx, top, "", "domain", "the rectangle's width and height")
-        .and_then(|v| domain(cx, v, "/domain"));
+    let shape = required(
+        cx,
+        top,
+        "",
+        "domain",
+        "the body: width and height, a mesh or a polygon",
+    )
+    .and_then(|v| domain(cx, v, "/domain", files));
     let time = required(
         cx,
         top,
@@ -119,8 +157,7 @@ fn scene(cx: &mut Cx, doc: &Value) -> Option<Problem> {
         "t_end and the step k or the number of steps N",
     )
     .and_then(|v| time(cx, v, "/time"));
-    let mesh =
-        required(cx, top, "", "mesh", "the mesh size h").and_then(|v| mesh(cx, v, "/mesh", dims));
+    let mesh = mesh_section(cx, top.get("mesh"), "/mesh", shape.as_ref());
     let boundary = required(
         cx,
         top,
@@ -128,7 +165,7 @@ fn scene(cx: &mut Cx, doc: &Value) -> Option<Problem> {
         "boundary",
         "the clamped, traction and contact segments",
     )
-    .and_then(|v| boundary(cx, v, "/boundary", dims, &mut sampled));
+    .and_then(|v| boundary(cx, v, "/boundary", shape.as_ref(), &mut sampled));
     let body_force = vector_section(cx, top, &LOADS, &mut sampled);
     let material = required(cx, top, "", "material", "viscosity and elasticity")
         .and_then(|v| material(cx, v, "/material"));
@@ -170,21 +207,41 @@ fn scene(cx: &mut Cx, doc: &Value) -> Option<Problem> {
         }
     };
 
-    if let Some((width, height)) = dims {
+    // The mesh as given (before refinement), its boundary tagged with the parts.
+    let base = match (&shape, &mesh, &boundary) {
+        (Some(shape), Some(spec), Some(parts)) => base_mesh(cx, shape, spec, parts),
+        _ => None,
+    };
+    if let Some(shape) = &shape {
+        let points = sample_points(shape, base.as_ref());
         let t_end = time.map(|(t, _)| t);
         for s in &sampled {
-            check_samples(cx, s, width, height, t_end);
+            check_samples(cx, s, &points, t_end);
         }
     }
 
     // Every section has reported its errors by now; the problem exists only if none failed.
-    let ((width, height), (t_end, steps), (cells_per_unit, pattern)) = (dims?, time?, mesh?);
+    let (shape, (t_end, steps), spec, base) = (shape?, time?, mesh?, base?);
+    let ([x0, y0], [x1, y1]) = shape.bounds();
+    let body = match shape {
+        Shape::Rectangle { .. } => None,
+        Shape::Mesh { name, .. } => Some(format!("mesh {name}")),
+        Shape::Polygon { .. } => Some("polygon".to_string()),
+    }
+    .map(|source| {
+        Arc::new(Body {
+            source,
+            base,
+            refine: spec.refine,
+        })
+    });
     let problem = Problem {
         name: name?,
-        width,
-        height,
-        cells_per_unit,
-        pattern,
+        body,
+        width: x1 - x0,
+        height: y1 - y0,
+        cells_per_unit: spec.cells_per_unit,
+        pattern: spec.pattern,
         t_end,
         steps,
         boundary: boundary?,
@@ -228,5 +285,71 @@ fn scene_name(cx: &mut Cx, v: &Value, ptr: &str) -> Option<String> {
             );
             None
         }
+    }
+}
+
+/// The body's mesh before refinement, tagged with the parts: the rectangle's structured mesh,
+/// the imported mesh, or the polygon meshed at h. Tagging errors (a part without facets, a
+/// facet in two parts, an unknown group) are reported at the part's pointer.
+fn base_mesh(
+    cx: &mut Cx,
+    shape: &Shape,
+    spec: &mesh::MeshSpec,
+    parts: &[crate::problem::BoundaryPart],
+) -> Option<Mesh> {
+    let mut m = match shape {
+        Shape::Rectangle { width, height } => {
+            let n = spec.cells_per_unit as f64;
+            let (nx, ny) = ((width * n).round() as usize, (height * n).round() as usize);
+            if (nx + 1).saturating_mul(ny + 1) > MAX_VALIDATION_NODES {
+                // Too large to mesh here; the service's node limit refuses it anyway, and
+                // segment parts were checked on the rectangle's sides.
+                return Some(Mesh::rectangle(*width, *height, 1, 1, spec.pattern));
+            }
+            Mesh::rectangle(*width, *height, nx, ny, spec.pattern)
+        }
+        Shape::Mesh { mesh, .. } => (**mesh).clone(),
+        Shape::Polygon { outer, holes } => {
+            let h = spec.h?;
+            match crate::mesh::polygon::triangulate(outer, holes, h, MAX_VALIDATION_NODES) {
+                Ok(t) => match Mesh::from_cells(t.nodes, t.triangles.concat()) {
+                    Ok(m) => m,
+                    Err(e) => {
+                        cx.err(
+                            "/domain/polygon",
+                            format!("the polygon's mesh is not usable: {e}"),
+                        );
+                        return None;
+                    }
+                },
+                Err(e) => {
+                    cx.err("/domain", e.to_string());
+                    return None;
+                }
+            }
+        }
+    };
+    let supports: Vec<_> = parts.iter().map(|p| p.support.clone()).collect();
+    match m.tag_boundary(&supports) {
+        Ok(()) => Some(m),
+        Err(e) => {
+            cx.err(&format!("/boundary/{}", e.part()), e.to_string());
+            None
+        }
+    }
+}
+
+/// Most nodes of a mesh built during validation.
+const MAX_VALIDATION_NODES: usize = 4_000_000;
+
+/// Where formulas are sampled: the rectangle's grid, or (at most ~4,000 of) the body's nodes.
+fn sample_points(shape: &Shape, base: Option<&Mesh>) -> Vec<[f64; 2]> {
+    match (shape, base) {
+        (Shape::Rectangle { width, height }, _) => formulas::grid_points(*width, *height),
+        (_, Some(m)) => {
+            let stride = m.n_nodes().div_ceil(4000).max(1);
+            m.nodes.iter().step_by(stride).copied().collect()
+        }
+        (_, None) => Vec::new(),
     }
 }

@@ -39,7 +39,41 @@ const PRESETS: &[Preset] = &[
                       h = k = 1/128 (|w|_V ≈ 0.23525, |ζ|_Z0 ≈ 0.75375).",
         build: convergence,
     },
+    Preset {
+        name: "plate-with-hole",
+        description: "A 2×1 plate with an off-centre hole (r = 0.2 at (0.7, 0.45)), imported from \
+                      gmsh: clamped on the left, frictional contact on the bottom with a low \
+                      bound g = 1 so part of Γ3 slips, traction f2 = (−1, −1) on the top; \
+                      paper material and damage; k = 1/32.",
+        build: plate_with_hole,
+    },
+    Preset {
+        name: "arch-on-support",
+        description: "An arch (annulus sector 1 ≤ r ≤ 1.5, 0°–120°) imported from gmsh, in \
+                      bilateral frictional contact along its inner arc (a curved Γ3 with \
+                      rotated frames), clamped at its end on y = 0, pressed by f2 = (0, −1) \
+                      on the outer arc; g = 1; k = 1/32.",
+        build: arch_on_support,
+    },
 ];
+
+/// The meshes the presets import, bundled into the binary (generated once with gmsh by
+/// `crates/contact-core/tests/meshes/generate.py`).
+const BUNDLED: &[(&str, &[u8])] = &[
+    (
+        "plate-with-hole.msh",
+        include_bytes!("../../tests/meshes/plate-with-hole.msh"),
+    ),
+    (
+        "arch-on-support.msh",
+        include_bytes!("../../tests/meshes/arch-on-support.msh"),
+    ),
+];
+
+/// The bytes of a mesh bundled with the presets.
+pub fn bundled_mesh(name: &str) -> Option<&'static [u8]> {
+    BUNDLED.iter().find(|(n, _)| *n == name).map(|(_, b)| *b)
+}
 
 /// The preset names, in presentation order.
 pub fn names() -> &'static [&'static str] {
@@ -48,6 +82,8 @@ pub fn names() -> &'static [&'static str] {
         "paper-exp2",
         "paper-exp3",
         "paper-convergence",
+        "plate-with-hole",
+        "arch-on-support",
     ];
     NAMES
 }
@@ -184,6 +220,41 @@ fn convergence() -> Value {
     )
 }
 
+/// A preset on a bundled gmsh mesh: the paper's material and damage, Tresca bound g.
+fn imported(name: &str, file: &str, boundary: Vec<Value>, g: f64) -> Value {
+    let mut doc = paper_scene(name, (1.0, 1.0), "1/32", boundary, [0.0, 0.0]);
+    doc["domain"] = json!({"mesh": file});
+    doc["mesh"] = json!({"refine": 0});
+    doc["friction"] = json!({"law": "tresca", "g": num(g)});
+    doc
+}
+
+fn plate_with_hole() -> Value {
+    imported(
+        "plate-with-hole",
+        "plate-with-hole.msh",
+        vec![
+            json!({"type": "clamped", "group": "clamped"}),
+            json!({"type": "contact", "group": "contact"}),
+            json!({"type": "traction", "group": "traction", "f2": [-1, -1]}),
+        ],
+        1.0,
+    )
+}
+
+fn arch_on_support() -> Value {
+    imported(
+        "arch-on-support",
+        "arch-on-support.msh",
+        vec![
+            json!({"type": "clamped", "group": "clamped"}),
+            json!({"type": "contact", "on": "x^2 + y^2 - 1"}),
+            json!({"type": "traction", "group": "outer", "f2": [0, -1]}),
+        ],
+        1.0,
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -213,7 +284,8 @@ mod tests {
             let p = validate(&doc).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(p.name, *name);
             assert_eq!(p.t_end, 1.0);
-            assert_eq!(p.friction, FrictionLaw::Tresca { g: 20.0 });
+            let g = if p.body.is_some() { 1.0 } else { 20.0 };
+            assert_eq!(p.friction, FrictionLaw::Tresca { g });
             assert!(p.damage.is_some());
             assert!(p.u0.is_zero());
         }

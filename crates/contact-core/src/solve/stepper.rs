@@ -214,10 +214,7 @@ impl Prepared {
     /// condition (2.31).
     pub fn new(problem: &Problem) -> Result<Prepared, SolveError> {
         let start = Instant::now();
-        let (nx, ny) = problem.cells();
-        let mut mesh = Mesh::rectangle(problem.width, problem.height, nx, ny, problem.pattern);
-        let segments: Vec<_> = problem.boundary.iter().map(|p| p.segment).collect();
-        mesh.tag_boundary(&segments);
+        let mesh = problem.mesh();
         let geo = Geometry::new(&mesh);
         let dofs = DofMap::new(&mesh, &problem.boundary);
         let visc = problem.material.viscosity;
@@ -283,8 +280,8 @@ impl Simulation {
             seconds: prepared_seconds,
         } = prepared;
         debug_assert_eq!(
-            (mesh.nx, mesh.ny),
-            problem.cells(),
+            mesh.n_nodes(),
+            problem.n_nodes(),
             "prepared for another mesh"
         );
         if !smallness.holds && problem.smallness == SmallnessPolicy::Refuse {
@@ -334,7 +331,7 @@ impl Simulation {
             .flat_map(|p| problem.u0.eval(p[0], p[1], 0.0))
             .collect();
         check_initial(&problem, &mesh, &u, &zeta)?;
-        let nt = mesh.triangles.len();
+        let nt = mesh.n_cells();
         let n_free = dofs.n_free();
         Ok(Simulation {
             state: State {
@@ -420,7 +417,7 @@ impl Simulation {
         }
         let zeta_prev = &self.state.zeta;
         let elasticity = self.problem.material.elasticity;
-        for (e, tri) in self.mesh.triangles.iter().enumerate() {
+        for (e, tri) in self.mesh.triangles().iter().enumerate() {
             let zbar = (zeta_prev[tri[0]] + zeta_prev[tri[1]] + zeta_prev[tri[2]]) / 3.0;
             self.b[e] = elastic_stress(&elasticity, &self.eps[e], zbar);
         }
@@ -490,8 +487,8 @@ impl Simulation {
         let (mut w2, mut u2) = (0.0, 0.0);
         for (e, eps) in self.eps.iter().enumerate() {
             let ew = self.geo.strain(&self.mesh, e, &self.w);
-            w2 += self.geo.area[e] * ew.norm_squared();
-            u2 += self.geo.area[e] * (eps + ew * k).norm_squared();
+            w2 += self.geo.measure[e] * ew.norm_squared();
+            u2 += self.geo.measure[e] * (eps + ew * k).norm_squared();
         }
         let mut scratch = vec![0.0; self.mesh.n_nodes()];
         let report = StepReport {
@@ -528,7 +525,7 @@ impl Simulation {
         let n = self.state.step;
         let need_sigma = sel.sigma || sel.von_mises;
         let sigma: Vec<Tensor2<f64>> = if need_sigma {
-            (0..self.mesh.triangles.len())
+            (0..self.mesh.n_cells())
                 .map(|e| {
                     viscous_stress(
                         &self.problem.material.viscosity,

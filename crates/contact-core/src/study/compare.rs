@@ -194,7 +194,7 @@ fn level_errors(
             .strain
             .iter()
             .zip(&parents)
-            .zip(&reference.geo.area)
+            .zip(&reference.geo.measure)
             .map(|((e, &p), a)| {
                 let c = coarse_strain[p as usize];
                 a * double_dot([e[0] - c[0], e[1] - c[1], e[2] - c[2]])

@@ -35,7 +35,7 @@ pub struct RefSnapshot {
 
 /// (ε_xx, ε_yy, ε_xy) of the nodal field `w` on every triangle.
 pub fn strains(mesh: &Mesh, geo: &Geometry, w: &[f64]) -> Vec<[f64; 3]> {
-    (0..mesh.triangles.len())
+    (0..mesh.n_cells())
         .map(|t| {
             let e = geo.strain(mesh, t, w);
             [e[(0, 0)], e[(1, 1)], e[(0, 1)]]
@@ -70,7 +70,7 @@ impl Reference {
                 let strain = strains(&mesh, &geo, &s.w);
                 let w2: f64 = strain
                     .iter()
-                    .zip(&geo.area)
+                    .zip(&geo.measure)
                     .map(|(e, a)| a * double_dot(*e))
                     .sum();
                 w_norms.push(w2.sqrt());

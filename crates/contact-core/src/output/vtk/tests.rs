@@ -143,7 +143,7 @@ fn vec3(interleaved: &[f64]) -> Vec<f64> {
 
 fn hand_built(mesh: &Mesh) -> StepFields {
     let np = mesh.nodes.len();
-    let nc = mesh.triangles.len();
+    let nc = mesh.n_cells();
     StepFields {
         n: 7,
         t: 0.35,
@@ -168,14 +168,14 @@ fn hand_built(mesh: &Mesh) -> StepFields {
 
 fn render(mesh: &Mesh, f: &StepFields) -> String {
     let mut buf = Vec::new();
-    write_vtu(&mut buf, &mesh.nodes, &mesh.triangles, f).unwrap();
+    write_vtu(&mut buf, &mesh.nodes, mesh.triangles(), f).unwrap();
     String::from_utf8(buf).expect("UTF-8")
 }
 
 /// Everything every .vtu must satisfy.
 fn check_grid(root: Node, mesh: &Mesh, f: &StepFields) {
     let np = mesh.nodes.len();
-    let nc = mesh.triangles.len();
+    let nc = mesh.n_cells();
     assert_eq!(root.tag_name().name(), "VTKFile");
     assert_eq!(root.attr("type"), "UnstructuredGrid");
     assert_eq!(root.attr("version"), "1.0");
@@ -202,7 +202,12 @@ fn check_grid(root: Node, mesh: &Mesh, f: &StepFields) {
     let cells = piece.child("Cells");
     assert_eq!(cells.array_names(), ["connectivity", "offsets", "types"]);
     let conn = i64s(cells.array("connectivity"), 3 * nc);
-    let tri: Vec<i64> = mesh.triangles.iter().flatten().map(|&i| i as i64).collect();
+    let tri: Vec<i64> = mesh
+        .triangles()
+        .iter()
+        .flatten()
+        .map(|&i| i as i64)
+        .collect();
     assert_eq!(conn, tri);
     let offsets = i64s(cells.array("offsets"), nc);
     assert_eq!(offsets, (1..=nc as i64).map(|c| 3 * c).collect::<Vec<_>>());
@@ -213,7 +218,7 @@ fn check_grid(root: Node, mesh: &Mesh, f: &StepFields) {
 #[test]
 fn vtu_of_all_fields_reads_back() {
     let mesh = Mesh::rectangle(2.0, 1.0, 4, 2, MeshPattern::Diagonal);
-    let (np, nc) = (mesh.nodes.len(), mesh.triangles.len());
+    let (np, nc) = (mesh.nodes.len(), mesh.n_cells());
     assert_eq!((np, nc), (15, 16));
     let f = hand_built(&mesh);
     let doc = render(&mesh, &f);
@@ -289,7 +294,7 @@ fn vtu_of_a_larger_mesh_crosses_chunk_boundaries() {
     // 61 × 41 nodes: every array is larger than one encoder chunk.
     let mesh = Mesh::rectangle(3.0, 2.0, 60, 40, MeshPattern::Cross);
     let f = hand_built(&mesh);
-    assert!(8 * 3 * 3 * mesh.triangles.len() > CHUNK_BYTES * 2);
+    assert!(8 * 3 * 3 * mesh.n_cells() > CHUNK_BYTES * 2);
     let doc = render(&mesh, &f);
     let xml = parse_xml(&doc);
     let root = xml.root_element();
@@ -319,11 +324,11 @@ fn vtu_rejects_fields_that_do_not_match_the_mesh() {
     bad.push(vm);
     for f in &bad {
         let mut buf = Vec::new();
-        let err = write_vtu(&mut buf, &mesh.nodes, &mesh.triangles, f).unwrap_err();
+        let err = write_vtu(&mut buf, &mesh.nodes, mesh.triangles(), f).unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::InvalidInput, "{err}");
         assert!(buf.is_empty(), "nothing is written for invalid input");
     }
-    let mut triangles = mesh.triangles.clone();
+    let mut triangles = mesh.triangles().to_vec();
     triangles[3][1] = mesh.nodes.len();
     let mut buf = Vec::new();
     let err = write_vtu(&mut buf, &mesh.nodes, &triangles, &good).unwrap_err();

@@ -1,0 +1,278 @@
+//! The checks an input mesh must pass before anything is computed on it, and the boundary
+//! facets found on the way. Each failure names the first offending cell, facet or node (in
+//! the mesh's order, 0-based), so a user can find it in the file.
+//!
+//! - every coordinate finite; every cell's vertices distinct and existing;
+//! - no degenerate cell: |T| > 1e-12 × (longest edge)^D;
+//! - one orientation: every cell's signed measure has the sign of the first cell's (a cell of
+//!   the other sign is inverted — it overlaps its neighbours);
+//! - no cell twice; every facet shared by at most two cells (else the mesh is not a manifold);
+//! - every node in some cell; the cells connected through shared facets (one body).
+//!
+//! The boundary facets are the faces of exactly one cell, in the order of first appearance
+//! (cells in order, and in each cell the face opposite vertex D, D − 1, …, 0).
+
+#![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
+
+use std::collections::HashMap;
+
+use super::{facet_frame, signed_measure, Facet, Mesh};
+
+/// Relative size (times the longest edge to the power D) below which a cell is degenerate.
+pub const DEGENERATE: f64 = 1e-12;
+
+/// Why a mesh was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MeshError {
+    #[error("the mesh has no cells")]
+    Empty,
+    #[error("node {node} has a coordinate that is not a finite number")]
+    NotFinite { node: usize },
+    #[error("cell {cell} refers to node {node}, but the mesh has {nodes} nodes")]
+    MissingNode {
+        cell: usize,
+        node: usize,
+        nodes: usize,
+    },
+    #[error("cell {cell} uses node {node} twice")]
+    RepeatedNode { cell: usize, node: usize },
+    #[error("cell {cell} is degenerate (measure {measure:e}, longest edge {edge:e})")]
+    Degenerate {
+        cell: usize,
+        measure: f64,
+        edge: f64,
+    },
+    #[error("cell {cell} is inverted: its orientation is opposite to cell 0's, so it overlaps its neighbours")]
+    Inverted { cell: usize },
+    #[error("cell {cell} repeats cell {first} (the same vertices)")]
+    DuplicateCell { cell: usize, first: usize },
+    #[error("the facet with nodes {nodes:?} is shared by more than two cells (cell {cell} is the third): the mesh is not a manifold")]
+    NonManifold { nodes: Vec<usize>, cell: usize },
+    #[error("node {node} belongs to no cell")]
+    Unreferenced { node: usize },
+    #[error("the mesh is not one connected body: cell {cell} is not connected to cell 0 through shared facets")]
+    Disconnected { cell: usize },
+    #[error("group \"{group}\": its facet {index} (nodes {nodes:?}) is not a boundary facet of the mesh")]
+    NotOnBoundary {
+        group: String,
+        index: usize,
+        nodes: Vec<usize>,
+    },
+    #[error("group \"{group}\": its facet {index} (nodes {nodes:?}) repeats an earlier facet of the group")]
+    DuplicateFacet {
+        group: String,
+        index: usize,
+        nodes: Vec<usize>,
+    },
+    #[error("the mesh is {found}D, but a {expected}D mesh is needed here")]
+    Dimension { found: usize, expected: usize },
+    #[error("node {node} has z = {z}, but a 2D mesh lies in the plane z = 0")]
+    NotPlanar { node: usize, z: f64 },
+    #[error("the mesh has {count} {what}; at most {max} are allowed")]
+    TooLarge {
+        what: &'static str,
+        count: usize,
+        max: usize,
+    },
+}
+
+/// The facet of a cell opposite its local vertex `a`, as a sorted key.
+pub(super) fn facet_key<const D: usize>(cell: &[usize], a: usize) -> [usize; D] {
+    let mut k = [0; D];
+    for (slot, &v) in k.iter_mut().zip(
+        cell.iter()
+            .enumerate()
+            .filter(|&(b, _)| b != a)
+            .map(|(_, v)| v),
+    ) {
+        *slot = v;
+    }
+    k.sort_unstable();
+    k
+}
+
+/// Checks the cells (see the module doc) and builds the mesh with its boundary facets.
+pub fn build<const D: usize>(
+    nodes: Vec<[f64; D]>,
+    cells: Vec<usize>,
+) -> Result<Mesh<D>, MeshError> {
+    let nc = cells.len() / (D + 1);
+    if nc == 0 {
+        return Err(MeshError::Empty);
+    }
+    if let Some(node) = nodes.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
+        return Err(MeshError::NotFinite { node });
+    }
+    let mut sign = 0.0;
+    for (e, cell) in cells.chunks_exact(D + 1).enumerate() {
+        for (a, &v) in cell.iter().enumerate() {
+            if v >= nodes.len() {
+                return Err(MeshError::MissingNode {
+                    cell: e,
+                    node: v,
+                    nodes: nodes.len(),
+                });
+            }
+            if cell[..a].contains(&v) {
+                return Err(MeshError::RepeatedNode { cell: e, node: v });
+            }
+        }
+        let p: Vec<[f64; D]> = cell.iter().map(|&v| nodes[v]).collect();
+        let measure = signed_measure(&p);
+        let mut edge: f64 = 0.0;
+        for a in 0..=D {
+            for b in a + 1..=D {
+                let l2: f64 = (0..D).map(|c| (p[a][c] - p[b][c]).powi(2)).sum();
+                edge = edge.max(l2.sqrt());
+            }
+        }
+        if measure
+            .abs()
+            .partial_cmp(&(DEGENERATE * edge.powi(D as i32)))
+            != Some(std::cmp::Ordering::Greater)
+        {
+            return Err(MeshError::Degenerate {
+                cell: e,
+                measure: measure.abs(),
+                edge,
+            });
+        }
+        if e == 0 {
+            sign = measure.signum();
+        } else if measure.signum() != sign {
+            return Err(MeshError::Inverted { cell: e });
+        }
+    }
+
+    // Faces: key → (count, first cell, local vertex opposite).
+    let mut faces: HashMap<[usize; D], (u8, usize, usize)> = HashMap::with_capacity(nc * (D + 1));
+    let mut order: Vec<[usize; D]> = Vec::with_capacity(nc * (D + 1));
+    let mut cell_keys: HashMap<Vec<usize>, usize> = HashMap::with_capacity(nc);
+    for (e, cell) in cells.chunks_exact(D + 1).enumerate() {
+        let mut sorted = cell.to_vec();
+        sorted.sort_unstable();
+        if let Some(&first) = cell_keys.get(&sorted) {
+            return Err(MeshError::DuplicateCell { cell: e, first });
+        }
+        cell_keys.insert(sorted, e);
+        for a in (0..=D).rev() {
+            let key = facet_key::<D>(cell, a);
+            let entry = faces.entry(key).or_insert_with(|| {
+                order.push(key);
+                (0, e, a)
+            });
+            entry.0 += 1;
+            if entry.0 > 2 {
+                return Err(MeshError::NonManifold {
+                    nodes: key.to_vec(),
+                    cell: e,
+                });
+            }
+        }
+    }
+    drop(cell_keys);
+
+    let mut used = vec![false; nodes.len()];
+    cells.iter().for_each(|&v| used[v] = true);
+    if let Some(node) = used.iter().position(|u| !u) {
+        return Err(MeshError::Unreferenced { node });
+    }
+
+    // Connectivity: union of the two cells of every interior face.
+    let mut parent: Vec<usize> = (0..nc).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    let mut seen: HashMap<[usize; D], usize> = HashMap::with_capacity(nc * (D + 1) / 2);
+    for (e, cell) in cells.chunks_exact(D + 1).enumerate() {
+        for a in 0..=D {
+            let key = facet_key::<D>(cell, a);
+            if let Some(&other) = seen.get(&key) {
+                let (ra, rb) = (root(&mut parent, e), root(&mut parent, other));
+                parent[ra.max(rb)] = ra.min(rb);
+            } else {
+                seen.insert(key, e);
+            }
+        }
+    }
+    drop(seen);
+    let r0 = root(&mut parent, 0);
+    if let Some(cell) = (1..nc).find(|&e| root(&mut parent, e) != r0) {
+        return Err(MeshError::Disconnected { cell });
+    }
+
+    let mut facets = Vec::new();
+    for key in order {
+        let (count, e, a) = faces[&key];
+        if count != 1 {
+            continue;
+        }
+        let cell = &cells[(D + 1) * e..(D + 1) * (e + 1)];
+        let mut f = [0; D];
+        for (slot, v) in f.iter_mut().zip(
+            cell.iter()
+                .enumerate()
+                .filter(|&(b, _)| b != a)
+                .map(|(_, &v)| v),
+        ) {
+            *slot = v;
+        }
+        let (nodes_f, normal, measure) = facet_frame(&nodes, f, nodes[cell[a]]);
+        facets.push(Facet {
+            nodes: nodes_f,
+            normal,
+            measure,
+            part: None,
+        });
+    }
+    Ok(Mesh::from_parts(nodes, cells, facets, Vec::new(), None))
+}
+
+/// Quality figures of a mesh, for its summary.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Figures {
+    /// Shortest and longest cell diameter (longest edge).
+    pub min_cell_size: f64,
+    pub max_cell_size: f64,
+    /// The shape ratio q ∈ (0, 1] (1 for the equilateral triangle or regular tetrahedron):
+    /// 4√3 |T| / Σ l² in 2D, 12 (3|T|)^(2/3) / Σ l² in 3D; minimum and mean over the cells.
+    pub min_quality: f64,
+    pub mean_quality: f64,
+}
+
+/// Cell sizes and shape ratios of `mesh`.
+pub fn figures<const D: usize>(mesh: &Mesh<D>) -> Figures {
+    let mut f = Figures {
+        min_cell_size: f64::INFINITY,
+        max_cell_size: 0.0,
+        min_quality: f64::INFINITY,
+        mean_quality: 0.0,
+    };
+    for cell in mesh.cells() {
+        let p: Vec<[f64; D]> = cell.iter().map(|&v| mesh.nodes[v]).collect();
+        let (mut longest, mut sum2) = (0.0f64, 0.0);
+        for a in 0..=D {
+            for b in a + 1..=D {
+                let l2: f64 = (0..D).map(|c| (p[a][c] - p[b][c]).powi(2)).sum();
+                longest = longest.max(l2.sqrt());
+                sum2 += l2;
+            }
+        }
+        let m = signed_measure(&p).abs();
+        let q = if D == 2 {
+            4.0 * 3f64.sqrt() * m / sum2
+        } else {
+            12.0 * (3.0 * m).powf(2.0 / 3.0) / sum2
+        };
+        f.min_cell_size = f.min_cell_size.min(longest);
+        f.max_cell_size = f.max_cell_size.max(longest);
+        f.min_quality = f.min_quality.min(q);
+        f.mean_quality += q;
+    }
+    f.mean_quality /= mesh.n_cells().max(1) as f64;
+    f
+}
