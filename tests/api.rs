@@ -98,7 +98,7 @@ fn whole_lifecycle_over_http() {
     let nodes = summary["mesh"]["nodes"].as_u64().unwrap() as usize;
     let triangles = summary["mesh"]["triangles"].as_u64().unwrap() as usize;
 
-    for step in ["3", "8", "last"] {
+    for step in ["0", "3", "8", "last"] {
         let f = get(
             a,
             &format!("/jobs/{id}/fields?step={step}&fields=u,zeta,sigma"),
@@ -110,6 +110,19 @@ fn whole_lifecycle_over_http() {
         assert_eq!(f["sigma"].as_array().unwrap().len(), triangles);
         assert!(f.get("w").is_none(), "unrequested fields are left out");
     }
+    // Step 0 is the initial state: the preset's u_0 = 0, w_0 = 0, ζ_0 = 1, σ_0 = B(ε(0), 1) =
+    // 0, and no contact state (there is none before the first step), even when asked for.
+    let f0 = get(a, &format!("/jobs/{id}/fields?step=0")).json();
+    assert_eq!((f0["n"].as_u64(), f0["t"].as_f64()), (Some(0), Some(0.0)));
+    for (name, value) in [("u", 0.0), ("w", 0.0), ("zeta", 1.0), ("von_mises", 0.0)] {
+        let v = f0[name].as_array().unwrap();
+        assert!(
+            v.iter().all(|x| x.as_f64() == Some(value)),
+            "{name} at t = 0"
+        );
+    }
+    assert_eq!(f0["sigma"].as_array().unwrap().len(), triangles);
+    assert!(f0.get("contact").is_none(), "no contact state at t = 0");
     let with_mesh = get(a, &format!("/jobs/{id}/fields?step=last&mesh=1")).json();
     assert_eq!(with_mesh["mesh"]["nodes"].as_array().unwrap().len(), nodes);
     assert_problem(&get(a, &format!("/jobs/{id}/fields?step=99")), 404);
@@ -122,9 +135,55 @@ fn whole_lifecycle_over_http() {
             && vtu.contains(&format!("NumberOfCells=\"{triangles}\""))
     );
     check_vtu_arrays(&vtu, nodes, triangles);
+    // σ is the cells' symmetric tensor (xx, yy, zz, xy, yz, xz): the stored (xx, yy, xy) of
+    // the fields JSON, bit for bit, and zeros.
+    let xml = roxmltree::Document::parse(&vtu).expect("the VTU is well-formed XML");
+    let sigma = vtu_f64s(&xml, "sigma");
+    assert_eq!(sigma.len(), 6 * triangles);
+    let stored = get(a, &format!("/jobs/{id}/fields?step=8&fields=sigma")).json();
+    for (s6, s3) in sigma
+        .chunks_exact(6)
+        .zip(stored["sigma"].as_array().unwrap())
+    {
+        let s3: Vec<f64> = s3
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(s6, [s3[0], s3[1], 0.0, s3[2], 0.0, 0.0]);
+    }
+    assert!(sigma.iter().any(|&s| s != 0.0));
+
+    // PVD: step 0 (the initial state, t = 0) and the 8 stored steps, each a VTU that is there.
     let pvd = String::from_utf8(get(a, &format!("/jobs/{id}/result.pvd")).body).unwrap();
-    assert_eq!(pvd.matches("<DataSet").count(), 8);
-    assert!(pvd.contains(&format!("/jobs/{id}/fields/8.vtu")));
+    let xml = roxmltree::Document::parse(&pvd).expect("the PVD is well-formed XML");
+    let sets: Vec<(&str, &str)> = xml
+        .descendants()
+        .filter(|n| n.has_tag_name("DataSet"))
+        .map(|n| {
+            (
+                n.attribute("timestep").unwrap(),
+                n.attribute("file").unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(sets.len(), 9, "{pvd}");
+    assert_eq!(sets[0].0, "0");
+    for (n, (t, file)) in sets.iter().enumerate() {
+        assert_eq!(t.parse::<f64>().unwrap(), n as f64 / 8.0);
+        assert_eq!(*file, format!("/jobs/{id}/fields/{n}.vtu"));
+    }
+    let r0 = get(a, sets[0].1);
+    assert_eq!(r0.status, 200);
+    let vtu0 = String::from_utf8(r0.body).unwrap();
+    check_vtu_arrays(&vtu0, nodes, triangles);
+    let xml = roxmltree::Document::parse(&vtu0).expect("0.vtu is well-formed XML");
+    assert_eq!(vtu_f64s(&xml, "TimeValue"), [0.0]);
+    assert_eq!(vtu_array(&xml, "Step").1, 0u64.to_le_bytes());
+    assert!(vtu_f64s(&xml, "u").iter().all(|&u| u == 0.0));
+    assert!(vtu_f64s(&xml, "zeta").iter().all(|&z| z == 1.0));
+    assert_eq!(vtu_f64s(&xml, "sigma"), vec![0.0; 6 * triangles]);
     let tar = get(a, &format!("/jobs/{id}/archive.tar")).body;
     let names = tar_names(&tar);
     assert!(
@@ -134,8 +193,9 @@ fn whole_lifecycle_over_http() {
     assert!(
         names.contains(&format!("{id}/summary.json"))
             && names.contains(&format!("{id}/result.pvd"))
+            && names.contains(&format!("{id}/fields/step_000000.vtu"))
     );
-    assert_eq!(names.iter().filter(|n| n.ends_with(".vtu")).count(), 8);
+    assert_eq!(names.iter().filter(|n| n.ends_with(".vtu")).count(), 9);
 
     let metrics = String::from_utf8(get(a, "/metrics").body).unwrap();
     assert!(
@@ -201,6 +261,49 @@ fn check_vtu_arrays(vtu: &str, nodes: usize, cells: usize) {
         seen += 1;
     }
     assert!(seen >= 8, "only {seen} arrays");
+}
+
+/// The `<DataArray Name="name">` of a VTU: its element (checked to be unique) and its
+/// decoded payload (after the UInt64 byte count, which is checked).
+fn vtu_array<'a>(xml: &'a roxmltree::Document, name: &str) -> (roxmltree::Node<'a, 'a>, Vec<u8>) {
+    use base64::Engine;
+    let found: Vec<_> = xml
+        .descendants()
+        .filter(|n| n.has_tag_name("DataArray") && n.attribute("Name") == Some(name))
+        .collect();
+    assert_eq!(found.len(), 1, "arrays named {name}");
+    let text: String = found[0].children().filter_map(|c| c.text()).collect();
+    let raw = base64::engine::general_purpose::STANDARD
+        .decode(text.trim())
+        .unwrap();
+    let (head, data) = raw.split_at(8);
+    assert_eq!(
+        u64::from_le_bytes(head.try_into().unwrap()) as usize,
+        data.len()
+    );
+    (found[0], data.to_vec())
+}
+
+/// A Float64 array of a VTU; for `sigma`, also checks that it is the cells' symmetric tensor.
+fn vtu_f64s(xml: &roxmltree::Document, name: &str) -> Vec<f64> {
+    let (node, data) = vtu_array(xml, name);
+    assert_eq!(node.attribute("type"), Some("Float64"));
+    if name == "sigma" {
+        assert_eq!(node.attribute("NumberOfComponents"), Some("6"));
+        let names: Vec<_> = (0..6)
+            .map(|i| {
+                node.attribute(format!("ComponentName{i}").as_str())
+                    .unwrap()
+            })
+            .collect();
+        assert_eq!(names, ["xx", "yy", "zz", "xy", "yz", "xz"]);
+        let cell_data = node.parent_element().unwrap();
+        assert!(cell_data.has_tag_name("CellData"));
+        assert_eq!(cell_data.attribute("Tensors"), Some("sigma"));
+    }
+    data.chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+        .collect()
 }
 
 fn tar_names(tar: &[u8]) -> Vec<String> {

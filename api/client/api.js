@@ -67,9 +67,10 @@ export function fields(id, step, withMesh) {
 }
 
 /**
- * The stored step numbers of a succeeded simulation. The summary lists every computed step
- * but not which were stored (output.every / last), so they are read from the ParaView
- * collection, whose DataSet entries reference /jobs/{id}/fields/{n}.vtu.
+ * The step numbers of a succeeded simulation that can be shown: 0 (the initial state, t = 0)
+ * and the stored ones. The summary lists every computed step but not which were stored
+ * (output.every / last), so they are read from the ParaView collection, whose DataSet entries
+ * reference /jobs/{id}/fields/{n}.vtu.
  */
 export async function storedSteps(id) {
   const xml = await getText(`/jobs/${id}/result.pvd`);

@@ -1,6 +1,11 @@
 //! Results of succeeded jobs, rendered on request from the compact stored steps: summary,
 //! mesh, fields as JSON, VTK (.vtu per step, .pvd collection) and one tar archive. Bodies are
 //! streamed from the blocking pool.
+//!
+//! Step 0 is the initial state (t = 0): u_0, w_0 = 0, ζ_0 and σ_0 = B(ε(u_0), ζ_0)
+//! ([`initial_fields`]). It is not stored but derived from the stored scene, like the mesh,
+//! and served with the stored steps everywhere (fields, N.vtu, the PVD, the archive), so a
+//! ParaView time series starts at t = 0.
 
 use super::query::Params;
 use super::{blocking, load_job, parse_id};
@@ -16,7 +21,7 @@ use contact_core::mesh::Mesh;
 use contact_core::output::fields::MeshJson;
 use contact_core::output::stored::decode_step;
 use contact_core::output::vtk::{write_pvd, write_vtu};
-use contact_core::solve::stepper::StepFields;
+use contact_core::solve::stepper::{initial_fields, StepFields};
 use uuid::Uuid;
 
 const FIELD_NAMES: [&str; 6] = ["u", "w", "zeta", "sigma", "von_mises", "contact"];
@@ -94,14 +99,24 @@ fn with_type(bytes: Vec<u8>, content_type: &'static str) -> Response {
     r
 }
 
-/// The mesh is not stored: it is regenerated (deterministically) from the stored scene.
-fn mesh_of(rec: &JobRecord) -> Result<(Mesh, f64), Problem> {
+/// The stored scene, validated again, and its mesh. The mesh is not stored: it is
+/// regenerated (deterministically) from the scene.
+fn scene_of(rec: &JobRecord) -> Result<(contact_core::problem::Problem, Mesh), Problem> {
     let p = contact_core::scene::validate(&rec.scene)
         .map_err(|e| Problem::internal(format!("stored scene: {e}")))?;
-    Ok((p.mesh(), p.k()))
+    let mesh = p.mesh();
+    Ok((p, mesh))
 }
 
-fn stored_steps(state: &AppState, id: Uuid) -> Result<Vec<usize>, Problem> {
+/// The mesh and the time step k.
+fn mesh_of(rec: &JobRecord) -> Result<(Mesh, f64), Problem> {
+    let (p, mesh) = scene_of(rec)?;
+    Ok((mesh, p.k()))
+}
+
+/// The steps that can be served, in order: 0 (the initial state, derived from the scene)
+/// and the stored ones.
+fn available_steps(state: &AppState, id: Uuid) -> Result<Vec<usize>, Problem> {
     let mut steps: Vec<usize> = state
         .rt
         .results
@@ -109,16 +124,18 @@ fn stored_steps(state: &AppState, id: Uuid) -> Result<Vec<usize>, Problem> {
         .map_err(|e| Problem::internal(e.to_string()))?
         .iter()
         .filter_map(|n| parse_step_file(n))
+        .chain([0])
         .collect();
     steps.sort_unstable();
+    steps.dedup();
     Ok(steps)
 }
 
 fn pick_step(steps: &[usize], spec: &str) -> Result<usize, Problem> {
     let want = if spec == "last" {
-        *steps.last().ok_or_else(|| {
-            Problem::not_found("this job stored no steps (see the scene's output selection)")
-        })?
+        *steps
+            .last()
+            .ok_or_else(|| Problem::not_found("this job has no steps to show"))?
     } else {
         spec.parse::<usize>().map_err(|_| {
             Problem::bad_request(format!(
@@ -129,7 +146,7 @@ fn pick_step(steps: &[usize], spec: &str) -> Result<usize, Problem> {
     if steps.binary_search(&want).is_err() {
         let shown: Vec<String> = steps.iter().take(20).map(|s| s.to_string()).collect();
         return Err(Problem::not_found(format!(
-            "step {want} is not stored; stored steps: {}{}",
+            "step {want} is not stored; available steps (0 is the initial state): {}{}",
             shown.join(", "),
             if steps.len() > 20 { ", …" } else { "" }
         )));
@@ -137,7 +154,15 @@ fn pick_step(steps: &[usize], spec: &str) -> Result<usize, Problem> {
     Ok(want)
 }
 
-fn load_step(state: &AppState, id: Uuid, n: usize) -> Result<StepFields, Problem> {
+/// Step n of a simulation: the initial state derived from the scene for n = 0, a stored
+/// step otherwise.
+fn load_step(state: &AppState, rec: &JobRecord, n: usize) -> Result<StepFields, Problem> {
+    let id = rec.id;
+    if n == 0 {
+        let (p, mesh) = scene_of(rec)?;
+        return initial_fields(&p, &mesh)
+            .map_err(|e| Problem::internal(format!("initial state of the stored scene: {e}")));
+    }
     let bytes = state
         .rt
         .results
@@ -241,8 +266,9 @@ struct FieldsDoc<'a> {
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FieldsQuery {
-    /// A stored step's number or `last` (the default). Checked once the job is known to be
-    /// a succeeded simulation: an unknown job is 404 whatever the step says.
+    /// A stored step's number, 0 (the initial state) or `last` (the default). Checked once
+    /// the job is known to be a succeeded simulation: an unknown job is 404 whatever the
+    /// step says.
     step: Option<String>,
     /// A comma-separated subset of [`FIELD_NAMES`] (default: all; empty items are skipped).
     fields: Option<FieldList>,
@@ -301,10 +327,9 @@ pub async fn fields(
     let rec = simulation(&state, &id).await?;
     let spec = q.step.unwrap_or_else(|| "last".into());
     let st = state.clone();
-    let job = rec.id;
-    let mut f = blocking(move || {
-        let n = pick_step(&stored_steps(&st, job)?, &spec)?;
-        load_step(&st, job, n)
+    let (mut f, rec) = blocking(move || {
+        let n = pick_step(&available_steps(&st, rec.id)?, &spec)?;
+        Ok((load_step(&st, &rec, n)?, rec))
     })
     .await?;
     let keep = |name: &str| wanted.iter().any(|w| w == name);
@@ -345,7 +370,7 @@ pub async fn fields(
     }))
 }
 
-/// `/jobs/{id}/fields/{N|last}.vtu`.
+/// `/jobs/{id}/fields/{N|last}.vtu` (0.vtu: the initial state).
 pub async fn vtu(
     State(state): State<AppState>,
     Path((id, file)): Path<(String, String)>,
@@ -362,8 +387,8 @@ pub async fn vtu(
     let st = state.clone();
     let id = rec.id;
     let (f, rec) = blocking(move || {
-        let n = pick_step(&stored_steps(&st, id)?, &spec)?;
-        Ok((load_step(&st, id, n)?, rec))
+        let n = pick_step(&available_steps(&st, id)?, &spec)?;
+        Ok((load_step(&st, &rec, n)?, rec))
     })
     .await?;
     Ok(blocking_body("application/xml", move |w| {
@@ -372,6 +397,8 @@ pub async fn vtu(
     }))
 }
 
+/// `/jobs/{id}/result.pvd`: step 0 (t = 0) and every stored step, each referencing its
+/// `/jobs/{id}/fields/N.vtu`.
 pub async fn pvd(
     State(state): State<AppState>,
     Path(id): Path<String>,
@@ -379,7 +406,7 @@ pub async fn pvd(
     let rec = simulation(&state, &id).await?;
     let st = state.clone();
     let id = rec.id;
-    let steps = blocking(move || stored_steps(&st, id)).await?;
+    let steps = blocking(move || available_steps(&st, id)).await?;
     let (_, k) = mesh_of(&rec)?;
     let entries: Vec<(f64, String)> = steps
         .iter()
@@ -392,8 +419,9 @@ pub async fn pvd(
 
 /// One uncompressed tar (POSIX ustar) whose members all sit in one folder named after the
 /// job: `<id>/scene.json`, `<id>/summary.json`, `<id>/result.pvd` and
-/// `<id>/fields/step_NNNNNN.vtu` for every stored step. Each member is rendered just before
-/// it is written, so the archive is streamed, never held whole.
+/// `<id>/fields/step_NNNNNN.vtu` for step 0 (the initial state) and every stored step. Each
+/// member is rendered just before it is written, so the archive is streamed, never held
+/// whole.
 pub async fn archive(
     State(state): State<AppState>,
     Path(id): Path<String>,
@@ -403,7 +431,7 @@ pub async fn archive(
     let mut resp = blocking_body("application/x-tar", move |w| {
         let io = |e: Problem| std::io::Error::other(e.detail);
         let id = rec.id;
-        let steps = stored_steps(&st, id).map_err(io)?;
+        let steps = available_steps(&st, id).map_err(io)?;
         let (mesh, k) = mesh_of(&rec).map_err(io)?;
         let mut tar = tar::Builder::new(w);
         let mtime = crate::store::now() as u64;
@@ -434,7 +462,7 @@ pub async fn archive(
         )?;
         member("result.pvd", &pvd)?;
         for n in steps {
-            let f = load_step(&st, id, n).map_err(io)?;
+            let f = load_step(&st, &rec, n).map_err(io)?;
             let mut buf = Vec::new();
             write_vtu(&mut buf, &mesh.nodes, mesh.triangles(), &f)?;
             member(&name(n), &buf)?;

@@ -7,8 +7,9 @@
 //
 // 1. Submit paper-exp2 at h = k = 1/8 through the form, wait (through the UI) until the
 //    result is shown, and check from the canvas pixels that the damage colouring is not
-//    uniform; move the time slider and check that the step and the picture change; play
-//    back to the end; screenshots at 1280×800 and on a narrow screen.
+//    uniform; move the time slider (Home: the initial state, step 0) and check that the step
+//    and the picture change; play back to the end; screenshots at 1280×800 and on a narrow
+//    screen.
 // 2. Submit a scene with mesh.h = -1 from the editor and check that the server's message is
 //    shown on the editor line of that key and in the error list; then a preset with
 //    overrides.h = -1 and check the message under the h input.
@@ -149,11 +150,21 @@ async function testSimulation() {
   }
   await page.screenshot({ path: path.join(outDir, 'client-exp2-step8.png'), fullPage: true });
 
-  // The slider: Home goes to the first stored step.
+  // The slider: Home goes to the first step of the PVD, the initial state (step 0, t = 0,
+  // ζ0 = 1 everywhere: one colour).
   await page.focus('#step-slider');
   await page.keyboard.press('Home');
+  await page.waitForSelector('#viewer[data-step="0"]', { timeout: 10_000 });
+  const label0 = await page.textContent('#step-label');
+  check(label0.includes('step 0 ') && label0.includes('t = 0'), `step label names the initial state: "${label0}"`);
+  check((await page.textContent('#colorbar')).includes('(uniform)'), 'ζ0 = 1 is uniform at t = 0');
+  const s0 = await canvasStats(page);
+  console.log('  canvas at step 0:', JSON.stringify(s0));
+  check(s0.distinct === 1, `uniform ζ at step 0 is drawn with ${s0.distinct} colour-map entry`);
+  check(s0.hash !== s8.hash, 'the canvas changed with the step');
+  await page.keyboard.press('ArrowRight');
   await page.waitForSelector('#viewer[data-step="1"]', { timeout: 10_000 });
-  check((await page.textContent('#step-label')).includes('step 1 '), 'step label names step 1 after the slider moved');
+  check((await page.textContent('#step-label')).includes('step 1 '), 'step label names step 1 after ArrowRight');
   const s1 = await canvasStats(page);
   console.log('  canvas at step 1:', JSON.stringify(s1));
   check(s1.hash !== s8.hash, 'the canvas changed with the step');
@@ -193,7 +204,7 @@ async function testSimulation() {
   check(narrow.distinct >= 64, `canvas redrawn at the narrow width (${narrow.width}×${narrow.height} px, ${narrow.distinct} entries)`);
   await page.screenshot({ path: path.join(outDir, 'client-exp2-narrow.png'), fullPage: true });
   await page.close();
-  return { step8: s8, step1: s1, step2: s2 };
+  return { step8: s8, step0: s0, step1: s1, step2: s2 };
 }
 
 async function testInvalidScene() {

@@ -298,14 +298,7 @@ impl Simulation {
             )));
         }
         let nn = mesh.n_nodes();
-        let zeta: Vec<f64> = match &problem.damage {
-            Some(d) => mesh
-                .nodes
-                .iter()
-                .map(|p| d.zeta0.eval(p[0], p[1], 0.0))
-                .collect(),
-            None => vec![1.0; nn],
-        };
+        let (u, zeta) = initial_values(&problem, &mesh);
         let damage = match &problem.damage {
             Some(d) => {
                 let h = assembly::combine(
@@ -325,11 +318,6 @@ impl Simulation {
             }
             None => None,
         };
-        let u: Vec<f64> = mesh
-            .nodes
-            .iter()
-            .flat_map(|p| problem.u0.eval(p[0], p[1], 0.0))
-            .collect();
         check_initial(&problem, &mesh, &u, &zeta)?;
         let nt = mesh.n_cells();
         let n_free = dofs.n_free();
@@ -412,15 +400,15 @@ impl Simulation {
     /// with ζ̄ the mean of ζ_{n−1} at the element's vertices (the P0 projection of (3.8) for
     /// the paper's B (4.1)); keeps ε(u_{n−1}), which the damage source φ reads too.
     fn history_stress(&mut self) {
-        for (e, eps) in self.eps.iter_mut().enumerate() {
-            *eps = self.geo.strain(&self.mesh, e, &self.state.u);
-        }
-        let zeta_prev = &self.state.zeta;
-        let elasticity = self.problem.material.elasticity;
-        for (e, tri) in self.mesh.triangles().iter().enumerate() {
-            let zbar = (zeta_prev[tri[0]] + zeta_prev[tri[1]] + zeta_prev[tri[2]]) / 3.0;
-            self.b[e] = elastic_stress(&elasticity, &self.eps[e], zbar);
-        }
+        history_stress(
+            &self.problem,
+            &self.mesh,
+            &self.geo,
+            &self.state.u,
+            &self.state.zeta,
+            &mut self.eps,
+            &mut self.b,
+        );
     }
 
     /// The velocity step (3.13) ∥ the damage step (3.10) of step n: neither reads the other's
@@ -536,19 +524,15 @@ impl Simulation {
         } else {
             Vec::new()
         };
+        let (sigma, von_mises) = stress_fields(&self.problem, &sigma);
         StepFields {
             n,
             t: n as f64 * self.problem.k(),
             u: sel.u.then(|| self.state.u.clone()),
             w: sel.w.then(|| self.w.clone()),
             zeta: sel.zeta.then(|| self.state.zeta.clone()),
-            sigma: sel.sigma.then(|| {
-                sigma
-                    .iter()
-                    .map(|s| [s[(0, 0)], s[(1, 1)], s[(0, 1)]])
-                    .collect()
-            }),
-            von_mises: sel.von_mises.then(|| sigma.iter().map(von_mises).collect()),
+            sigma,
+            von_mises,
             contact: sel.contact.then(|| self.contact_state()),
         }
     }
@@ -591,6 +575,103 @@ impl Simulation {
             .as_ref()
             .map_or(0, |d| d.solver.refactorizations)
     }
+}
+
+/// The initial state (t_0 = 0) as the fields of step 0, for output: the requested ones of
+/// u_0 and ζ_0 (the nodal interpolants the run starts from, (3.11)), w_0 = 0 (the velocity
+/// before the first step; the scheme never uses it) and σ_0 = A ε(w_0) + B(ε(u_0), ζ̄_0) =
+/// B_0, the history stress the first step reads ((3.8) with w_0 = 0), with its von Mises
+/// stress. There is no contact state before the first step: `contact` is `None` even when
+/// requested. Needs no factorisation: cheap enough to derive on request.
+pub fn initial_fields(problem: &Problem, mesh: &Mesh) -> Result<StepFields, SolveError> {
+    let (u, zeta) = initial_values(problem, mesh);
+    check_initial(problem, mesh, &u, &zeta)?;
+    let sel = problem.output.fields;
+    let (sigma, von_mises) = if sel.sigma || sel.von_mises {
+        let nt = mesh.n_cells();
+        let mut eps = vec![Tensor2::zeros(); nt];
+        let mut b = vec![Tensor2::zeros(); nt];
+        history_stress(
+            problem,
+            mesh,
+            &Geometry::new(mesh),
+            &u,
+            &zeta,
+            &mut eps,
+            &mut b,
+        );
+        stress_fields(problem, &b)
+    } else {
+        (None, None)
+    };
+    Ok(StepFields {
+        n: 0,
+        t: 0.0,
+        w: sel.w.then(|| vec![0.0; u.len()]),
+        u: sel.u.then_some(u),
+        zeta: sel.zeta.then_some(zeta),
+        sigma,
+        von_mises,
+        contact: None,
+    })
+}
+
+/// u_0 (interleaved per node) and ζ_0 (per node; ≡ 1 without damage): the nodal
+/// interpolants of the scene's `initial.u0` and `damage.zeta0` at t = 0, (3.11).
+fn initial_values(problem: &Problem, mesh: &Mesh) -> (Vec<f64>, Vec<f64>) {
+    let zeta: Vec<f64> = match &problem.damage {
+        Some(d) => mesh
+            .nodes
+            .iter()
+            .map(|p| d.zeta0.eval(p[0], p[1], 0.0))
+            .collect(),
+        None => vec![1.0; mesh.n_nodes()],
+    };
+    let u: Vec<f64> = mesh
+        .nodes
+        .iter()
+        .flat_map(|p| problem.u0.eval(p[0], p[1], 0.0))
+        .collect();
+    (u, zeta)
+}
+
+/// ε(u)|_T and B(ε(u), ζ̄)|_T on every element, ζ̄ the mean of ζ at the element's vertices
+/// (the P0 projection of (3.8) for the paper's B (4.1)).
+fn history_stress(
+    problem: &Problem,
+    mesh: &Mesh,
+    geo: &Geometry,
+    u: &[f64],
+    zeta: &[f64],
+    eps: &mut [Tensor2<f64>],
+    b: &mut [Tensor2<f64>],
+) {
+    for (e, eps) in eps.iter_mut().enumerate() {
+        *eps = geo.strain(mesh, e, u);
+    }
+    let elasticity = problem.material.elasticity;
+    for (e, tri) in mesh.triangles().iter().enumerate() {
+        let zbar = (zeta[tri[0]] + zeta[tri[1]] + zeta[tri[2]]) / 3.0;
+        b[e] = elastic_stress(&elasticity, &eps[e], zbar);
+    }
+}
+
+/// The requested `sigma` (σ_xx, σ_yy, σ_xy per element) and `von_mises` of per-element
+/// stresses.
+fn stress_fields(
+    problem: &Problem,
+    sigma: &[Tensor2<f64>],
+) -> (Option<Vec<[f64; 3]>>, Option<Vec<f64>>) {
+    let sel = problem.output.fields;
+    (
+        sel.sigma.then(|| {
+            sigma
+                .iter()
+                .map(|s| [s[(0, 0)], s[(1, 1)], s[(0, 1)]])
+                .collect()
+        }),
+        sel.von_mises.then(|| sigma.iter().map(von_mises).collect()),
+    )
 }
 
 /// Where a formula meets the scheme: the scene's sampling check (a small grid at t = 0, T/2,

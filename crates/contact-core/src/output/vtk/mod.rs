@@ -11,7 +11,12 @@
 //! - `Points`: the mesh nodes as `Float64` with 3 components (z = 0);
 //! - `Cells`: `connectivity` and `offsets` (`Int64`), `types` (`UInt8`, all 5 = VTK_TRIANGLE);
 //! - `PointData`: `u` and `w` (3 components, z = 0) and `zeta`, each when present;
-//! - `CellData`: `sigma` (3 components named xx, yy, xy) and `von_mises`, each when present;
+//! - `CellData`: `sigma` and `von_mises`, each when present. σ is a symmetric tensor of 6
+//!   components in VTK's order for symmetric tensors, xx, yy, zz, xy, yz, xz (the order
+//!   `vtkMath::TensorFromSymmetricTensor` expands), with σ_zz = σ_yz = σ_xz = 0: the plane
+//!   model's constitutive laws (4.1) act on 2 × 2 tensors, so it has no σ_zz. `CellData`
+//!   carries `Tensors="sigma"`, which makes it the cells' active tensors for VTK's XML
+//!   readers (VTK 9 accepts 6-component tensors), so ParaView's tensor filters find it;
 //! - `FieldData`: `TimeValue` (the step's time t, which ParaView uses as the time of the data
 //!   set) and `Step` (the step index n).
 //!
@@ -28,15 +33,18 @@ use std::io::{self, BufWriter, Write};
 
 /// VTK cell type of a linear triangle.
 const VTK_TRIANGLE: u8 = 5;
+/// Component names of a symmetric tensor, in the order VTK reads 6-component tensors.
+const SYM_TENSOR: [&str; 6] = ["xx", "yy", "zz", "xy", "yz", "xz"];
 /// Raw bytes gathered before they are handed to the base64 encoder.
 const CHUNK_BYTES: usize = 48 * 1024;
 
 /// Writes one step as a VTK XML UnstructuredGrid (`.vtu`) document (see the module docs).
 ///
 /// `nodes` and `triangles` are the mesh; `u` and `w` in `fields` are interleaved (x, y) per
-/// node, `zeta` is per node, `sigma` and `von_mises` are per triangle. The contact state is
-/// not written. Errors with `InvalidInput`, before writing anything, when a field's length
-/// does not match the mesh or a triangle refers to a missing node.
+/// node, `zeta` is per node, `sigma` ((σ_xx, σ_yy, σ_xy), written as the 6 components of a
+/// symmetric tensor) and `von_mises` are per triangle. The contact state is not written.
+/// Errors with `InvalidInput`, before writing anything, when a field's length does not match
+/// the mesh or a triangle refers to a missing node.
 pub fn write_vtu<W: Write>(
     out: W,
     nodes: &[[f64; 2]],
@@ -79,10 +87,15 @@ pub fn write_vtu<W: Write>(
         o.write_all(b"      </PointData>\n")?;
     }
     if fields.sigma.is_some() || fields.von_mises.is_some() {
-        o.write_all(b"      <CellData>\n")?;
+        if fields.sigma.is_some() {
+            o.write_all(b"      <CellData Tensors=\"sigma\">\n")?;
+        } else {
+            o.write_all(b"      <CellData>\n")?;
+        }
         if let Some(s) = &fields.sigma {
-            let values = s.iter().flatten().copied();
-            data_array(o, 8, "sigma", &["xx", "yy", "xy"], None, 3 * nc, values)?;
+            // (xx, yy, xy) → (xx, yy, zz, xy, yz, xz).
+            let values = s.iter().flat_map(|s| [s[0], s[1], 0.0, s[2], 0.0, 0.0]);
+            data_array(o, 8, "sigma", &SYM_TENSOR, None, 6 * nc, values)?;
         }
         if let Some(vm) = &fields.von_mises {
             data_array(o, 8, "von_mises", &[], None, nc, vm.iter().copied())?;
@@ -215,7 +228,8 @@ impl Scalar for u8 {
 }
 
 /// Writes one inline binary `<DataArray>`: base64 of the u64 byte count followed by the
-/// values. `components` names the components of a multi-component array (empty: scalar). `count` is the number of values (tuples × components) `values` yields; callers
+/// values. `components` names the components of a multi-component array (empty: scalar).
+/// `count` is the number of values (tuples × components) `values` yields; callers
 /// pass iterators over validated data, and a mismatch is reported as an error.
 fn data_array<W: Write, T: Scalar>(
     out: &mut W,

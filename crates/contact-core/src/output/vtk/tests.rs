@@ -141,6 +141,26 @@ fn vec3(interleaved: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// Plane (σ_xx, σ_yy, σ_xy) as VTK's symmetric tensor (xx, yy, zz, xy, yz, xz).
+fn sym6(plane: &[[f64; 3]]) -> Vec<f64> {
+    plane
+        .iter()
+        .flat_map(|s| [s[0], s[1], 0.0, s[2], 0.0, 0.0])
+        .collect()
+}
+
+/// Checks that `sigma` is declared as the cells' symmetric tensor and returns its values.
+fn sigma_tensor(cd: Node, nc: usize) -> Vec<f64> {
+    assert_eq!(cd.attr("Tensors"), "sigma", "the active cell tensors");
+    let sigma = cd.array("sigma");
+    assert_eq!(sigma.attr("NumberOfComponents"), "6");
+    for (i, name) in ["xx", "yy", "zz", "xy", "yz", "xz"].iter().enumerate() {
+        assert_eq!(sigma.attr(&format!("ComponentName{i}")), *name);
+    }
+    assert!(sigma.attribute("ComponentName6").is_none());
+    f64s(sigma, nc, 6)
+}
+
 fn hand_built(mesh: &Mesh) -> StepFields {
     let np = mesh.nodes.len();
     let nc = mesh.n_cells();
@@ -236,19 +256,7 @@ fn vtu_of_all_fields_reads_back() {
 
     let cd = piece.child("CellData");
     assert_eq!(cd.array_names(), ["sigma", "von_mises"]);
-    let sigma = cd.array("sigma");
-    assert_eq!(sigma.attr("ComponentName0"), "xx");
-    assert_eq!(sigma.attr("ComponentName1"), "yy");
-    assert_eq!(sigma.attr("ComponentName2"), "xy");
-    let expected: Vec<f64> = f
-        .sigma
-        .as_ref()
-        .unwrap()
-        .iter()
-        .flatten()
-        .copied()
-        .collect();
-    assert_eq!(f64s(sigma, nc, 3), expected);
+    assert_eq!(sigma_tensor(cd, nc), sym6(f.sigma.as_ref().unwrap()));
     assert_eq!(
         &f64s(cd.array("von_mises"), nc, 1),
         f.von_mises.as_ref().unwrap()
@@ -286,7 +294,12 @@ fn vtu_writes_only_the_present_fields() {
     check_grid(root, &mesh, &some);
     let piece = root.child("UnstructuredGrid").child("Piece");
     assert_eq!(piece.child("PointData").array_names(), ["w"]);
-    assert_eq!(piece.child("CellData").array_names(), ["von_mises"]);
+    let cd = piece.child("CellData");
+    assert_eq!(cd.array_names(), ["von_mises"]);
+    assert!(
+        cd.attribute("Tensors").is_none(),
+        "no sigma, no active tensors"
+    );
 }
 
 #[test]
@@ -303,6 +316,87 @@ fn vtu_of_a_larger_mesh_crosses_chunk_boundaries() {
     let np = mesh.nodes.len();
     let u = f64s(piece.child("PointData").array("u"), np, 3);
     assert_eq!(u, vec3(f.u.as_ref().unwrap()));
+}
+
+/// σ of a known constant-strain field, written and read back: the initial state of a scene
+/// with a linear u_0 = (a x + b y, c x + d y) and a constant ζ_0 has ε = [[a, (b + c)/2],
+/// [(b + c)/2, d]] on every triangle and σ_0 = B(ε, ζ_0) = ζ_0 (2μ ε + λ tr ε I) (4.1), so
+/// each of the six components is known in closed form, and all differ (an order mix-up
+/// cannot go unseen). Also: step 0 at t = 0, u_0 and ζ_0 as the run starts from them, w_0 = 0.
+#[test]
+fn vtu_sigma_is_the_symmetric_tensor_of_a_constant_strain_field() {
+    use crate::solve::stepper::{initial_fields, Simulation};
+    use crate::solve::SolverSettings;
+    let (a, b, c, d) = (0.012, 0.02, -0.05, -0.007);
+    let (mu, lambda, zeta0) = (4.0, 3.0, 0.75);
+    let mut doc = crate::scene::presets::get("paper-exp1").unwrap();
+    doc["mesh"]["h"] = serde_json::json!("1/4");
+    doc["time"] = serde_json::json!({"t_end": 1, "N": 4});
+    doc["material"]["elasticity"] =
+        serde_json::json!({"type": "linear", "mu": mu, "lambda": lambda});
+    doc["initial"]["u0"] = serde_json::json!([format!("{a}*x + {b}*y"), format!("{c}*x + {d}*y")]);
+    doc["damage"]["zeta0"] = serde_json::json!(zeta0);
+    let problem = crate::scene::validate(&doc).unwrap();
+    let sim = Simulation::new(problem.clone(), SolverSettings::default()).unwrap();
+    let mesh = &sim.mesh;
+    let f = initial_fields(&problem, mesh).unwrap();
+    let (np, nc) = (mesh.nodes.len(), mesh.n_cells());
+    assert_eq!((f.n, f.t), (0, 0.0));
+    assert_eq!(
+        f.u.as_ref(),
+        Some(&sim.state.u),
+        "u_0 as the run starts from it"
+    );
+    assert_eq!(
+        f.zeta.as_ref(),
+        Some(&sim.state.zeta),
+        "ζ_0 as the run starts from it"
+    );
+    assert_eq!(f.w.as_ref(), Some(&vec![0.0; 2 * np]));
+    assert!(
+        f.contact.is_none(),
+        "no contact state before the first step"
+    );
+
+    let doc = render(mesh, &f);
+    let xml = parse_xml(&doc);
+    let root = xml.root_element();
+    check_grid(root, mesh, &f);
+    let piece = root.child("UnstructuredGrid").child("Piece");
+    let pd = piece.child("PointData");
+    let u = f64s(pd.array("u"), np, 3);
+    for (p, u) in mesh.nodes.iter().zip(u.chunks_exact(3)) {
+        let exact = [a * p[0] + b * p[1], c * p[0] + d * p[1], 0.0];
+        for (got, want) in u.iter().zip(exact) {
+            assert!((got - want).abs() <= 1e-15, "u at {p:?}: {u:?}");
+        }
+    }
+    assert!(f64s(pd.array("w"), np, 3).iter().all(|&w| w == 0.0));
+    assert!(f64s(pd.array("zeta"), np, 1).iter().all(|&z| z == zeta0));
+
+    let (exx, eyy, exy) = (a, d, 0.5 * (b + c));
+    let tr = exx + eyy;
+    let xx = zeta0 * (2.0 * mu * exx + lambda * tr);
+    let yy = zeta0 * (2.0 * mu * eyy + lambda * tr);
+    let xy = zeta0 * 2.0 * mu * exy;
+    let expected = [xx, yy, 0.0, xy, 0.0, 0.0];
+    let cd = piece.child("CellData");
+    let sigma = sigma_tensor(cd, nc);
+    for (e, s) in sigma.chunks_exact(6).enumerate() {
+        for (i, (got, want)) in s.iter().zip(expected).enumerate() {
+            assert!(
+                (got - want).abs() <= 1e-12,
+                "triangle {e}, component {i}: {got} ≠ {want} ({s:?})"
+            );
+        }
+        assert_eq!([s[2], s[4], s[5]], [0.0; 3], "plane model: no zz, yz, xz");
+    }
+    // Von Mises of the plane tensor, (3/2 σ^D:σ^D)^½ with the 2D deviator.
+    let half = 0.5 * (xx - yy);
+    let vm = (1.5 * (2.0 * half * half + 2.0 * xy * xy)).sqrt();
+    for v in f64s(cd.array("von_mises"), nc, 1) {
+        assert!((v - vm).abs() <= 1e-12, "von Mises {v} ≠ {vm}");
+    }
 }
 
 #[test]
