@@ -3,6 +3,7 @@
 //! length, every square cell cut by its lower-left → upper-right diagonal (default), so the
 //! meshes of h and h/2 are nested.
 
+pub mod polygon;
 use crate::problem::{MeshPattern, Segment};
 
 /// A boundary edge of the mesh.
