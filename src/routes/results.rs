@@ -104,7 +104,9 @@ fn with_type(bytes: Vec<u8>, content_type: &'static str) -> Response {
 fn scene_of(rec: &JobRecord) -> Result<(contact_core::problem::Problem, Mesh), Problem> {
     let p = contact_core::scene::validate(&rec.scene)
         .map_err(|e| Problem::internal(format!("stored scene: {e}")))?;
-    let mesh = p.mesh();
+    let mesh = p
+        .mesh()
+        .map_err(|e| Problem::internal(format!("stored scene: {e}")))?;
     Ok((p, mesh))
 }
 

@@ -9,6 +9,7 @@ use std::sync::Arc;
 
 use crate::expr::Expr;
 pub use crate::mesh::support::Support;
+use crate::mesh::support::TagError;
 use crate::mesh::Mesh;
 pub use crate::mesh::{MeshPattern, Segment};
 
@@ -240,19 +241,18 @@ fn edges(m: &Mesh) -> usize {
 }
 
 impl Problem {
-    /// The mesh the scheme runs on, boundary facets tagged.
-    pub fn mesh(&self) -> Mesh {
+    /// The mesh the scheme runs on, boundary facets tagged. Validation has tagged the same
+    /// mesh already (except rectangles too large to mesh during validation), so an error here
+    /// is a part that selects no facet, or a facet two parts select, on such a rectangle.
+    pub fn mesh(&self) -> Result<Mesh, TagError> {
         match &self.body {
-            Some(b) => b.mesh(),
+            Some(b) => Ok(b.mesh()),
             None => {
                 let (nx, ny) = self.cells();
                 let mut mesh = Mesh::rectangle(self.width, self.height, nx, ny, self.pattern);
                 let supports: Vec<_> = self.boundary.iter().map(|p| p.support.clone()).collect();
-                // Validation tagged this rectangle once already; it cannot fail now.
-                mesh.tag_boundary(&supports).expect(
-                    "boundary parts were checked on this mesh when the scene was validated",
-                );
-                mesh
+                mesh.tag_boundary(&supports)?;
+                Ok(mesh)
             }
         }
     }

@@ -191,7 +191,7 @@ fn formula_parts_equal_segment_parts() {
     let contact = parts.iter().position(|p| p["type"] == "contact").unwrap();
     parts[contact] = json!({"type": "contact", "on": "y", "where": "1 - x"});
     let on = scene::validate(&doc).unwrap();
-    let (a, b) = (seg.mesh(), on.mesh());
+    let (a, b) = (seg.mesh().unwrap(), on.mesh().unwrap());
     let tags = |m: &Mesh| m.facets.iter().map(|f| f.part).collect::<Vec<_>>();
     assert_eq!(tags(&a), tags(&b));
 }

@@ -218,3 +218,101 @@ fn bey_refinement_of_a_tetrahedron() {
     };
     assert_eq!(g.facets.len(), 16);
 }
+
+mod hostile {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn coordinate() -> impl Strategy<Value = f64> {
+        prop_oneof![
+            8 => (0u8..5).prop_map(f64::from),
+            1 => Just(f64::NAN),
+            1 => Just(f64::INFINITY),
+            2 => -1e3f64..1e3,
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 2000, ..ProptestConfig::default() })]
+
+        /// Any nodes and cells: a mesh or an error, never a panic; an accepted mesh has
+        /// positive cells of one orientation and boundary facets with unit normals.
+        #[test]
+        fn from_cells_never_panics(
+            nodes in prop::collection::vec([coordinate(), coordinate()], 0..12),
+            cells in prop::collection::vec(0usize..14, 0..30),
+        ) {
+            let n = cells.len() / 3 * 3;
+            if let Ok(m) = Mesh::from_cells(nodes, cells[..n].to_vec()) {
+                let sign = m.area(0).signum();
+                prop_assert!((0..m.n_cells()).all(|t| m.area(t) * sign > 0.0));
+                prop_assert!(!m.facets.is_empty());
+                for f in &m.facets {
+                    prop_assert!((f.normal[0].hypot(f.normal[1]) - 1.0).abs() < 1e-12);
+                    prop_assert!(f.measure > 0.0);
+                }
+                let r = m.refine();
+                prop_assert_eq!(r.n_cells(), 4 * m.n_cells());
+            }
+        }
+
+        /// Byte edits of a real file: a checked mesh or an error, never a panic.
+        #[test]
+        fn import_of_edited_files_never_panics(
+            edits in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+            cut in any::<prop::sample::Index>(),
+        ) {
+            let mut bytes = include_bytes!("../../tests/meshes/plate-with-hole.msh").to_vec();
+            for (at, b) in edits {
+                let i = at.index(bytes.len());
+                bytes[i] = b;
+            }
+            if cut.index(4) == 0 {
+                let end = cut.index(bytes.len());
+                bytes.truncate(end);
+            }
+            let _ = import::import::<2>(&bytes);
+        }
+    }
+
+    #[test]
+    fn the_3d_mesh_is_refused_where_2d_is_needed_and_accepted_as_3d() {
+        let bytes = include_bytes!("../../tests/meshes/cylinder.msh");
+        let e = import::import::<2>(bytes).unwrap_err();
+        assert!(e.to_string().contains("3D"), "{e}");
+        let m = import::import::<3>(bytes).unwrap();
+        let s = import::summary(&m);
+        assert_eq!(s.dimension, 3);
+        let names: Vec<_> = s.groups.iter().map(|g| g.name.as_str()).collect();
+        assert_eq!(names, ["base", "top", "side"]);
+        // Base and top discs of radius 0.5 (facets on chords: slightly less than π/4).
+        let pi4 = std::f64::consts::FRAC_PI_4;
+        assert!(s.groups[0].measure < pi4 && s.groups[0].measure > 0.97 * pi4);
+        let vol: f64 = m
+            .cells()
+            .map(|c| signed_measure(&c.iter().map(|&i| m.nodes[i]).collect::<Vec<_>>()).abs())
+            .sum();
+        assert!(vol < pi4 && vol > 0.97 * pi4, "{vol}");
+    }
+
+    #[test]
+    fn the_plate_imports_with_its_groups() {
+        let bytes = include_bytes!("../../tests/meshes/plate-with-hole.msh");
+        let m = import::import::<2>(bytes).unwrap();
+        let s = import::summary(&m);
+        let len = |name: &str| s.groups.iter().find(|g| g.name == name).unwrap().measure;
+        assert!((len("clamped") - 1.0).abs() < 1e-12 && (len("contact") - 2.0).abs() < 1e-12);
+        let circumference = 2.0 * std::f64::consts::PI * 0.2;
+        assert!(len("hole") < circumference && len("hole") > 0.99 * circumference);
+        // Area: the plate minus the hole's inscribed polygon.
+        let area: f64 = (0..m.n_cells()).map(|t| m.area(t).abs()).sum();
+        assert!(
+            area > 2.0 - 0.04 * std::f64::consts::PI && area < 2.0 - 0.039 * std::f64::consts::PI,
+            "{area}"
+        );
+        assert_eq!(
+            m.facets.len(),
+            s.groups.iter().map(|g| g.facets).sum::<usize>()
+        );
+    }
+}

@@ -302,8 +302,10 @@ fn base_mesh(
             let n = spec.cells_per_unit as f64;
             let (nx, ny) = ((width * n).round() as usize, (height * n).round() as usize);
             if (nx + 1).saturating_mul(ny + 1) > MAX_VALIDATION_NODES {
-                // Too large to mesh here; the service's node limit refuses it anyway, and
-                // segment parts were checked on the rectangle's sides.
+                // Too large to mesh here (the service's node limit refuses it anyway): segment
+                // parts were checked on the rectangle's sides, and the run reports a part
+                // that selects nothing ([`Problem::mesh`]). The base mesh of a rectangle is
+                // not kept.
                 return Some(Mesh::rectangle(*width, *height, 1, 1, spec.pattern));
             }
             Mesh::rectangle(*width, *height, nx, ny, spec.pattern)

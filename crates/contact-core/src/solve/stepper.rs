@@ -214,7 +214,10 @@ impl Prepared {
     /// condition (2.31).
     pub fn new(problem: &Problem) -> Result<Prepared, SolveError> {
         let start = Instant::now();
-        let mesh = problem.mesh();
+        let mesh = problem.mesh().map_err(|e| SolveError::Data {
+            pointer: format!("/boundary/{}", e.part()),
+            message: e.to_string(),
+        })?;
         let geo = Geometry::new(&mesh);
         let dofs = DofMap::new(&mesh, &problem.boundary);
         let visc = problem.material.viscosity;
