@@ -9,7 +9,7 @@ use contact_core::mesh::{Mesh, MeshPattern};
 use contact_core::problem::Problem;
 use contact_core::scene::{self, presets, MeshFiles};
 use contact_core::solve::invariants;
-use contact_core::solve::stepper::StepReport;
+use contact_core::solve::stepper::{Simulation, StepReport};
 use serde_json::{json, Value};
 
 /// An ASCII MSH 4.1 file: 2D nodes, triangles (surface group "body") and named line groups.
@@ -319,4 +319,40 @@ fn the_given_mesh_presets_slip_in_part_and_keep_the_invariants() {
             "{name}: {most} of {contact} Γ3 nodes slip"
         );
     }
+}
+
+#[test]
+fn the_discrete_trace_constant_is_the_same_in_a_rotated_frame() {
+    // A non-convex law makes the set-up compute cτ and the discrete strong-convexity margin
+    // from the Schur complement onto the (rotated) contact DOFs.
+    let law = json!({"law": "slip_weakening", "mu0": 1, "mu1": 0.5, "alpha": 0.5});
+    let with_law = || {
+        let mut doc = exp3_slipping();
+        doc["friction"] = law.clone();
+        doc
+    };
+    let builtin =
+        Simulation::new(scene::validate(&with_law()).unwrap(), Default::default()).unwrap();
+    let (c, s) = (0.9f64.cos(), 0.9f64.sin());
+    let rot = |v: [f64; 2]| [c * v[0] - s * v[1], s * v[0] + c * v[1]];
+    let mut doc = with_law();
+    doc["domain"] = json!({"mesh": "body.msh"});
+    doc["mesh"] = json!({"refine": 0});
+    doc["boundary"] = json!([
+        {"type": "clamped", "group": "clamped"},
+        {"type": "traction", "group": "loaded", "f2": rot([-1.0, -1.0])},
+        {"type": "contact", "group": "contact"}
+    ]);
+    let p = scene::validate_with(&doc, &OneFile(rectangle_file(rot))).unwrap();
+    let rotated = Simulation::new(p, Default::default()).unwrap();
+    assert!(rotated.dofs.frames.len() == rotated.dofs.n_contact());
+    let (a, b) = (&builtin.smallness, &rotated.smallness);
+    let (ca, cb) = (a.c_tau.unwrap(), b.c_tau.unwrap());
+    assert!(rel(ca, cb) < 1e-9, "cτ {ca} vs {cb}");
+    let (ma, mb) = (a.discrete_margin.unwrap(), b.discrete_margin.unwrap());
+    assert!(
+        (ma - mb).abs() < 1e-9 * ma.abs().max(1.0),
+        "margin {ma} vs {mb}"
+    );
+    assert_eq!(a.holds, b.holds);
 }
