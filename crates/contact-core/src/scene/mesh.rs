@@ -54,8 +54,7 @@ pub(super) fn mesh_section(
     };
     let refine = match object(cx, v, ptr, "mesh", MESH_FIELDS)?.get("refine") {
         None => Some(0),
-        Some(r) if shape.is_some() && rect.is_some() => {
-            let _ = r;
+        Some(_) if rect.is_some() => {
             cx.err(
                 &join(ptr, "refine"),
                 "refine applies to imported and polygon meshes; a rectangle is refined by a smaller h",

@@ -325,7 +325,20 @@ fn base_mesh(
                     }
                 },
                 Err(e) => {
-                    cx.err("/domain", e.to_string());
+                    use crate::mesh::polygon::Ring;
+                    let ptr = match e.place() {
+                        Some((Ring::Outer, v)) => format!("/domain/polygon{}", at_vertex(v)),
+                        Some((Ring::Hole(i), v)) => format!("/domain/holes/{i}{}", at_vertex(v)),
+                        None if matches!(
+                            e,
+                            crate::mesh::polygon::PolygonError::MeshingFailed { .. }
+                        ) =>
+                        {
+                            "/domain".into()
+                        }
+                        None => "/mesh/h".into(),
+                    };
+                    cx.err(&ptr, e.to_string());
                     return None;
                 }
             }
@@ -339,6 +352,11 @@ fn base_mesh(
             None
         }
     }
+}
+
+/// "/3" for vertex 3 of a ring, "" for the whole ring.
+fn at_vertex(v: Option<usize>) -> String {
+    v.map(|v| format!("/{v}")).unwrap_or_default()
 }
 
 /// Most nodes of a mesh built during validation.

@@ -895,3 +895,121 @@ fn presets_and_examples_conform_to_the_schema() {
     doc["material"]["viscosity"]["etaa"] = json!(1);
     assert!(validate(&doc).is_err() && !schema_errors(&doc).is_empty());
 }
+
+/// The body forms and part selections: each misuse is refused at its pointer.
+#[test]
+fn body_forms_and_part_selections_are_checked() {
+    let plate = || presets::get("plate-with-hole").unwrap();
+    let bracket = || presets::get("l-bracket").unwrap();
+    let rect = || presets::get("paper-exp3").unwrap();
+    let cases: Vec<(Value, &str, &str)> = vec![
+        (
+            {
+                let mut d = rect();
+                d["domain"]["mesh"] = json!("plate-with-hole.msh");
+                d
+            },
+            "/domain",
+            "one form",
+        ),
+        (
+            {
+                let mut d = rect();
+                d["mesh"]["refine"] = json!(1);
+                d
+            },
+            "/mesh/refine",
+            "smaller h",
+        ),
+        (
+            {
+                let mut d = plate();
+                d["mesh"] = json!({"h": "1/8"});
+                d
+            },
+            "/mesh/h",
+            "refine, not h",
+        ),
+        (
+            {
+                let mut d = plate();
+                d["mesh"] = json!({"refine": 9});
+                d
+            },
+            "/mesh/refine",
+            "at most 8",
+        ),
+        (
+            {
+                let mut d = plate();
+                d["domain"]["mesh"] = json!("../etc/passwd");
+                d
+            },
+            "/domain/mesh",
+            "no mesh",
+        ),
+        (
+            {
+                let mut d = rect();
+                d["boundary"][0] = json!({"type": "clamped", "group": "x"});
+                d
+            },
+            "/boundary/0/group",
+            "imported mesh",
+        ),
+        (
+            {
+                let mut d = rect();
+                d["boundary"][0] =
+                    json!({"type": "clamped", "from": [0, 0], "to": [0, 1], "where": "x"});
+                d
+            },
+            "/boundary/0/where",
+            "on",
+        ),
+        (
+            {
+                let mut d = rect();
+                d["boundary"][0] = json!({"type": "clamped", "on": "x", "group": "g"});
+                d
+            },
+            "/boundary/0",
+            "one way",
+        ),
+        (
+            {
+                let mut d = rect();
+                d["boundary"][0] = json!({"type": "clamped", "on": "x + t"});
+                d
+            },
+            "/boundary/0/on",
+            "uses t",
+        ),
+        (
+            {
+                let mut d = bracket();
+                d["domain"]["polygon"] = json!([[0, 0], [1, 1], [1, 0], [0, 1]]);
+                d
+            },
+            "/domain/polygon/0",
+            "intersects itself",
+        ),
+        (
+            {
+                let mut d = bracket();
+                d["mesh"] = json!({"refine": 1});
+                d
+            },
+            "/mesh/h",
+            "the mesh size",
+        ),
+    ];
+    for (doc, ptr, text) in cases {
+        let errs = validate(&doc).unwrap_err().0;
+        assert!(
+            errs.iter()
+                .any(|e| e.pointer == ptr && e.message.contains(text)),
+            "{ptr} / {text}: {errs:?}"
+        );
+    }
+}

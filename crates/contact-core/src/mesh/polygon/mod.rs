@@ -183,6 +183,25 @@ pub enum PolygonError {
     MeshingFailed { reason: String },
 }
 
+impl PolygonError {
+    /// The ring and vertex (or edge, by its first vertex) the error is about, if any; `None`
+    /// for the size h and for the mesher itself.
+    pub fn place(&self) -> Option<(Ring, Option<usize>)> {
+        use PolygonError::*;
+        match self {
+            TooFewVertices { ring, .. } | ZeroArea { ring } => Some((*ring, None)),
+            NonFiniteCoordinate { ring, vertex }
+            | CoordinateOutOfRange { ring, vertex, .. }
+            | RepeatedVertex { ring, vertex, .. } => Some((*ring, Some(*vertex))),
+            SelfIntersecting { ring, edge, .. }
+            | RingsIntersect { ring, edge, .. }
+            | BoundaryTooClose { ring, edge } => Some((*ring, Some(*edge))),
+            HoleOutside { hole } | HolesNested { hole, .. } => Some((Ring::Hole(*hole), None)),
+            InvalidSize { .. } | TooManyNodes { .. } | MeshingFailed { .. } => None,
+        }
+    }
+}
+
 type Cdt = ConstrainedDelaunayTriangulation<Point2<f64>>;
 
 /// Meshes the region inside `outer` and outside every hole at size h.
