@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod logging;
+pub mod mesh_files;
 pub mod node;
 pub mod preset;
 pub mod progress;

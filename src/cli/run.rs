@@ -1,5 +1,6 @@
 //! `contact-sim run`: one simulation, its summary on stdout, its files with --out.
 
+use super::mesh_files::SceneDir;
 use super::{fail, preset, pretty, progress};
 use clap::Args;
 use contact_core::output::fields::MeshJson;
@@ -53,7 +54,14 @@ pub fn main(args: RunArgs) -> ExitCode {
         t_end: to_value(args.t_end),
     };
     scene::apply_overrides(&mut doc, &overrides);
-    let problem = match scene::validate(&doc) {
+    // Mesh files are looked up next to the scene file (the working directory for a preset).
+    let dir = args
+        .scene
+        .as_deref()
+        .and_then(Path::parent)
+        .map(Path::to_path_buf)
+        .unwrap_or_default();
+    let problem = match scene::validate_with(&doc, &SceneDir(dir)) {
         Ok(p) => p,
         Err(errors) => {
             eprintln!(

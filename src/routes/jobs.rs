@@ -218,8 +218,7 @@ fn check_limits(
 /// node limit, all runs together the step limit.
 fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), Problem> {
     let cfg = &state.rt.config;
-    let (nx, ny) = plan.base.cells();
-    let nodes = (nx + 1) * (ny + 1);
+    let nodes = plan.base.n_nodes();
     if nodes > cfg.max_nodes {
         return Err(Problem::invalid_field(
             "/study/reference/h",

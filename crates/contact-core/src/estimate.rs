@@ -28,6 +28,18 @@ pub const MAX_RELATIVE: f64 = 0.5;
 
 /// Why a scene cannot have an error estimate (reported at `/error_estimate`).
 pub fn unsupported(p: &Problem) -> Option<String> {
+    if let Some(body) = &p.body {
+        if body.refine == 0 {
+            return Some("on an imported or polygon mesh needs mesh.refine ≥ 1: the (2h, 2k) run uses the mesh with one refinement less, and this mesh is the one given".into());
+        }
+        if !p.steps.is_multiple_of(2) {
+            return Some(format!(
+                "needs a run at (2h, 2k): the number of steps N = {} must be even",
+                p.steps
+            ));
+        }
+        return None;
+    }
     if p.pattern == MeshPattern::Cross {
         return Some(
             "the cross pattern's meshes are not nested; use diagonal or anti_diagonal".into(),
@@ -90,11 +102,34 @@ pub struct ErrorEstimator {
     final_: Option<EstimateRow>,
 }
 
+/// The problem at (by·h, by·k), by = 2 or 4: the rectangle's n / by, or the given mesh with
+/// log2(by) refinements less.
 fn coarsened(p: &Problem, by: usize) -> Problem {
+    let body = p.body.as_ref().map(|b| {
+        std::sync::Arc::new(crate::problem::Body {
+            refine: b.refine - by.trailing_zeros() as usize,
+            ..(**b).clone()
+        })
+    });
     Problem {
+        body,
         cells_per_unit: p.cells_per_unit / by,
         steps: p.steps / by,
         ..p.clone()
+    }
+}
+
+/// Can the problem be coarsened by 4 in h and k?
+fn has_coarser(p: &Problem) -> bool {
+    if !p.steps.is_multiple_of(4) {
+        return false;
+    }
+    match &p.body {
+        Some(b) => b.refine >= 2,
+        None => {
+            let (nx, ny) = p.cells();
+            p.cells_per_unit.is_multiple_of(4) && nx % 4 == 0 && ny % 4 == 0
+        }
     }
 }
 
@@ -104,12 +139,7 @@ impl ErrorEstimator {
         let start = Instant::now();
         let p = &fine.problem;
         let coarse = Simulation::new(coarsened(p, 2), settings)?;
-        let (nx, ny) = p.cells();
-        let coarser = if p.cells_per_unit.is_multiple_of(4)
-            && p.steps.is_multiple_of(4)
-            && nx % 4 == 0
-            && ny % 4 == 0
-        {
+        let coarser = if has_coarser(p) {
             Some(Simulation::new(coarsened(p, 4), settings)?)
         } else {
             None
@@ -217,7 +247,10 @@ impl ErrorEstimator {
     pub fn finish(self) -> ErrorEstimate {
         ErrorEstimate {
             model_order: MODEL_ORDER,
-            coarse_h: 1.0 / self.coarse.problem.cells_per_unit as f64,
+            coarse_h: match &self.coarse.problem.body {
+                None => 1.0 / self.coarse.problem.cells_per_unit as f64,
+                Some(_) => crate::mesh::quality::figures(&self.coarse.mesh).max_cell_size,
+            },
             coarse_k: self.coarse.problem.k(),
             check: self.coarser.is_some(),
             coarse_seconds: self.seconds,

@@ -227,3 +227,96 @@ fn parts_that_select_badly_are_refused_at_their_pointer() {
         );
     }
 }
+
+/// plate-with-hole at k = 1/8 and `refine` red refinements.
+fn plate(refine: u64) -> Problem {
+    let mut doc = presets::get("plate-with-hole").unwrap();
+    doc["time"]["k"] = json!("1/8");
+    doc["mesh"]["refine"] = json!(refine);
+    scene::validate(&doc).unwrap()
+}
+
+#[test]
+fn a_study_of_a_given_mesh_refines_it_and_converges_at_order_one() {
+    use contact_core::study::{run_ladder, spec};
+    // Levels n = 2^refine (spec::resolution): refine 0, 1, 2 against refine 3.
+    let base = plate(3);
+    assert_eq!(spec::resolution(&base), 8);
+    let s = run_ladder(&base, &[(1, 8), (2, 8), (4, 8)], (8, 8)).unwrap();
+    eprintln!("{}", s.text_table());
+    assert!(s
+        .rows
+        .windows(2)
+        .all(|w| w[1].err_w < w[0].err_w && w[1].err_zeta < w[0].err_zeta));
+    let ow: Vec<f64> = s.rows.iter().filter_map(|r| r.order_w).collect();
+    assert!(
+        ow.iter().all(|&o| (0.6..1.6).contains(&o)),
+        "w orders {ow:?}"
+    );
+
+    // The study document names refine levels; h is refused for a given mesh.
+    let doc = json!({"scene": "plate-with-hole", "refine": [0, 1], "k": "1/8",
+                     "reference": {"refine": 2, "k": "1/8"}});
+    let (plan, _) = spec::parse(&doc, "/study").unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        (plan.levels.clone(), plan.reference),
+        (vec![(1, 8), (2, 8)], (4, 8))
+    );
+    let bad = json!({"scene": "plate-with-hole", "refine": [3], "k": "1/8",
+                     "reference": {"refine": 2, "k": "1/8"}});
+    let e = spec::parse(&bad, "/study").unwrap_err().0;
+    assert!(e.iter().any(|e| e.pointer == "/study/refine/0"), "{e:?}");
+    let h = json!({"scene": "plate-with-hole", "h": "1/4", "k": "1/8",
+                   "reference": {"h": "1/8", "k": "1/8"}});
+    let e = spec::parse(&h, "/study").unwrap_err().0;
+    assert!(
+        e.iter().any(|e| e.message.contains("give refine, not h")),
+        "{e:?}"
+    );
+}
+
+#[test]
+fn the_error_estimate_of_a_given_mesh_uses_one_refinement_less() {
+    // k = 1/32, so that the (4h, 4k) run's k = 1/8 stays far from k = 1/2 (kμ/η = 1).
+    let mut doc = presets::get("plate-with-hole").unwrap();
+    doc["error_estimate"] = json!(true);
+    let e = scene::validate(&doc).unwrap_err().0;
+    assert!(
+        e.iter()
+            .any(|e| e.pointer == "/error_estimate" && e.message.contains("refine ≥ 1")),
+        "{e:?}"
+    );
+    doc["mesh"]["refine"] = json!(2);
+    let p = scene::validate(&doc).unwrap();
+    let out = contact_core::run::run(p, Default::default(), |_, _| {
+        std::ops::ControlFlow::Continue(())
+    })
+    .unwrap();
+    let est = out.error_estimate.expect("an estimate");
+    let last = est.final_.expect("at T");
+    // The (2h, 2k) difference is a relative error of a few percent, and the (4h, 4k) run
+    // gives an observed order near 1.
+    let w = last.w.unwrap();
+    assert!(w > 1e-4 && w < 0.5, "{w}");
+    let o = last.observed_order_w.unwrap();
+    assert!((0.5..2.0).contains(&o), "{o}");
+}
+
+#[test]
+fn the_given_mesh_presets_slip_in_part_and_keep_the_invariants() {
+    for name in ["plate-with-hole", "l-bracket"] {
+        let mut doc = presets::get(name).unwrap();
+        doc["time"]["k"] = json!("1/8");
+        let p = scene::validate(&doc).unwrap();
+        let mut most = 0;
+        let sim = run_checked(p, |sim, r| {
+            invariants::check_step(sim, r).unwrap_or_else(|e| panic!("{name}: {e}"));
+            most = most.max(r.slip_nodes);
+        });
+        let contact = sim.dofs.n_contact();
+        assert!(
+            most > 0 && most < contact,
+            "{name}: {most} of {contact} Γ3 nodes slip"
+        );
+    }
+}

@@ -14,9 +14,12 @@ pub fn prolongate(
     comps: usize,
     fine: &Mesh,
 ) -> Option<Vec<f64>> {
-    if let Some(nest) = &fine.nesting {
-        return (nest.coarse_nodes == coarse.n_nodes())
-            .then(|| refined(nest, coarse_values, comps));
+    if let Some(levels) = refinements(coarse, fine) {
+        let mut v = coarse_values.to_vec();
+        for nest in levels {
+            v = refined(nest, &v, comps);
+        }
+        return Some(v);
     }
     let (coarse, fine) = nested_grids(coarse, fine)?;
     let (rx, ry) = (fine.nx / coarse.nx, fine.ny / coarse.ny);
@@ -65,6 +68,25 @@ fn nested_grids(coarse: &Mesh, fine: &Mesh) -> Option<(Grid, Grid)> {
     nested.then_some((c, f))
 }
 
+/// The red refinements that lead from `coarse` to `fine`, when `fine` was made from
+/// `coarse` by refining (the same mesh as given, refined fewer times).
+fn refinements<'a>(coarse: &Mesh, fine: &'a Mesh) -> Option<&'a [Nesting]> {
+    let (lc, lf) = (coarse.nesting.len(), fine.nesting.len());
+    if coarse.grid.is_some() || fine.grid.is_some() || lf < lc {
+        return None;
+    }
+    let same_start =
+        coarse.nesting.iter().zip(&fine.nesting).all(|(a, b)| {
+            a.coarse_nodes == b.coarse_nodes && a.midpoints.len() == b.midpoints.len()
+        });
+    let next_is_coarse = match fine.nesting.get(lc) {
+        Some(n) => n.coarse_nodes == coarse.n_nodes(),
+        None => fine.n_nodes() == coarse.n_nodes(),
+    };
+    (same_start && next_is_coarse && fine.n_cells() == coarse.n_cells() << (2 * (lf - lc)))
+        .then(|| &fine.nesting[lc..])
+}
+
 /// A red refinement's nodal values: coarse nodes keep theirs, midpoints take the mean.
 fn refined(nest: &Nesting, coarse_values: &[f64], comps: usize) -> Vec<f64> {
     let mut out = coarse_values[..nest.coarse_nodes * comps].to_vec();
@@ -81,10 +103,9 @@ fn refined(nest: &Nesting, coarse_values: &[f64], comps: usize) -> Vec<f64> {
 /// of a coarse P1 field is the coarse field itself, so ε(I v)|_T = ε(v)|_parent(T): strain
 /// errors need no interpolation at all.
 pub fn parent_triangles(coarse_mesh: &Mesh, fine_mesh: &Mesh) -> Option<Vec<u32>> {
-    if let Some(nest) = &fine_mesh.nesting {
-        return (nest.coarse_nodes == coarse_mesh.n_nodes()
-            && fine_mesh.n_cells() == 4 * coarse_mesh.n_cells())
-        .then(|| (0..fine_mesh.n_cells()).map(|t| (t / 4) as u32).collect());
+    if let Some(levels) = refinements(coarse_mesh, fine_mesh) {
+        let per = 4usize.pow(levels.len() as u32);
+        return Some((0..fine_mesh.n_cells()).map(|t| (t / per) as u32).collect());
     }
     let (coarse, fine) = nested_grids(coarse_mesh, fine_mesh)?;
     let (rx, ry) = (fine.nx / coarse.nx, fine.ny / coarse.ny);

@@ -76,7 +76,7 @@ pub struct Group {
     pub facets: Vec<usize>,
 }
 
-/// How a red refinement relates to its coarse mesh: the first `coarse_nodes` nodes are the
+/// How one red refinement relates to its coarse mesh: the first `coarse_nodes` nodes are the
 /// coarse nodes, node `coarse_nodes + k` is the midpoint of coarse edge `midpoints[k]`, and
 /// the children of coarse cell c are cells 2^D·c .. 2^D·c + 2^D − 1.
 #[derive(Debug, Clone, PartialEq)]
@@ -95,8 +95,9 @@ pub struct Mesh<const D: usize = 2> {
     pub groups: Vec<Group>,
     /// Set for the structured rectangle.
     pub grid: Option<Grid>,
-    /// Set for a red refinement of another mesh.
-    pub nesting: Option<Nesting>,
+    /// One entry per red refinement that made this mesh from the mesh as given, coarsest
+    /// first (empty for a mesh as given).
+    pub nesting: Vec<Nesting>,
 }
 
 impl<const D: usize> Mesh<D> {
@@ -161,7 +162,7 @@ impl<const D: usize> Mesh<D> {
         cells: Vec<usize>,
         facets: Vec<Facet<D>>,
         groups: Vec<Group>,
-        nesting: Option<Nesting>,
+        nesting: Vec<Nesting>,
     ) -> Mesh<D> {
         debug_assert_eq!(cells.len() % (D + 1), 0);
         Mesh {
@@ -296,7 +297,7 @@ impl Mesh<2> {
                 ny,
                 pattern,
             }),
-            nesting: None,
+            nesting: Vec::new(),
         }
     }
 

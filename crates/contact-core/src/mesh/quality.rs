@@ -229,7 +229,13 @@ pub fn build<const D: usize>(
             part: None,
         });
     }
-    Ok(Mesh::from_parts(nodes, cells, facets, Vec::new(), None))
+    Ok(Mesh::from_parts(
+        nodes,
+        cells,
+        facets,
+        Vec::new(),
+        Vec::new(),
+    ))
 }
 
 /// Quality figures of a mesh, for its summary.

@@ -119,14 +119,10 @@ pub fn red<const D: usize>(coarse: &Mesh<D>) -> Mesh<D> {
                 .collect(),
         })
         .collect();
-    Mesh::from_parts(
-        nodes,
-        cells,
-        facets,
-        groups,
-        Some(Nesting {
-            coarse_nodes: n0,
-            midpoints,
-        }),
-    )
+    let mut nesting = coarse.nesting.clone();
+    nesting.push(Nesting {
+        coarse_nodes: n0,
+        midpoints,
+    });
+    Mesh::from_parts(nodes, cells, facets, groups, nesting)
 }

@@ -161,7 +161,8 @@ fn red_refinement_is_nested_and_keeps_tags() {
         .map(|e| e.measure)
         .sum();
     assert!((tagged - 2.0).abs() < 1e-14);
-    let nest = f.nesting.as_ref().unwrap();
+    assert_eq!(f.nesting.len(), 2);
+    let nest = f.nesting.last().unwrap();
     for (k, &[a, b]) in nest.midpoints.iter().enumerate() {
         let (p, q, r) = (f.nodes[a], f.nodes[b], f.nodes[nest.coarse_nodes + k]);
         assert!((0..2).all(|c| r[c] == 0.5 * (p[c] + q[c])));

@@ -55,6 +55,14 @@ const PRESETS: &[Preset] = &[
                       on the outer arc; g = 1; k = 1/32.",
         build: arch_on_support,
     },
+    Preset {
+        name: "l-bracket",
+        description: "An L-shaped bracket (2×1 with the upper right quarter 1×0.5 cut away) \
+                      given as a polygon and meshed in-process at h = 1/16: clamped on x = 0, \
+                      frictional contact (g = 0.3, part of Γ3 slips) on y = 0, pressed by f2 = (−0.5, −1) on the \
+                      step y = 0.5, x ≥ 1; parts selected by formulas; k = 1/32.",
+        build: l_bracket,
+    },
 ];
 
 /// The meshes the presets import, bundled into the binary (generated once with gmsh by
@@ -84,6 +92,7 @@ pub fn names() -> &'static [&'static str] {
         "paper-convergence",
         "plate-with-hole",
         "arch-on-support",
+        "l-bracket",
     ];
     NAMES
 }
@@ -238,7 +247,7 @@ fn plate_with_hole() -> Value {
             json!({"type": "contact", "group": "contact"}),
             json!({"type": "traction", "group": "traction", "f2": [-1, -1]}),
         ],
-        1.0,
+        0.5,
     )
 }
 
@@ -253,6 +262,24 @@ fn arch_on_support() -> Value {
         ],
         1.0,
     )
+}
+
+fn l_bracket() -> Value {
+    let mut doc = paper_scene(
+        "l-bracket",
+        (1.0, 1.0),
+        "1/32",
+        vec![
+            json!({"type": "clamped", "on": "x"}),
+            json!({"type": "contact", "on": "y"}),
+            json!({"type": "traction", "on": "y - 0.5", "where": "x - 1", "f2": [-0.5, -1]}),
+        ],
+        [0.0, 0.0],
+    );
+    doc["domain"] = json!({"polygon": [[0, 0], [2, 0], [2, 0.5], [1, 0.5], [1, 1], [0, 1]]});
+    doc["mesh"] = json!({"h": "1/16", "refine": 0});
+    doc["friction"] = json!({"law": "tresca", "g": 0.3});
+    doc
 }
 
 #[cfg(test)]
@@ -284,7 +311,12 @@ mod tests {
             let p = validate(&doc).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(p.name, *name);
             assert_eq!(p.t_end, 1.0);
-            let g = if p.body.is_some() { 1.0 } else { 20.0 };
+            let g = match *name {
+                "plate-with-hole" => 0.5,
+                "arch-on-support" => 1.0,
+                "l-bracket" => 0.3,
+                _ => 20.0,
+            };
             assert_eq!(p.friction, FrictionLaw::Tresca { g });
             assert!(p.damage.is_some());
             assert!(p.u0.is_zero());

@@ -26,8 +26,7 @@ pub struct Work {
 impl Work {
     /// Relative cost used to schedule the largest runs first: nodes × steps.
     pub fn cost(&self) -> usize {
-        let (nx, ny) = self.problem.cells();
-        (nx + 1) * (ny + 1) * self.problem.steps
+        self.problem.n_nodes() * self.problem.steps
     }
 }
 

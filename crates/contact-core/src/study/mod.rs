@@ -250,9 +250,18 @@ fn check_nested(plan: &Plan) -> Result<(), StudyError> {
     Ok(())
 }
 
+/// The problem at one level: n cells per unit length on a rectangle; on a given mesh,
+/// n = 2^refine ([`spec::resolution`]).
 fn with(base: &Problem, (n, steps): (usize, usize)) -> Problem {
+    let body = base.body.as_ref().map(|b| {
+        std::sync::Arc::new(crate::problem::Body {
+            refine: n.trailing_zeros() as usize,
+            ..(**b).clone()
+        })
+    });
     Problem {
-        cells_per_unit: n,
+        body,
+        cells_per_unit: if base.body.is_some() { 0 } else { n },
         steps,
         ..base.clone()
     }
@@ -267,9 +276,16 @@ fn compared_steps(plan: &Plan) -> BTreeSet<usize> {
         let ratio = ref_steps / steps.max(1);
         all.extend((1..=steps).map(|m| m * ratio));
     }
-    let (nx, ny) = with(&plan.base, (ref_n, ref_steps)).cells();
-    // ζ per node and three strain components per triangle (see reference::Reference).
-    let per_snapshot = ((nx + 1) * (ny + 1) + 2 * nx * ny * 3) * 8;
+    // ζ per node and three strain components per triangle (see reference::Reference); a
+    // given mesh has about two triangles per node.
+    let reference = with(&plan.base, (ref_n, ref_steps));
+    let per_snapshot = match &reference.body {
+        None => {
+            let (nx, ny) = reference.cells();
+            ((nx + 1) * (ny + 1) + 2 * nx * ny * 3) * 8
+        }
+        Some(_) => 7 * reference.n_nodes() * 8,
+    };
     let fit = (SNAPSHOT_BUDGET_BYTES / per_snapshot.max(1)).max(1);
     if all.len() <= fit {
         return all;

@@ -46,7 +46,17 @@ pub struct Plan {
     pub reference_key: String,
 }
 
-const FIELDS: &[&str] = &["name", "scene", "h", "k", "reference", "preset"];
+const FIELDS: &[&str] = &["name", "scene", "h", "refine", "k", "reference", "preset"];
+
+/// A level's spatial resolution as one number: n = round(1/h) on a rectangle, and on a given
+/// mesh n = 2^refine (so that "nested" is "n divides the reference's n" in both cases, and
+/// the tables' h = 1/n is the mesh size relative to the mesh as given).
+pub fn resolution(p: &Problem) -> usize {
+    match &p.body {
+        Some(b) => 1 << b.refine,
+        None => p.cells_per_unit,
+    }
+}
 
 /// Reads the study object `doc`, located at JSON pointer `at` in the request (errors are
 /// reported there). Returns the plan and the expanded document (presets resolved), which is
@@ -142,7 +152,19 @@ pub fn parse(doc: &Value, at: &str) -> Result<(Plan, Value), ValidationErrors> {
             Some(v) => Ok((vec![v.clone()], false)),
         }
     };
-    let (hs, h_list) = list("h")?;
+    // A given mesh is refined by `refine` (whole numbers), a rectangle by `h`.
+    if obj.contains_key("h") && obj.contains_key("refine") {
+        return Err(err(
+            "/refine",
+            "give h (a rectangle) or refine (an imported or polygon mesh), not both".into(),
+        ));
+    }
+    let hkey = if obj.contains_key("refine") {
+        "refine"
+    } else {
+        "h"
+    };
+    let (hs, h_list) = list(hkey)?;
     let (ks, k_list) = list("k")?;
     if hs.len() > 1 && ks.len() > 1 && hs.len() != ks.len() {
         return Err(err(
@@ -164,15 +186,18 @@ pub fn parse(doc: &Value, at: &str) -> Result<(Plan, Value), ValidationErrors> {
         .and_then(Value::as_object)
         .ok_or_else(|| err("/reference", "missing: reference {\"h\": ..., \"k\": ...} (the finest run, taken as the true solution)".into()))?;
     for key in reference.keys() {
-        if key != "h" && key != "k" {
+        if key != hkey && key != "k" {
             return Err(err(
                 &format!("/reference/{key}"),
-                format!("unknown field {key:?} (allowed: h, k)"),
+                format!("unknown field {key:?} (allowed: {hkey}, k)"),
             ));
         }
     }
-    let (Some(ref_h), Some(ref_k)) = (reference.get("h"), reference.get("k")) else {
-        return Err(err("/reference", "the reference needs both h and k".into()));
+    let (Some(ref_h), Some(ref_k)) = (reference.get(hkey), reference.get("k")) else {
+        return Err(err(
+            "/reference",
+            format!("the reference needs both {hkey} and k"),
+        ));
     };
 
     // Every level is the scene with (h, k) overridden, validated as a scene, so each value
@@ -184,17 +209,25 @@ pub fn parse(doc: &Value, at: &str) -> Result<(Plan, Value), ValidationErrors> {
         apply_overrides(
             &mut d,
             &Overrides {
-                h: Some(h.clone()),
+                h: (hkey == "h").then(|| h.clone()),
                 k: Some(k.clone()),
                 t_end: None,
             },
         );
+        if hkey == "refine" {
+            if let Some(o) = d.as_object_mut() {
+                let mesh = o.entry("mesh").or_insert_with(|| json!({}));
+                if let Some(m) = mesh.as_object_mut() {
+                    m.insert("refine".into(), h.clone());
+                }
+            }
+        }
         match scene::validate(&d) {
             Ok(p) => Some(p),
             Err(ValidationErrors(es)) => {
                 for e in es {
                     let pointer = match e.pointer.as_str() {
-                        "/mesh/h" => h_ptr.clone(),
+                        "/mesh/h" | "/mesh/refine" => h_ptr.clone(),
                         "/time/k" | "/time/N" => k_ptr.clone(),
                         p => format!("{at_scene}{p}"),
                     };
@@ -227,9 +260,9 @@ pub fn parse(doc: &Value, at: &str) -> Result<(Plan, Value), ValidationErrors> {
     let mut levels = Vec::with_capacity(n_levels);
     for i in 0..n_levels {
         let (h, k) = (&hs[i.min(hs.len() - 1)], &ks[i.min(ks.len() - 1)]);
-        let (hp, kp) = (ptr("h", h_list, i), ptr("k", k_list, i));
+        let (hp, kp) = (ptr(hkey, h_list, i), ptr("k", k_list, i));
         if let Some(p) = resolve(h, k, hp.clone(), kp.clone()) {
-            levels.push((p.cells_per_unit, p.steps, hp, kp));
+            levels.push((resolution(&p), p.steps, hp, kp));
         }
     }
     let Some(base) = base.filter(|_| errors.is_empty()) else {
@@ -241,14 +274,22 @@ pub fn parse(doc: &Value, at: &str) -> Result<(Plan, Value), ValidationErrors> {
             "the cross pattern's meshes are not nested (its cell-centre nodes are not nodes of the finer mesh); use diagonal or anti_diagonal".into(),
         ));
     }
-    let (ref_n, ref_steps) = (base.cells_per_unit, base.steps);
+    let (ref_n, ref_steps) = (resolution(&base), base.steps);
     for (n, steps, hp, kp) in &levels {
         if ref_n % n != 0 {
             errors.push(FieldError {
                 pointer: hp.clone(),
-                message: format!(
-                    "h = 1/{n} is not nested in the reference h = 1/{ref_n}: the reference mesh must refine it (1/h must divide {ref_n})"
-                ),
+                message: if base.body.is_some() {
+                    format!(
+                        "refine = {} is finer than the reference's refine = {}: the reference mesh must refine every level's",
+                        n.trailing_zeros(),
+                        ref_n.trailing_zeros()
+                    )
+                } else {
+                    format!(
+                        "h = 1/{n} is not nested in the reference h = 1/{ref_n}: the reference mesh must refine it (1/h must divide {ref_n})"
+                    )
+                },
             });
         }
         if ref_steps % steps != 0 {
@@ -292,9 +333,9 @@ pub fn parse(doc: &Value, at: &str) -> Result<(Plan, Value), ValidationErrors> {
         expanded.insert("name".into(), json!(n));
     }
     expanded.insert("scene".into(), scene_doc);
-    expanded.insert("h".into(), obj["h"].clone());
+    expanded.insert(hkey.into(), obj[hkey].clone());
     expanded.insert("k".into(), obj["k"].clone());
-    expanded.insert("reference".into(), json!({"h": ref_h, "k": ref_k}));
+    expanded.insert("reference".into(), json!({hkey: ref_h, "k": ref_k}));
     let plan = Plan {
         name: name.unwrap_or_else(|| format!("study of {}", base.name)),
         levels: levels.iter().map(|l| (l.0, l.1)).collect(),
