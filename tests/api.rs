@@ -125,6 +125,28 @@ fn whole_lifecycle_over_http() {
     assert!(f0.get("contact").is_none(), "no contact state at t = 0");
     let with_mesh = get(a, &format!("/jobs/{id}/fields?step=last&mesh=1")).json();
     assert_eq!(with_mesh["mesh"]["nodes"].as_array().unwrap().len(), nodes);
+    // The boundary parts' kinds, in the scene's order, for colouring the boundary by kind.
+    let parts: Vec<&str> = with_mesh["mesh"]["parts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["type"].as_str().unwrap())
+        .collect();
+    let exp2 = contact_core::scene::presets::get("paper-exp2").unwrap();
+    let kinds: Vec<&str> = exp2["boundary"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b["type"].as_str().unwrap())
+        .collect();
+    assert_eq!(parts, kinds);
+    for e in with_mesh["mesh"]["boundary_edges"].as_array().unwrap() {
+        assert!(e[1].is_null() || e[1].as_u64().unwrap() < parts.len() as u64);
+    }
+    assert_eq!(
+        get(a, &format!("/jobs/{id}/mesh")).json()["parts"],
+        with_mesh["mesh"]["parts"]
+    );
     assert_problem(&get(a, &format!("/jobs/{id}/fields?step=99")), 404);
     assert_problem(&get(a, &format!("/jobs/{id}/fields?fields=pressure")), 400);
 

@@ -15,7 +15,10 @@ export class ApiProblem extends Error {
 
 async function request(method, path, body) {
   const init = { method, headers: { Accept: 'application/json' } };
-  if (body !== undefined) {
+  if (body instanceof ArrayBuffer || ArrayBuffer.isView(body) || body instanceof Blob) {
+    init.headers['Content-Type'] = 'application/octet-stream';
+    init.body = body;
+  } else if (body !== undefined) {
     init.headers['Content-Type'] = 'application/json';
     init.body = typeof body === 'string' ? body : JSON.stringify(body);
   }
@@ -55,6 +58,13 @@ export const summary = (id) => getJson(`/jobs/${id}/summary`);
 export const submit = async (body) => (await request('POST', '/jobs', body)).body;
 export const cancel = async (id) => (await request('POST', `/jobs/${id}/cancel`)).body;
 export const remove = async (id) => request('DELETE', `/jobs/${id}`);
+
+/**
+ * Uploads a gmsh .msh file (its bytes): {status: 201 (new) or 200 (the same bytes were
+ * uploaded before), body: {id, ..., summary figures}}. A file the server refuses is an
+ * ApiProblem with the server's detail.
+ */
+export const uploadMesh = (bytes) => request('POST', '/meshes', bytes);
 
 /**
  * Fields of one stored step. Only what the viewer draws is asked for (sigma, three numbers

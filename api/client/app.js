@@ -1,4 +1,5 @@
-// Entry point: wires the preset form, the scene editor, the job list and the result views.
+// Entry point: wires the preset form, the mesh upload, the scene editor, the job list and
+// the result views.
 //
 // Two ways to submit, matching POST /jobs: {preset, overrides} from the form (errors point
 // at /preset or /overrides/..., shown under those inputs), or a whole scene from the editor
@@ -10,6 +11,7 @@ import { SceneEditor } from './editor.js';
 import { JobList, isFinished } from './jobs.js';
 import { SimulationView } from './viewer.js';
 import { StudyView } from './study.js';
+import { MeshUpload } from './meshes.js';
 
 const presetSelect = $('#preset-select');
 const presetDesc = $('#preset-desc');
@@ -151,22 +153,28 @@ $('#preset-form').addEventListener('submit', (ev) => {
   submit({ preset: presetSelect.value, ...(Object.keys(o).length ? { overrides: o } : {}) }, false);
 });
 
+/** The selected preset's document with the form's h (unless `withH` is false), k and T. */
+async function presetDoc(withH = true) {
+  const doc = await api.preset(presetSelect.value);
+  const o = overrides();
+  if (o.h !== undefined && withH) (doc.mesh ??= {}).h = o.h;
+  if (o.k !== undefined) {
+    doc.time ??= {};
+    delete doc.time.N;
+    doc.time.k = o.k;
+  }
+  if (o.t_end !== undefined) {
+    doc.time ??= {};
+    delete doc.time.T;
+    doc.time.t_end = o.t_end;
+  }
+  return doc;
+}
+
 /** Loads the selected preset into the editor, with the form's h, k, T written into it. */
 async function loadPresetIntoEditor(open) {
   try {
-    const doc = await api.preset(presetSelect.value);
-    const o = overrides();
-    if (o.h !== undefined) (doc.mesh ??= {}).h = o.h;
-    if (o.k !== undefined) {
-      doc.time ??= {};
-      delete doc.time.N;
-      doc.time.k = o.k;
-    }
-    if (o.t_end !== undefined) {
-      doc.time ??= {};
-      delete doc.time.T;
-      doc.time.t_end = o.t_end;
-    }
+    const doc = await presetDoc();
     editor.text = JSON.stringify(doc, null, 2);
     if (open) {
       $('#scene-panel').open = true;
@@ -205,6 +213,18 @@ $('#format-scene').addEventListener('click', () => {
     editor.text = JSON.stringify(doc, null, 2);
     editor.showErrors(errors); // the notes follow their keys to the new lines
   }
+});
+
+// A scene on an uploaded mesh starts from the selected preset (an imported mesh has no h).
+new MeshUpload($('#mesh-upload'), {
+  baseScene: async () => ({ doc: await presetDoc(false), name: presetSelect.value }),
+  onScene: (doc) => {
+    if (editor.edited && !confirm('Replace the edited scene with the scene on the uploaded mesh?')) return false;
+    editor.text = JSON.stringify(doc, null, 2);
+    $('#scene-panel').open = true;
+    $('#scene-panel').scrollIntoView({ block: 'nearest' });
+    return true;
+  },
 });
 
 presetSelect.addEventListener('change', () => {

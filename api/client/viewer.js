@@ -1,7 +1,8 @@
-// The result view of a finished simulation: the deformed mesh coloured by a field, the
-// contact boundary with its stick/slip state, a time slider with play, norms over time,
-// and download links. Data (all from the real endpoints):
-//   GET /jobs/{id}/fields?step=N&mesh=1  -> {job, mesh: {nodes, triangles, boundary_edges},
+// The result view of a finished simulation: the deformed mesh (any triangle mesh) coloured
+// by a field, the boundary by the kind of its parts and Γ3 by its stick/slip state, zoom
+// (wheel, buttons) and pan (drag), the value under the pointer, a time slider with play,
+// norms over time, and download links. Data (all from the real endpoints):
+//   GET /jobs/{id}/fields?step=N&mesh=1  -> {job, mesh: {nodes, triangles, boundary_edges, parts},
 //        n, t, u: [ux0, uy0, ...], w: [...], zeta: [...], von_mises: [per triangle],
 //        contact: [{node, slip_velocity, friction_traction, bound, slipping}]}
 //   GET /jobs/{id}/summary -> {mesh, time, final, stats, steps: [{n, t, w_V, u_V, zeta_L2, zeta_min, ...}], ...}
@@ -11,7 +12,7 @@
 
 import * as api from './api.js';
 import { el, fmt, fmtStep, fmtSeconds } from './util.js';
-import { drawField, STICK, SLIP } from './render.js';
+import { drawField, probe, partKinds, edgeKind, boundingBox, KINDS, STICK, SLIP } from './render.js';
 import { cssGradient, niceRange } from './colormap.js';
 import { linePlot } from './plots.js';
 
@@ -22,6 +23,8 @@ const QUANTITIES = {
 };
 const CACHE_STEPS = 400;
 const FRAME_MS = 150;
+const ZOOM_MIN = 0.5;
+const ZOOM_MAX = 500;
 
 export class SimulationView {
   constructor(root) {
@@ -51,6 +54,9 @@ export class SimulationView {
     if (this.job !== job) return; // another job was opened meanwhile
     this.mesh = first.mesh;
     delete first.mesh;
+    this.kinds = partKinds(this.mesh);
+    this.bbox = boundingBox(this.mesh.nodes);
+    this.view = { zoom: 1, panX: 0, panY: 0 };
     this.summary = summary;
     this.steps = steps.length ? steps : [{ n: first.n, t: first.t }];
     this.cache = new Map([[first.n, first]]);
@@ -67,6 +73,8 @@ export class SimulationView {
     this.token++;
     this.job = null;
     this.resizeObserver?.disconnect();
+    cancelAnimationFrame(this.pending);
+    this.frame = null;
     this.root.replaceChildren();
     delete this.root.dataset.state;
     delete this.root.dataset.step;
@@ -87,7 +95,12 @@ export class SimulationView {
       el('option', { value: 'manual' }, 'fixed'));
     this.lo = el('input', { id: 'range-lo', type: 'number', step: 'any', 'aria-label': 'colour range minimum', oninput: () => this.draw() });
     this.hi = el('input', { id: 'range-hi', type: 'number', step: 'any', 'aria-label': 'colour range maximum', oninput: () => this.draw() });
-    this.canvas = el('canvas', { id: 'mesh-canvas', role: 'img', 'aria-label': 'deformed mesh coloured by the selected field' });
+    this.canvas = el('canvas', { id: 'mesh-canvas', role: 'img', 'aria-label': 'deformed mesh coloured by the selected field; wheel or the buttons zoom, drag pans' });
+    this.probeBox = el('div', { id: 'probe', class: 'probe', 'aria-live': 'off', hidden: true });
+    const viewButtons = el('span', { class: 'view-buttons', role: 'group', 'aria-label': 'view' },
+      el('button', { id: 'zoom-out', type: 'button', class: 'small', title: 'zoom out', 'aria-label': 'zoom out', onclick: () => this.zoomBy(1 / 1.5) }, '−'),
+      el('button', { id: 'zoom-in', type: 'button', class: 'small', title: 'zoom in', 'aria-label': 'zoom in', onclick: () => this.zoomBy(1.5) }, '+'),
+      el('button', { id: 'view-reset', type: 'button', class: 'small', title: 'show the whole body', onclick: () => this.resetView() }, 'Reset view'));
     this.cbLo = el('span', { class: 'cb-lo' });
     this.cbHi = el('span', { class: 'cb-hi' });
     this.cbLabel = el('span', { class: 'cb-label' });
@@ -134,10 +147,12 @@ export class SimulationView {
         el('button', { type: 'button', class: 'small', title: 'largest displacement = 10% of the body', onclick: () => this.autoFactor() }, 'auto'),
         el('label', {}, 'Range ', this.rangeMode),
         el('span', { class: 'range-inputs' }, this.lo, '–', this.hi),
-        el('label', {}, this.edges, ' mesh lines')),
-      el('div', { class: 'canvas-wrap' }, this.canvas),
+        el('label', {}, this.edges, ' mesh lines'),
+        viewButtons),
+      el('div', { class: 'canvas-wrap' }, this.canvas, this.probeBox),
       el('div', { class: 'colorbar', id: 'colorbar' },
         this.cbLo, el('div', { class: 'bar', style: `background: ${cssGradient()}` }), this.cbHi, this.cbLabel),
+      this.boundaryLegend(),
       el('div', { class: 'legend' },
         'Γ3 contact: ', el('span', { class: 'swatch', style: `background:${STICK}` }), ' stick ',
         el('span', { class: 'swatch', style: `background:${SLIP}` }), ' slip ', this.contactInfo,
@@ -166,6 +181,138 @@ export class SimulationView {
       this.draw();
     });
     this.resizeObserver.observe(this.canvas.parentElement);
+    this.bindPointer();
+  }
+
+  /** The boundary's colours, for the kinds this mesh has. */
+  boundaryLegend() {
+    const present = new Set(this.mesh.boundary_edges.map(([, part]) => edgeKind(this.kinds, part)));
+    const order = ['clamped', 'traction', 'contact', 'free', 'other'].filter((k) => present.has(k));
+    return el('div', { class: 'legend', id: 'boundary-legend' }, 'Boundary: ',
+      order.map((k) => el('span', { class: 'kind', dataset: { kind: k } },
+        el('span', { class: 'line-swatch', style: `background:${KINDS[k].colour}; height:${KINDS[k].width}px` }), ` ${KINDS[k].label} `)));
+  }
+
+  // ---- zoom, pan and the value under the pointer --------------------------------------
+
+  bindPointer() {
+    const c = this.canvas;
+    const at = (ev) => {
+      // The drawing's origin is the canvas's content box, inside its border.
+      const r = c.getBoundingClientRect();
+      return [ev.clientX - r.left - c.clientLeft, ev.clientY - r.top - c.clientTop];
+    };
+    c.addEventListener('wheel', (ev) => {
+      ev.preventDefault();
+      // Lines (mouse wheels) and pixels (touchpads) alike: ~1.2× per wheel notch.
+      const dy = ev.deltaMode === 1 ? ev.deltaY * 33 : ev.deltaMode === 2 ? ev.deltaY * 400 : ev.deltaY;
+      this.zoomBy(Math.exp(-dy * 0.0018), ...at(ev));
+    }, { passive: false });
+    let drag = null;
+    c.addEventListener('pointerdown', (ev) => {
+      if (ev.button !== 0) return;
+      drag = { id: ev.pointerId, x: ev.clientX, y: ev.clientY, moved: false };
+      c.setPointerCapture(ev.pointerId);
+    });
+    c.addEventListener('pointermove', (ev) => {
+      if (drag && drag.id === ev.pointerId) {
+        const dx = ev.clientX - drag.x, dy = ev.clientY - drag.y;
+        if (!drag.moved && Math.hypot(dx, dy) < 3) return;
+        drag.moved = true;
+        drag.x = ev.clientX;
+        drag.y = ev.clientY;
+        const s = this.transform()?.s || 1;
+        this.view.panX -= dx / s;
+        this.view.panY += dy / s;
+        c.classList.add('panning');
+        this.showProbe(null);
+        this.scheduleDraw();
+        return;
+      }
+      this.pointer = at(ev);
+      this.showProbe(this.pointer);
+    });
+    const end = (ev) => {
+      if (drag && drag.id === ev.pointerId) drag = null;
+      c.classList.remove('panning');
+    };
+    c.addEventListener('pointerup', end);
+    c.addEventListener('pointercancel', end);
+    c.addEventListener('pointerleave', () => {
+      this.pointer = null;
+      this.showProbe(null);
+    });
+    c.addEventListener('dblclick', () => this.resetView());
+  }
+
+  /** Zooms by `factor` about CSS point (x, y) of the canvas (default: its centre). */
+  zoomBy(factor, x, y) {
+    const t = this.transform();
+    if (!t) return;
+    const zoom = Math.min(ZOOM_MAX, Math.max(ZOOM_MIN, this.view.zoom * factor));
+    const w = this.canvas.clientWidth, h = this.canvas.clientHeight;
+    x ??= w / 2;
+    y ??= h / 2;
+    // Keep the world point under (x, y) where it is.
+    const wx = (x - t.ox) / t.s, wy = (t.oy - y) / t.s;
+    const { fit } = this.frame;
+    const s = fit.s0 * zoom;
+    this.view = { zoom, panX: wx - (x - w / 2) / s - fit.cx, panY: wy + (y - h / 2) / s - fit.cy };
+    this.scheduleDraw();
+  }
+
+  /**
+   * World → CSS pixels for the current view (which may be ahead of the last drawn frame
+   * while a redraw is pending): X = ox + s x, Y = oy − s y.
+   */
+  transform() {
+    if (!this.frame) return null;
+    const { fit } = this.frame;
+    const s = fit.s0 * this.view.zoom;
+    return {
+      s,
+      ox: this.canvas.clientWidth / 2 - s * (fit.cx + this.view.panX),
+      oy: this.canvas.clientHeight / 2 + s * (fit.cy + this.view.panY),
+    };
+  }
+
+  resetView() {
+    this.view = { zoom: 1, panX: 0, panY: 0 };
+    this.draw();
+  }
+
+  /** Redraws at the next frame (many wheel or drag events make one redraw). */
+  scheduleDraw() {
+    cancelAnimationFrame(this.pending);
+    this.pending = requestAnimationFrame(() => this.draw());
+  }
+
+  /** The value of the shown field at CSS point p of the canvas, in the readout. */
+  showProbe(p) {
+    const box = this.probeBox;
+    const hit = p && this.frame ? probe(this.frame, this.mesh.triangles, p[0], p[1]) : null;
+    const vals = hit ? this.values() : null;
+    if (!hit) {
+      box.hidden = true;
+      box.textContent = '';
+      delete box.dataset.value;
+      return;
+    }
+    const [a, b, c] = this.mesh.triangles[hit.triangle];
+    const [wa, wb, wc] = hit.weights;
+    const N = this.mesh.nodes;
+    const x = wa * N[a][0] + wb * N[b][0] + wc * N[c][0];
+    const y = wa * N[a][1] + wb * N[b][1] + wc * N[c][1];
+    const q = QUANTITIES[this.quantity.value];
+    let value = null;
+    if (vals) value = vals.perCell ? vals.v[hit.triangle] : wa * vals.v[a] + wb * vals.v[b] + wc * vals.v[c];
+    box.hidden = false;
+    box.dataset.value = value === null ? '' : String(value);
+    box.dataset.triangle = String(hit.triangle);
+    box.replaceChildren(
+      el('span', { class: 'probe-value' }, `${q.label.replace(/ \(per triangle\)$/, '')} = ${value === null ? 'not stored' : fmt(value)}`),
+      el('span', { class: 'probe-where' }, `at (${fmt(x, 3)}, ${fmt(y, 3)})${vals?.perCell ? ` · triangle ${hit.triangle}` : ''}`),
+    );
   }
 
   /** Shows stored step number `idx` (index into this.steps), fetching it if needed. */
@@ -241,18 +388,21 @@ export class SimulationView {
         this.hi.value = String(Number(max.toPrecision(4)));
       }
     }
-    // Height follows the body's aspect ratio, within the window.
+    // Height follows the body's aspect ratio (its bounding box, with room for the
+    // deformation), within the window.
     const wrapW = this.canvas.parentElement.clientWidth || 600;
     const nodes = this.mesh.nodes;
-    let w = 0, h = 0;
-    for (const [x, y] of nodes) { w = Math.max(w, x); h = Math.max(h, y); }
-    const cssH = Math.round(Math.min(Math.max(wrapW * (h / (w || 1)) * 1.25 + 32, 180), window.innerHeight * 0.6));
+    const [bx0, by0, bx1, by1] = this.bbox;
+    const aspect = (by1 - by0) / (bx1 - bx0 || 1);
+    const cssH = Math.round(Math.min(Math.max(wrapW * aspect * 1.25 + 32, 180), window.innerHeight * 0.6));
     if (this.canvas.style.height !== `${cssH}px`) this.canvas.style.height = `${cssH}px`;
     const factor = Number(this.factor.value);
-    drawField(this.canvas, {
+    this.frame = drawField(this.canvas, {
       nodes,
       triangles: this.mesh.triangles,
       boundaryEdges: this.mesh.boundary_edges,
+      kinds: this.kinds,
+      view: this.view,
       disp: this.current.u || null,
       factor: Number.isFinite(factor) && factor >= 0 ? factor : 1,
       values: vals ? vals.v : new Float64Array(nodes.length),
@@ -261,6 +411,13 @@ export class SimulationView {
       contact: this.current.contact || null,
       showEdges: this.edges.checked,
     });
+    const fr = this.frame;
+    // For tests and tools: world → CSS pixels from the canvas's bounding client rectangle
+    // (X = ox + s x, Y = oy − s y, in the reference configuration).
+    const cv = this.canvas;
+    cv.dataset.view = JSON.stringify({ s: fr.s, ox: fr.ox + cv.clientLeft, oy: fr.oy + cv.clientTop, zoom: this.view.zoom });
+    this.canvas.style.touchAction = this.view.zoom > 1 ? 'none' : '';
+    if (this.pointer) this.showProbe(this.pointer);
     const q = QUANTITIES[this.quantity.value];
     this.cbLo.textContent = fmt(range[0]);
     this.cbHi.textContent = fmt(range[1]);
@@ -277,8 +434,8 @@ export class SimulationView {
     if (!u) return;
     let umax = 0;
     for (let i = 0; i < u.length; i += 2) umax = Math.max(umax, Math.hypot(u[i], u[i + 1]));
-    let size = 0;
-    for (const [x, y] of this.mesh.nodes) size = Math.max(size, x, y);
+    const [x0, y0, x1, y1] = this.bbox;
+    const size = Math.max(x1 - x0, y1 - y0);
     if (!(umax > 0)) return;
     const f = (0.1 * size) / umax;
     const p = 10 ** Math.floor(Math.log10(f));

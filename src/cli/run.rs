@@ -100,7 +100,7 @@ pub fn main(args: RunArgs) -> ExitCode {
             wrote_mesh = true;
             write(
                 dir.parent().unwrap().join("mesh.json"),
-                to_json(&MeshJson::new(&sim.mesh)),
+                to_json(&MeshJson::new(&sim.mesh, &sim.problem.boundary)),
             )?;
         }
         if sim.problem.output.stores(r.n, sim.problem.steps) {

@@ -45,6 +45,7 @@ const ASSETS: &[Asset] = &[
     asset!("colormap.js", JS),
     asset!("plots.js", JS),
     asset!("study.js", JS),
+    asset!("meshes.js", JS),
     asset!("util.js", JS),
 ];
 

@@ -250,8 +250,8 @@ pub async fn mesh(
 ) -> Result<Response, Problem> {
     let rec = simulation(&state, &id).await?;
     Ok(blocking_body("application/json", move |w| {
-        let (mesh, _) = mesh_of(&rec).map_err(|e| std::io::Error::other(e.detail))?;
-        serde_json::to_writer(w, &MeshJson::new(&mesh)).map_err(std::io::Error::other)
+        let (p, mesh) = scene_of(&rec).map_err(|e| std::io::Error::other(e.detail))?;
+        serde_json::to_writer(w, &MeshJson::new(&mesh, &p.boundary)).map_err(std::io::Error::other)
     }))
 }
 
@@ -354,18 +354,16 @@ pub async fn fields(
         f.contact = None
     }
     Ok(blocking_body("application/json", move |w| {
-        let mesh = if with_mesh {
-            Some(
-                mesh_of(&rec)
-                    .map_err(|e| std::io::Error::other(e.detail))?
-                    .0,
-            )
+        let scene = if with_mesh {
+            Some(scene_of(&rec).map_err(|e| std::io::Error::other(e.detail))?)
         } else {
             None
         };
         let doc = FieldsDoc {
             job: rec.id,
-            mesh: mesh.as_ref().map(MeshJson::new),
+            mesh: scene
+                .as_ref()
+                .map(|(p, mesh)| MeshJson::new(mesh, &p.boundary)),
             fields: &f,
         };
         serde_json::to_writer(w, &doc).map_err(std::io::Error::other)
