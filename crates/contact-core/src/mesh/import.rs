@@ -3,11 +3,9 @@
 //! physical groups of facet elements become named [`Group`]s of boundary facets, and the
 //! mesh passes [`super::quality`]. [`summarize`] is what `POST /meshes` answers.
 
-use std::collections::HashMap;
-
 use serde::Serialize;
 
-use super::quality::{figures, Figures, MeshError};
+use super::quality::{figures, Figures, IndexMap, MeshError};
 use super::{Group, Mesh};
 use crate::msh::{self, MshMesh};
 
@@ -68,7 +66,7 @@ pub fn from_msh<const D: usize>(m: &MshMesh) -> Result<Mesh<D>, MeshError> {
         .map(|p| std::array::from_fn(|c| p[c]))
         .collect();
     let mut mesh = Mesh::<D>::from_cells(nodes, m.cell_nodes.clone())?;
-    let index: HashMap<[usize; D], usize> = mesh
+    let index: IndexMap<[usize; D], usize> = mesh
         .facets
         .iter()
         .enumerate()

@@ -91,6 +91,39 @@ pub(super) fn facet_key<const D: usize>(cell: &[usize], a: usize) -> [usize; D] 
     k
 }
 
+/// A fast hasher for node-index keys (the mesh's own indices, not adversarial in cost: a
+/// hostile file can at worst make lookups slower, never wrong).
+#[derive(Default, Clone, Copy)]
+pub(crate) struct IndexHasher(u64);
+
+impl std::hash::Hasher for IndexHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        bytes.iter().for_each(|&b| self.write_u64(b as u64));
+    }
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x517c_c1b7_2722_0a95);
+    }
+    fn write_usize(&mut self, x: usize) {
+        self.write_u64(x as u64);
+    }
+}
+
+/// A hash map keyed by node indices.
+pub(crate) type IndexMap<K, V> = HashMap<K, V, std::hash::BuildHasherDefault<IndexHasher>>;
+
+/// What the face map keeps per face: how many cells have it, the first cell and its local
+/// vertex opposite the face, and the second cell.
+#[derive(Clone, Copy)]
+struct Face {
+    count: u8,
+    cell: u32,
+    opposite: u8,
+    other: u32,
+}
+
 /// Checks the cells (see the module doc) and builds the mesh with its boundary facets.
 pub fn build<const D: usize>(
     nodes: Vec<[f64; D]>,
@@ -99,6 +132,13 @@ pub fn build<const D: usize>(
     let nc = cells.len() / (D + 1);
     if nc == 0 {
         return Err(MeshError::Empty);
+    }
+    if nc >= u32::MAX as usize {
+        return Err(MeshError::TooLarge {
+            what: "cells",
+            count: nc,
+            max: u32::MAX as usize - 1,
+        });
     }
     if let Some(node) = nodes.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
         return Err(MeshError::NotFinite { node });
@@ -117,15 +157,19 @@ pub fn build<const D: usize>(
                 return Err(MeshError::RepeatedNode { cell: e, node: v });
             }
         }
-        let p: Vec<[f64; D]> = cell.iter().map(|&v| nodes[v]).collect();
-        let measure = signed_measure(&p);
+        let mut p = [[0.0; D]; 4];
+        for (slot, &v) in p.iter_mut().zip(cell) {
+            *slot = nodes[v];
+        }
+        let measure = signed_measure(&p[..=D]);
         let mut edge: f64 = 0.0;
         for a in 0..=D {
             for b in a + 1..=D {
                 let l2: f64 = (0..D).map(|c| (p[a][c] - p[b][c]).powi(2)).sum();
-                edge = edge.max(l2.sqrt());
+                edge = edge.max(l2);
             }
         }
+        let edge = edge.sqrt();
         if measure
             .abs()
             .partial_cmp(&(DEGENERATE * edge.powi(D as i32)))
@@ -144,33 +188,55 @@ pub fn build<const D: usize>(
         }
     }
 
-    // Faces: key → (count, first cell, local vertex opposite).
-    let mut faces: HashMap<[usize; D], (u8, usize, usize)> = HashMap::with_capacity(nc * (D + 1));
-    let mut order: Vec<[usize; D]> = Vec::with_capacity(nc * (D + 1));
-    let mut cell_keys: HashMap<Vec<usize>, usize> = HashMap::with_capacity(nc);
-    for (e, cell) in cells.chunks_exact(D + 1).enumerate() {
-        let mut sorted = cell.to_vec();
-        sorted.sort_unstable();
-        if let Some(&first) = cell_keys.get(&sorted) {
-            return Err(MeshError::DuplicateCell { cell: e, first });
+    // Duplicate cells: sort the cells by their sorted vertex sets and compare neighbours.
+    let mut sorted = cells.clone();
+    sorted
+        .chunks_exact_mut(D + 1)
+        .for_each(|c| c.sort_unstable());
+    let key = |e: usize| &sorted[(D + 1) * e..(D + 1) * (e + 1)];
+    let mut order: Vec<u32> = (0..nc as u32).collect();
+    order.sort_unstable_by(|&a, &b| key(a as usize).cmp(key(b as usize)).then(a.cmp(&b)));
+    let mut first_duplicate: Option<(usize, usize)> = None;
+    for w in order.windows(2) {
+        let (a, b) = (w[0] as usize, w[1] as usize);
+        if key(a) == key(b) && first_duplicate.is_none_or(|(cell, _)| b < cell) {
+            first_duplicate = Some((b, a));
         }
-        cell_keys.insert(sorted, e);
+    }
+    drop((order, sorted));
+    if let Some((cell, first)) = first_duplicate {
+        return Err(MeshError::DuplicateCell { cell, first });
+    }
+
+    // Faces in order of first appearance, with the cells that share them.
+    let mut faces: IndexMap<[usize; D], Face> =
+        IndexMap::with_capacity_and_hasher(nc * (D + 1) / 2 + 16, Default::default());
+    let mut seen_order: Vec<[usize; D]> = Vec::with_capacity(nc + nc / 2);
+    for (e, cell) in cells.chunks_exact(D + 1).enumerate() {
         for a in (0..=D).rev() {
             let key = facet_key::<D>(cell, a);
-            let entry = faces.entry(key).or_insert_with(|| {
-                order.push(key);
-                (0, e, a)
+            let face = faces.entry(key).or_insert_with(|| {
+                seen_order.push(key);
+                Face {
+                    count: 0,
+                    cell: e as u32,
+                    opposite: a as u8,
+                    other: u32::MAX,
+                }
             });
-            entry.0 += 1;
-            if entry.0 > 2 {
-                return Err(MeshError::NonManifold {
-                    nodes: key.to_vec(),
-                    cell: e,
-                });
+            face.count += 1;
+            match face.count {
+                2 => face.other = e as u32,
+                3.. => {
+                    return Err(MeshError::NonManifold {
+                        nodes: key.to_vec(),
+                        cell: e,
+                    })
+                }
+                _ => {}
             }
         }
     }
-    drop(cell_keys);
 
     let mut used = vec![false; nodes.len()];
     cells.iter().for_each(|&v| used[v] = true);
@@ -179,38 +245,32 @@ pub fn build<const D: usize>(
     }
 
     // Connectivity: union of the two cells of every interior face.
-    let mut parent: Vec<usize> = (0..nc).collect();
-    fn root(parent: &mut [usize], mut i: usize) -> usize {
-        while parent[i] != i {
-            parent[i] = parent[parent[i]];
-            i = parent[i];
+    let mut parent: Vec<u32> = (0..nc as u32).collect();
+    fn root(parent: &mut [u32], mut i: u32) -> u32 {
+        while parent[i as usize] != i {
+            parent[i as usize] = parent[parent[i as usize] as usize];
+            i = parent[i as usize];
         }
         i
     }
-    let mut seen: HashMap<[usize; D], usize> = HashMap::with_capacity(nc * (D + 1) / 2);
-    for (e, cell) in cells.chunks_exact(D + 1).enumerate() {
-        for a in 0..=D {
-            let key = facet_key::<D>(cell, a);
-            if let Some(&other) = seen.get(&key) {
-                let (ra, rb) = (root(&mut parent, e), root(&mut parent, other));
-                parent[ra.max(rb)] = ra.min(rb);
-            } else {
-                seen.insert(key, e);
-            }
-        }
+    for face in faces.values().filter(|f| f.count == 2) {
+        let (ra, rb) = (root(&mut parent, face.cell), root(&mut parent, face.other));
+        parent[ra.max(rb) as usize] = ra.min(rb);
     }
-    drop(seen);
     let r0 = root(&mut parent, 0);
-    if let Some(cell) = (1..nc).find(|&e| root(&mut parent, e) != r0) {
-        return Err(MeshError::Disconnected { cell });
+    if let Some(cell) = (1..nc as u32).find(|&e| root(&mut parent, e) != r0) {
+        return Err(MeshError::Disconnected {
+            cell: cell as usize,
+        });
     }
 
     let mut facets = Vec::new();
-    for key in order {
-        let (count, e, a) = faces[&key];
-        if count != 1 {
+    for key in seen_order {
+        let face = faces[&key];
+        if face.count != 1 {
             continue;
         }
+        let (e, a) = (face.cell as usize, face.opposite as usize);
         let cell = &cells[(D + 1) * e..(D + 1) * (e + 1)];
         let mut f = [0; D];
         for (slot, v) in f.iter_mut().zip(

@@ -16,8 +16,7 @@
 
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
-use std::collections::HashMap;
-
+use super::quality::IndexMap;
 use super::{Facet, Group, Mesh, Nesting};
 
 /// The local edges of a simplex, in numbering order.
@@ -54,7 +53,8 @@ pub fn red<const D: usize>(coarse: &Mesh<D>) -> Mesh<D> {
     let n0 = coarse.n_nodes();
     let mut nodes = coarse.nodes.clone();
     let mut midpoints: Vec<[usize; 2]> = Vec::new();
-    let mut index: HashMap<[usize; 2], usize> = HashMap::with_capacity(coarse.n_cells() * 2);
+    let mut index: IndexMap<[usize; 2], usize> =
+        IndexMap::with_capacity_and_hasher(coarse.n_cells() * 2, Default::default());
     let mut mid = |a: usize, b: usize, nodes: &mut Vec<[f64; D]>| -> usize {
         let key = [a.min(b), a.max(b)];
         *index.entry(key).or_insert_with(|| {
