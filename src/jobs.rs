@@ -392,6 +392,12 @@ impl Runtime {
         cancel: &AtomicBool,
     ) -> Result<Outcome, Problem> {
         let id = job.id;
+        if let Some(mesh) = super::meshes::mesh_ref(&job.scene) {
+            // The mesh is read through the store: wait for a shared database that is
+            // restarting rather than fail the job for it.
+            self.with_store_retry(|| self.store.get_mesh(&mesh))
+                .map_err(|e| failure("cannot read the job's mesh", &e.to_string()))?;
+        }
         let problem = scene::validate_with(&job.scene, &*self.meshes)
             .map_err(|e| failure("stored scene no longer validates", &e.to_string()))?;
         let steps = problem.steps;

@@ -87,9 +87,12 @@ impl Meshes {
     /// leaves an unlisted file, replaced by the next upload of the same bytes).
     pub fn upload(&self, bytes: &[u8]) -> Result<(MeshRecord, bool), Problem> {
         if bytes.is_empty() {
-            return Err(Problem::bad_request(
+            return Err(Problem::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid mesh",
                 "the body is empty: send the bytes of a gmsh .msh file (MSH 4.1, ASCII or binary)",
-            ));
+            )
+            .with_type("/problems/invalid-mesh"));
         }
         let id = mesh_id(bytes);
         let io = |e: std::io::Error| Problem::internal(format!("mesh file {id}: {e}"));
@@ -280,7 +283,7 @@ mod tests {
             .unwrap_err();
         assert_eq!(e.status, 422);
         assert!(e.detail.contains("2.2"), "{}", e.detail);
-        assert_eq!(meshes.upload(b"").unwrap_err().status, 400);
+        assert_eq!(meshes.upload(b"").unwrap_err().status, 422);
         assert_eq!(meshes.delete(&rec.id).unwrap(), MeshDeletion::Deleted);
         let e = meshes.load(&rec.id).unwrap_err();
         assert_eq!(e, unknown_mesh(&rec.id));

@@ -518,7 +518,7 @@ fn hostile_uploads_are_refused_with_a_reason() {
     let inverted = format!("{} {} {} {}", tri[0], tri[1], tri[3], tri[2]);
     let missing = format!("{} {} {} 99999", tri[0], tri[1], tri[2]);
     let cases: Vec<(&str, Vec<u8>, u16, &[&str])> = vec![
-        ("empty body", Vec::new(), 400, &["empty"]),
+        ("empty body", Vec::new(), 422, &["empty"]),
         (
             "truncated",
             ascii.as_bytes()[..ascii.len() / 2].to_vec(),
@@ -757,6 +757,11 @@ fn jobs_on_uploaded_meshes() {
         let msg = p["errors"][0]["message"].as_str().unwrap();
         assert!(msg.starts_with(&want), "{msg}");
     }
+    // Studies do not take uploaded meshes yet: refused plainly.
+    let study = json!({"study": {"scene": plate_scene(&a_id, "s", 8), "h": "1/4", "k": ["1/4", "1/8"],
+                                 "reference": {"h": "1/4", "k": "1/16"}}});
+    let p = assert_problem(&post_json(a, "/jobs", &study), 422);
+    assert_eq!(p["errors"][0]["pointer"], "/study/scene/domain/mesh", "{p}");
     // A stored 3D mesh: scenes are 2D.
     let p = assert_problem(&post_json(a, "/jobs", &plate_scene(&c_id, "x", 8)), 422);
     assert_eq!(p["errors"][0]["pointer"], "/domain/mesh", "{p}");

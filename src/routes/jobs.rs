@@ -265,6 +265,14 @@ fn validated(doc: Value, state: &AppState) -> Result<(Value, usize), Problem> {
                     format!("unknown field {k:?} next to a study (a study request is {{\"study\": {{...}}}})"),
                 ));
             }
+            // Until `study::parse` takes the service's meshes (it validates with the bundled
+            // ones only), a study cannot name an uploaded mesh: say so plainly.
+            if let Some(id) = crate::meshes::mesh_ref(&doc) {
+                return Err(Problem::invalid_field(
+                    "/study/scene/domain/mesh",
+                    format!("convergence studies of uploaded meshes are not available yet (mesh {id}); run simulations on it, or study a preset's bundled mesh"),
+                ));
+            }
             let (plan, expanded) =
                 study::parse(study, "/study").map_err(|e| Problem::invalid_scene(&e))?;
             check_study_limits(&plan, state)?;
