@@ -3,7 +3,7 @@
 
 use crate::limits;
 use crate::problem::Problem;
-use crate::routes::{client, jobs, misc, results};
+use crate::routes::{client, jobs, meshes, misc, results};
 use crate::state::AppState;
 use axum::extract::DefaultBodyLimit;
 use axum::http::StatusCode;
@@ -12,6 +12,8 @@ use axum::{middleware, Router};
 
 pub fn app(state: AppState) -> Router {
     let limit = state.rt.config.max_body_bytes;
+    // Mesh uploads have a limit of their own (this route-level one wins over the router's).
+    let big = DefaultBodyLimit::max(state.rt.config.max_mesh_bytes);
     let limiter = state.limiter.clone();
     Router::new()
         .route("/jobs", post(jobs::submit).get(jobs::list))
@@ -25,6 +27,9 @@ pub fn app(state: AppState) -> Router {
         .route("/jobs/{id}/result.pvd", get(results::pvd))
         .route("/jobs/{id}/archive.tar", get(results::archive))
         .route("/jobs/{id}/report.svg", get(results::report))
+        .route("/meshes", post(meshes::upload).get(meshes::list).layer(big))
+        .route("/meshes/{id}", get(meshes::get).delete(meshes::delete))
+        .route("/meshes/{id}/file", get(meshes::file))
         .route("/presets", get(misc::presets))
         .route("/presets/{name}", get(misc::preset))
         .route("/healthz", get(misc::healthz))

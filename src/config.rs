@@ -30,6 +30,9 @@ pub struct Config {
     pub max_stored_bytes: u64,
     /// Request body limit in bytes.
     pub max_body_bytes: usize,
+    /// Body limit of a mesh upload (`POST /meshes`) in bytes; the reader's own limit
+    /// (`contact_core::mesh::import::MAX_FILE_BYTES`, 256 MiB) applies above it.
+    pub max_mesh_bytes: usize,
     /// Runs of one study computed at the same time (its reference and its levels).
     pub study_threads: usize,
     /// Deepest array/object nesting accepted in a submitted document (scenes need 4).
@@ -57,6 +60,7 @@ impl Default for Config {
             max_steps: 100_000,
             max_stored_bytes: 2 << 30,
             max_body_bytes: 1 << 20,
+            max_mesh_bytes: 64 << 20,
             study_threads: 2,
             max_json_depth: 32,
             submit_rate: 10.0,

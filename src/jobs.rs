@@ -7,6 +7,7 @@
 //! that dies leaves the job `running` with an expiring lease, and the next claim resumes it
 //! from the last checkpoint.
 
+use super::meshes::Meshes;
 use super::problem::Problem;
 use super::store::results::ResultFiles;
 use super::store::{JobRecord, JobStatus, Progress, Store, StoreError};
@@ -95,6 +96,8 @@ struct Live {
 pub struct Runtime {
     pub store: Arc<dyn Store>,
     pub results: Arc<ResultFiles>,
+    /// Uploaded meshes: what `domain.mesh` of a scene resolves to.
+    pub meshes: Arc<Meshes>,
     pub config: Config,
     live: Mutex<HashMap<Uuid, Live>>,
     channels: Mutex<HashMap<Uuid, broadcast::Sender<JobEvent>>>,
@@ -117,10 +120,16 @@ enum Outcome {
 
 impl Runtime {
     /// Starts `config.workers` worker threads.
-    pub fn start(store: Arc<dyn Store>, results: Arc<ResultFiles>, config: Config) -> Arc<Runtime> {
+    pub fn start(
+        store: Arc<dyn Store>,
+        results: Arc<ResultFiles>,
+        meshes: Arc<Meshes>,
+        config: Config,
+    ) -> Arc<Runtime> {
         let rt = Arc::new(Runtime {
             store,
             results,
+            meshes,
             config,
             live: Mutex::new(HashMap::new()),
             channels: Mutex::new(HashMap::new()),
@@ -383,7 +392,13 @@ impl Runtime {
         cancel: &AtomicBool,
     ) -> Result<Outcome, Problem> {
         let id = job.id;
-        let problem = scene::validate(&job.scene)
+        if let Some(mesh) = super::meshes::mesh_ref(&job.scene) {
+            // The mesh is read through the store: wait for a shared database that is
+            // restarting rather than fail the job for it.
+            self.with_store_retry(|| self.store.get_mesh(&mesh))
+                .map_err(|e| failure("cannot read the job's mesh", &e.to_string()))?;
+        }
+        let problem = scene::validate_with(&job.scene, &*self.meshes)
             .map_err(|e| failure("stored scene no longer validates", &e.to_string()))?;
         let steps = problem.steps;
         let output = problem.output;
@@ -479,7 +494,7 @@ impl Runtime {
         cancel: &AtomicBool,
     ) -> Result<Outcome, Problem> {
         let id = job.id;
-        let (plan, _) = study::parse(&job.scene["study"], "/study")
+        let (plan, _) = study::parse_with(&job.scene["study"], "/study", &*self.meshes)
             .map_err(|e| failure("stored study no longer validates", &e.to_string()))?;
         let last_beat = Mutex::new(Instant::now());
         // Why a heartbeat stopped the study (cancelled, or taken over by another worker).

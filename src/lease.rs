@@ -79,6 +79,7 @@ mod tests {
                 steps: 1,
                 idempotency_key: None,
                 request_hash: None,
+                mesh: None,
             })
             .unwrap()
         else {

@@ -8,6 +8,7 @@ pub mod config;
 pub mod jobs;
 pub mod lease;
 pub mod limits;
+pub mod meshes;
 pub mod problem;
 pub mod routes;
 pub mod server;

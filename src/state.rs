@@ -1,8 +1,10 @@
 //! What the handlers share, and how a node starts: the job store (embedded SQLite or shared
-//! PostgreSQL), the result files and the worker pool.
+//! PostgreSQL), the result files, the uploaded meshes and the worker pool.
 
 use crate::jobs::Runtime;
 use crate::limits::RateLimiter;
+use crate::meshes::Meshes;
+use crate::store::meshes::MeshBlobs;
 use crate::store::postgres::PgStore;
 use crate::store::results::ResultFiles;
 use crate::store::sqlite::SqliteStore;
@@ -50,25 +52,28 @@ pub fn start(config: Config) -> Result<AppState, String> {
 pub fn open_runtime(config: Config) -> Result<Arc<Runtime>, String> {
     std::fs::create_dir_all(&config.data_dir)
         .map_err(|e| format!("cannot create {}: {e}", config.data_dir.display()))?;
-    let (store, results): (Arc<dyn Store>, ResultFiles) = match &config.store {
+    let (store, results, blobs): (Arc<dyn Store>, ResultFiles, MeshBlobs) = match &config.store {
         None => (
             Arc::new(
                 SqliteStore::open(&config.data_dir.join("jobs.sqlite3"))
                     .map_err(|e| e.to_string())?,
             ),
             ResultFiles::new(&config.data_dir).map_err(|e| e.to_string())?,
+            MeshBlobs::new(&config.data_dir).map_err(|e| e.to_string())?,
         ),
         Some(url) => (
             Arc::new(connect_waiting(url).map_err(|e| format!("store {}: {e}", redact(url)))?),
             // Other nodes write into the same directory: only stale temporary files are
             // theirs to lose.
             ResultFiles::shared(&config.data_dir).map_err(|e| e.to_string())?,
+            MeshBlobs::shared(&config.data_dir).map_err(|e| e.to_string())?,
         ),
     };
+    let meshes = Arc::new(Meshes::new(store.clone(), blobs));
     store
         .release_worker_leases(&format!("{}-", config.node))
         .map_err(|e| e.to_string())?;
-    Ok(Runtime::start(store, Arc::new(results), config))
+    Ok(Runtime::start(store, Arc::new(results), meshes, config))
 }
 
 /// Connects to the shared store, waiting up to a minute for a database that is not up yet

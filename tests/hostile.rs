@@ -368,9 +368,11 @@ fn no_path_escapes_the_data_dir() {
     for name in ["secret", "secret.vtu", "summary.json", "1.vtu", "last.vtu"] {
         assert_eq!(std::fs::read_to_string(base.0.join(name)).unwrap(), SECRET);
     }
-    // Inside the data directory: the store, and the one job's directory of result files.
+    // Inside the data directory: the store, the (empty) directory of uploaded meshes, and
+    // the one job's directory of result files.
     for (p, _) in tree(&data) {
         let ok = p.starts_with("jobs.sqlite3")
+            || p == "meshes/"
             || p == "results/"
             || p.starts_with(&format!("results/{id}"));
         assert!(ok, "unexpected file {p} in the data directory");
@@ -663,6 +665,9 @@ fn fuzz_the_http_surface() {
         format!("/jobs/{id}/result.pvd"),
         format!("/jobs/{id}/archive.tar"),
         format!("/jobs/{id}/report.svg"),
+        "/meshes".to_string(),
+        format!("/meshes/{}", "0".repeat(64)),
+        format!("/meshes/{}/file", "0".repeat(64)),
         "/".to_string(),
         "/client/app.js".to_string(),
         "/presets".to_string(),

@@ -12,6 +12,9 @@
 //!   for bit.
 //! * `database_restart_under_load`: the database is restarted twice while jobs run and are
 //!   submitted; nothing is lost, nothing is run twice to completion.
+//! * `uploaded_meshes_are_shared_by_the_nodes`: a mesh uploaded through one API node is seen
+//!   by another and used by a job a worker node runs; deleting it is refused while the job
+//!   is queued, allowed (through any node) once it has finished.
 
 mod service_support;
 
@@ -51,9 +54,9 @@ fn pg_store_migrations_and_reconnection() {
     let store = PgStore::connect(&pg.url()).unwrap();
 
     // Migrations: applied once, idempotent at the next connect.
-    assert_eq!(store.schema_version().unwrap(), 1);
+    assert_eq!(store.schema_version().unwrap(), 2);
     let again = PgStore::connect(&pg.url()).unwrap();
-    assert_eq!(again.schema_version().unwrap(), 1);
+    assert_eq!(again.schema_version().unwrap(), 2);
 
     let job = NewJob {
         scene: json!({"name": "job"}),
@@ -61,6 +64,7 @@ fn pg_store_migrations_and_reconnection() {
         steps: 10,
         idempotency_key: None,
         request_hash: None,
+        mesh: None,
     };
     let Enqueued::New(done) = store.enqueue(job).unwrap() else {
         panic!("not a new job");
@@ -565,4 +569,83 @@ fn a_node_started_before_the_database_waits_for_it() {
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("TLS is not supported"), "{err}");
+}
+
+/// Meshes on the shared store: uploaded through the API node (its row in the database, its
+/// file in the shared directory), used by a job that a worker node runs, refused deletion
+/// while that job is unfinished; a second API node sees the same meshes.
+#[test]
+fn uploaded_meshes_are_shared_by_the_nodes() {
+    let Some(cluster) = Cluster::start("meshes") else {
+        return;
+    };
+    let api = &cluster.api;
+    let plate = std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("crates/contact-core/tests/meshes/plate-with-hole.msh"),
+    )
+    .unwrap();
+    let octet = [("Content-Type", "application/octet-stream")];
+    let r = http(api.addr, "POST", "/meshes", &octet, &plate);
+    assert_eq!(r.status, 201, "{}", r.text());
+    let mesh = r.json()["id"].as_str().unwrap().to_string();
+    assert!(cluster
+        .data
+        .join("meshes")
+        .join(format!("{mesh}.msh"))
+        .is_file());
+    // Another API node on the same store and directory: the same mesh, an idempotent upload.
+    let other = Proc::start(
+        &cluster.data,
+        &["--store", &cluster.url, "--node", "api2", "--workers", "0"],
+    );
+    assert_eq!(
+        get(other.addr, &format!("/meshes/{mesh}")).json(),
+        get(api.addr, &format!("/meshes/{mesh}")).json()
+    );
+    assert_eq!(
+        http(other.addr, "POST", "/meshes", &octet, &plate).status,
+        200
+    );
+    assert_eq!(get(other.addr, &format!("/meshes/{mesh}/file")).body, plate);
+
+    // A job on it, long enough to be refused deletion while it runs on the worker node.
+    let mut scene = contact_core::scene::presets::get("plate-with-hole").unwrap();
+    scene["domain"] = json!({"mesh": mesh});
+    scene["time"] = json!({"t_end": 1, "N": 40});
+    scene["output"]["every"] = json!(40);
+    // Queued (no worker yet): the mesh cannot go.
+    let id = submit(api.addr, &scene, "plate-on-worker");
+    let r = http(other.addr, "DELETE", &format!("/meshes/{mesh}"), &[], b"");
+    assert_eq!(r.status, 409, "{}", r.text());
+    let _worker = cluster.worker("mw", "30");
+    let f = &wait_all(
+        api.addr,
+        std::slice::from_ref(&id),
+        Duration::from_secs(120),
+    )[0];
+    assert_eq!(
+        (f["status"].as_str(), f["worker"].as_str()),
+        (Some("succeeded"), Some("mw-w0")),
+        "{f}"
+    );
+    let nodes = get(api.addr, &format!("/meshes/{mesh}")).json()["summary"]["nodes"].clone();
+    let fields = get(other.addr, &format!("/jobs/{id}/fields?mesh=1")).json();
+    assert_eq!(
+        fields["mesh"]["nodes"].as_array().unwrap().len() as u64,
+        nodes.as_u64().unwrap()
+    );
+    // Finished: the mesh may go, on any node; the others no longer find it.
+    assert_eq!(
+        http(other.addr, "DELETE", &format!("/meshes/{mesh}"), &[], b"").status,
+        204
+    );
+    assert_eq!(get(api.addr, &format!("/meshes/{mesh}")).status, 404);
+    let r = post_json(api.addr, "/jobs", &scene);
+    assert_eq!(r.status, 422, "{}", r.text());
+    assert!(!cluster
+        .data
+        .join("meshes")
+        .join(format!("{mesh}.msh"))
+        .exists());
 }

@@ -30,6 +30,9 @@ pub struct ServeArgs {
     /// Request body limit in bytes (413 beyond).
     #[arg(long = "max-body-bytes", default_value_t = Config::default().max_body_bytes)]
     pub max_body_bytes: usize,
+    /// Body limit of a mesh upload, POST /meshes, in bytes (413 beyond).
+    #[arg(long = "max-mesh-bytes", default_value_t = Config::default().max_mesh_bytes)]
+    pub max_mesh_bytes: usize,
     /// Deepest array/object nesting of a submitted document (422 beyond).
     #[arg(long = "max-json-depth", default_value_t = Config::default().max_json_depth)]
     pub max_json_depth: usize,
@@ -73,6 +76,7 @@ impl ServeArgs {
             max_steps: self.max_steps,
             max_stored_bytes: self.max_stored_bytes,
             max_body_bytes: self.max_body_bytes,
+            max_mesh_bytes: self.max_mesh_bytes,
             max_json_depth: self.max_json_depth,
             submit_rate: self.submit_rate,
             submit_burst: self.submit_burst,

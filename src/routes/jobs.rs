@@ -1,7 +1,7 @@
 //! /jobs: submit (validate, limit, deduplicate, enqueue), list, get (ETag, Retry-After),
 //! cancel, delete, and the Server-Sent Events progress stream.
 
-use super::query::Params;
+use super::query::{Cursor, Limit, Params};
 use super::{blocking, load_job, parse_id, rfc3339};
 use crate::jobs::{is_study, JobEvent};
 use crate::problem::Problem;
@@ -164,14 +164,23 @@ fn check_limits(
     p: &contact_core::problem::Problem,
     state: &AppState,
     is_preset: bool,
+    doc: &Value,
 ) -> Result<(), Problem> {
     let cfg = &state.rt.config;
     let nodes = p.n_nodes();
-    let (hptr, kptr) = if is_preset {
+    let (mut hptr, kptr) = if is_preset {
         ("/overrides/h", "/overrides/k")
     } else {
         ("/mesh/h", "/time/k")
     };
+    // An imported mesh's size is the file's and its refinements'.
+    if !is_preset && doc["domain"].get("mesh").is_some() {
+        hptr = if doc["mesh"].get("refine").is_some() {
+            "/mesh/refine"
+        } else {
+            "/domain/mesh"
+        };
+    }
     if nodes > cfg.max_nodes {
         return Err(Problem::invalid_field(
             hptr,
@@ -241,6 +250,45 @@ fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), Proble
     Ok(())
 }
 
+/// The document to store and its number of time steps, or why it is refused (422 at the
+/// offending field). Blocking.
+fn validated(doc: Value, state: &AppState) -> Result<(Value, usize), Problem> {
+    match doc.get("study") {
+        Some(study) => {
+            if let Some(k) = doc
+                .as_object()
+                .and_then(|o| o.keys().find(|k| *k != "study"))
+            {
+                return Err(Problem::invalid_field(
+                    &format!("/{k}"),
+                    format!("unknown field {k:?} next to a study (a study request is {{\"study\": {{...}}}})"),
+                ));
+            }
+            let (plan, expanded) = study::parse_with(study, "/study", &*state.rt.meshes)
+                .map_err(|e| Problem::invalid_scene(&e))?;
+            check_study_limits(&plan, state)?;
+            Ok((json!({ "study": expanded }), study::total_steps(&plan)))
+        }
+        None => {
+            let (scene_doc, is_preset) = expand(doc)?;
+            let problem = match scene::validate_with(&scene_doc, &*state.rt.meshes) {
+                Ok(p) => p,
+                Err(errors) => {
+                    let e = Problem::invalid_scene(&errors);
+                    return Err(if is_preset {
+                        map_override_pointers(e)
+                    } else {
+                        e
+                    });
+                }
+            };
+            check_limits(&problem, state, is_preset, &scene_doc)?;
+            let steps = problem.steps;
+            Ok((scene_doc, steps))
+        }
+    }
+}
+
 pub async fn submit(
     State(state): State<AppState>,
     headers: HeaderMap,
@@ -259,40 +307,11 @@ pub async fn submit(
     let doc: Value = serde_json::from_slice(&body)
         .map_err(|e| Problem::bad_request(format!("malformed JSON: {e}")))?;
     crate::limits::check_depth(&doc, state.rt.config.max_json_depth)?;
-    let (scene_doc, steps) = match doc.get("study") {
-        Some(study) => {
-            if let Some(k) = doc
-                .as_object()
-                .and_then(|o| o.keys().find(|k| *k != "study"))
-            {
-                return Err(Problem::invalid_field(
-                    &format!("/{k}"),
-                    format!("unknown field {k:?} next to a study (a study request is {{\"study\": {{...}}}})"),
-                ));
-            }
-            let (plan, expanded) =
-                study::parse(study, "/study").map_err(|e| Problem::invalid_scene(&e))?;
-            check_study_limits(&plan, &state)?;
-            (json!({ "study": expanded }), study::total_steps(&plan))
-        }
-        None => {
-            let (scene_doc, is_preset) = expand(doc)?;
-            let problem = match scene::validate(&scene_doc) {
-                Ok(p) => p,
-                Err(errors) => {
-                    let e = Problem::invalid_scene(&errors);
-                    return Err(if is_preset {
-                        map_override_pointers(e)
-                    } else {
-                        e
-                    });
-                }
-            };
-            check_limits(&problem, &state, is_preset)?;
-            (scene_doc, problem.steps)
-        }
-    };
+    // Validation meshes the body (and reads an uploaded mesh): on the blocking pool.
+    let st = state.clone();
+    let (scene_doc, steps) = blocking(move || validated(doc, &st)).await?;
     let hash = scene_hash(&scene_doc);
+    let mesh = crate::meshes::mesh_ref(&scene_doc);
     let key = match headers.get("idempotency-key") {
         Some(v) => Some(
             v.to_str()
@@ -334,6 +353,7 @@ pub async fn submit(
             steps,
             idempotency_key: key,
             request_hash,
+            mesh,
         })?)
     })
     .await?;
@@ -348,6 +368,13 @@ pub async fn submit(
             (StatusCode::OK, rec)
         }
         Enqueued::Existing(rec) => (StatusCode::ACCEPTED, rec),
+        // The mesh was deleted between validation and enqueueing.
+        Enqueued::NoMesh(id) => {
+            return Err(Problem::invalid_field(
+                "/domain/mesh",
+                crate::meshes::unknown_mesh(&id),
+            ))
+        }
         Enqueued::KeyConflict(rec) => {
             return Err(Problem::new(
                 StatusCode::UNPROCESSABLE_ENTITY,
@@ -392,37 +419,6 @@ impl TryFrom<String> for StatusParam {
                 "status must be one of queued, running, succeeded, failed, cancelled, not {s:?}"
             )
         })
-    }
-}
-
-/// `cursor`: a page position as the store writes it.
-#[derive(serde::Deserialize)]
-#[serde(try_from = "String")]
-struct Cursor(String);
-
-impl TryFrom<String> for Cursor {
-    type Error = String;
-    fn try_from(c: String) -> Result<Self, String> {
-        match crate::store::parse_cursor(&c) {
-            Some(_) => Ok(Cursor(c)),
-            None => Err(format!("invalid cursor {c:?}")),
-        }
-    }
-}
-
-/// `limit`: an integer in 1..=500.
-#[derive(serde::Deserialize)]
-#[serde(try_from = "String")]
-struct Limit(usize);
-
-impl TryFrom<String> for Limit {
-    type Error = &'static str;
-    fn try_from(l: String) -> Result<Self, &'static str> {
-        l.parse::<usize>()
-            .ok()
-            .filter(|n| (1..=500).contains(n))
-            .map(Limit)
-            .ok_or("limit must be an integer in 1..=500")
     }
 }
 

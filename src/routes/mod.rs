@@ -2,6 +2,7 @@
 
 pub mod client;
 pub mod jobs;
+pub mod meshes;
 pub mod misc;
 pub mod query;
 pub mod results;

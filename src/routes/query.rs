@@ -52,6 +52,38 @@ fn detail(message: &str) -> String {
     )
 }
 
+/// `cursor`: a page position as the store writes it (the `next` of the previous page of a
+/// listing: jobs, meshes).
+#[derive(serde::Deserialize)]
+#[serde(try_from = "String")]
+pub struct Cursor(pub String);
+
+impl TryFrom<String> for Cursor {
+    type Error = String;
+    fn try_from(c: String) -> Result<Self, String> {
+        match crate::store::parse_cursor(&c) {
+            Some(_) => Ok(Cursor(c)),
+            None => Err(format!("invalid cursor {c:?}")),
+        }
+    }
+}
+
+/// `limit`: items per page, an integer in 1..=500.
+#[derive(serde::Deserialize)]
+#[serde(try_from = "String")]
+pub struct Limit(pub usize);
+
+impl TryFrom<String> for Limit {
+    type Error = &'static str;
+    fn try_from(l: String) -> Result<Self, &'static str> {
+        l.parse::<usize>()
+            .ok()
+            .filter(|n| (1..=500).contains(n))
+            .map(Limit)
+            .ok_or("limit must be an integer in 1..=500")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,6 +10,7 @@
 use super::query::Params;
 use super::{blocking, load_job, parse_id};
 use crate::jobs::{is_study, parse_step_file, step_file, REPORT_FILE, SUMMARY_FILE, TABLE_FILE};
+use crate::meshes::Meshes;
 use crate::problem::Problem;
 use crate::state::AppState;
 use crate::store::{JobRecord, JobStatus};
@@ -81,7 +82,7 @@ async fn result_file(
 /// A stored result file as the response, with its SHA-256 as `Repr-Digest` (RFC 9530) and
 /// as the `ETag`, so a client can check what it downloaded from whichever node wrote it.
 /// (Stored steps carry their own checksum; the views streamed from them are derived.)
-fn with_type(bytes: Vec<u8>, content_type: &'static str) -> Response {
+pub(super) fn with_type(bytes: Vec<u8>, content_type: &'static str) -> Response {
     use base64::Engine as _;
     use sha2::{Digest, Sha256};
     let digest = Sha256::digest(&bytes);
@@ -100,19 +101,32 @@ fn with_type(bytes: Vec<u8>, content_type: &'static str) -> Response {
 }
 
 /// The stored scene, validated again, and its mesh. The mesh is not stored: it is
-/// regenerated (deterministically) from the scene.
-fn scene_of(rec: &JobRecord) -> Result<(contact_core::problem::Problem, Mesh), Problem> {
-    let p = contact_core::scene::validate(&rec.scene)
-        .map_err(|e| Problem::internal(format!("stored scene: {e}")))?;
+/// regenerated (deterministically) from the stored scene, an imported one from the uploaded
+/// mesh the scene names. Once that mesh is deleted (allowed when no unfinished job uses
+/// it), the results drawn on it are 409 until the same file is uploaded again (it gets the
+/// same id). Blocking.
+fn scene_of(
+    meshes: &Meshes,
+    rec: &JobRecord,
+) -> Result<(contact_core::problem::Problem, Mesh), Problem> {
+    let p = contact_core::scene::validate_with(&rec.scene, meshes).map_err(|e| {
+        match e.0.iter().find(|f| f.pointer == "/domain/mesh") {
+            Some(f) if crate::meshes::mesh_ref(&rec.scene).is_some() => Problem::conflict(format!(
+                "job {}: its mesh is no longer stored ({}); upload the same .msh again (POST /meshes gives it the same id) to read these results",
+                rec.id, f.message
+            )),
+            _ => Problem::internal(format!("stored scene: {e}")),
+        }
+    })?;
     let mesh = p
         .mesh()
         .map_err(|e| Problem::internal(format!("stored scene: {e}")))?;
     Ok((p, mesh))
 }
 
-/// The mesh and the time step k.
-fn mesh_of(rec: &JobRecord) -> Result<(Mesh, f64), Problem> {
-    let (p, mesh) = scene_of(rec)?;
+/// The mesh and the time step k. Blocking.
+fn mesh_of(meshes: &Meshes, rec: &JobRecord) -> Result<(Mesh, f64), Problem> {
+    let (p, mesh) = scene_of(meshes, rec)?;
     Ok((mesh, p.k()))
 }
 
@@ -161,7 +175,7 @@ fn pick_step(steps: &[usize], spec: &str) -> Result<usize, Problem> {
 fn load_step(state: &AppState, rec: &JobRecord, n: usize) -> Result<StepFields, Problem> {
     let id = rec.id;
     if n == 0 {
-        let (p, mesh) = scene_of(rec)?;
+        let (p, mesh) = scene_of(&state.rt.meshes, rec)?;
         return initial_fields(&p, &mesh)
             .map_err(|e| Problem::internal(format!("initial state of the stored scene: {e}")));
     }
@@ -249,8 +263,10 @@ pub async fn mesh(
     Path(id): Path<String>,
 ) -> Result<Response, Problem> {
     let rec = simulation(&state, &id).await?;
+    // Built before the answer starts, so that a missing mesh is a 409, not a cut body.
+    let meshes = state.rt.meshes.clone();
+    let (p, mesh) = blocking(move || scene_of(&meshes, &rec)).await?;
     Ok(blocking_body("application/json", move |w| {
-        let (p, mesh) = scene_of(&rec).map_err(|e| std::io::Error::other(e.detail))?;
         serde_json::to_writer(w, &MeshJson::new(&mesh, &p.boundary)).map_err(std::io::Error::other)
     }))
 }
@@ -329,9 +345,13 @@ pub async fn fields(
     let rec = simulation(&state, &id).await?;
     let spec = q.step.unwrap_or_else(|| "last".into());
     let st = state.clone();
-    let (mut f, rec) = blocking(move || {
+    let (mut f, rec, mesh) = blocking(move || {
         let n = pick_step(&available_steps(&st, rec.id)?, &spec)?;
-        Ok((load_step(&st, &rec, n)?, rec))
+        let mesh = match with_mesh {
+            true => Some(scene_of(&st.rt.meshes, &rec)?),
+            false => None,
+        };
+        Ok((load_step(&st, &rec, n)?, rec, mesh))
     })
     .await?;
     let keep = |name: &str| wanted.iter().any(|w| w == name);
@@ -354,14 +374,9 @@ pub async fn fields(
         f.contact = None
     }
     Ok(blocking_body("application/json", move |w| {
-        let scene = if with_mesh {
-            Some(scene_of(&rec).map_err(|e| std::io::Error::other(e.detail))?)
-        } else {
-            None
-        };
         let doc = FieldsDoc {
             job: rec.id,
-            mesh: scene
+            mesh: mesh
                 .as_ref()
                 .map(|(p, mesh)| MeshJson::new(mesh, &p.boundary)),
             fields: &f,
@@ -386,13 +401,12 @@ pub async fn vtu(
     let rec = simulation(&state, &id).await?;
     let st = state.clone();
     let id = rec.id;
-    let (f, rec) = blocking(move || {
+    let (f, mesh) = blocking(move || {
         let n = pick_step(&available_steps(&st, id)?, &spec)?;
-        Ok((load_step(&st, &rec, n)?, rec))
+        Ok((load_step(&st, &rec, n)?, mesh_of(&st.rt.meshes, &rec)?.0))
     })
     .await?;
     Ok(blocking_body("application/xml", move |w| {
-        let (mesh, _) = mesh_of(&rec).map_err(|e| std::io::Error::other(e.detail))?;
         write_vtu(w, &mesh.nodes, mesh.triangles(), &f)
     }))
 }
@@ -406,8 +420,11 @@ pub async fn pvd(
     let rec = simulation(&state, &id).await?;
     let st = state.clone();
     let id = rec.id;
-    let steps = blocking(move || available_steps(&st, id)).await?;
-    let (_, k) = mesh_of(&rec)?;
+    let (steps, k) = blocking(move || {
+        let steps = available_steps(&st, id)?;
+        Ok((steps, mesh_of(&st.rt.meshes, &rec)?.1))
+    })
+    .await?;
     let entries: Vec<(f64, String)> = steps
         .iter()
         .map(|&n| (n as f64 * k, format!("/jobs/{id}/fields/{n}.vtu")))
@@ -428,11 +445,16 @@ pub async fn archive(
 ) -> Result<Response, Problem> {
     let rec = simulation(&state, &id).await?;
     let st = state.clone();
+    let (mesh, k, rec) = blocking(move || {
+        let (mesh, k) = mesh_of(&st.rt.meshes, &rec)?;
+        Ok((mesh, k, rec))
+    })
+    .await?;
+    let st = state.clone();
     let mut resp = blocking_body("application/x-tar", move |w| {
         let io = |e: Problem| std::io::Error::other(e.detail);
         let id = rec.id;
         let steps = available_steps(&st, id).map_err(io)?;
-        let (mesh, k) = mesh_of(&rec).map_err(io)?;
         let mut tar = tar::Builder::new(w);
         let mtime = crate::store::now() as u64;
         let mut member = |name: &str, data: &[u8]| {

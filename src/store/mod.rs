@@ -4,9 +4,15 @@
 //! ([`results::ResultFiles`]). Many nodes share one PostgreSQL database instead
 //! ([`postgres::PgStore`]) and a result directory on a shared filesystem.
 //!
+//! Uploaded meshes are stored the same way: a row per mesh (id, size, upload time, summary)
+//! in the job store, and the file under `<data_dir>/meshes/` ([`meshes::MeshBlobs`]). A job
+//! records the uploaded mesh its scene uses, so that a mesh is not deleted under a job that
+//! still needs it.
+//!
 //! All methods are blocking (call them from worker threads or `spawn_blocking`).
 
 mod claim;
+pub mod meshes;
 pub mod postgres;
 pub mod results;
 mod row;
@@ -104,6 +110,10 @@ pub struct NewJob {
     pub steps: usize,
     pub idempotency_key: Option<String>,
     pub request_hash: Option<String>,
+    /// The id of the uploaded mesh the scene uses (`domain.mesh`), if any: the job is only
+    /// enqueued if that mesh is stored, and the mesh cannot be deleted while the job is
+    /// queued or running.
+    pub mesh: Option<String>,
 }
 
 /// Outcome of `enqueue` with an idempotency key.
@@ -115,6 +125,40 @@ pub enum Enqueued {
     Existing(JobRecord),
     /// The key was used before with a different request body.
     KeyConflict(JobRecord),
+    /// The uploaded mesh of [`NewJob::mesh`] is not stored (deleted meanwhile): nothing was
+    /// enqueued.
+    NoMesh(String),
+}
+
+/// An uploaded mesh as stored (its file is in [`meshes::MeshBlobs`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeshRecord {
+    /// Lowercase hex SHA-256 of the file.
+    pub id: String,
+    /// Size of the file in bytes.
+    pub bytes: u64,
+    /// Unix time in seconds of the first upload.
+    pub created_at: f64,
+    /// What `contact_core::mesh::import::summarize` reported (JSON).
+    pub summary: serde_json::Value,
+}
+
+/// A page of meshes, newest first.
+#[derive(Debug, Clone)]
+pub struct MeshPage {
+    pub meshes: Vec<MeshRecord>,
+    /// Opaque cursor for the next page (as for jobs), None on the last page.
+    pub next: Option<String>,
+}
+
+/// Outcome of [`Store::delete_mesh`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum MeshDeletion {
+    Deleted,
+    /// No mesh with that id.
+    Absent,
+    /// Not deleted: this job, queued or running, uses it.
+    InUse(Box<JobRecord>),
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -195,6 +239,21 @@ pub trait Store: Send + Sync + 'static {
     /// empty prefix releases every running job (single node only). Returns the number of
     /// jobs released.
     fn release_worker_leases(&self, worker_prefix: &str) -> Result<usize, StoreError>;
+    /// Records an uploaded mesh unless one with this id is stored already. Returns the
+    /// stored record (the first upload's, for a repeated one) and whether it is new.
+    fn add_mesh(
+        &self,
+        id: &str,
+        bytes: u64,
+        summary: &serde_json::Value,
+    ) -> Result<(MeshRecord, bool), StoreError>;
+    fn get_mesh(&self, id: &str) -> Result<Option<MeshRecord>, StoreError>;
+    /// Newest first, with cursors as [`Store::list`]'s.
+    fn list_meshes(&self, cursor: Option<&str>, limit: usize) -> Result<MeshPage, StoreError>;
+    /// Removes a mesh's record unless a queued or running job uses it (atomically with
+    /// `enqueue`: a job is never enqueued on a mesh being deleted). Its file is the caller's
+    /// to remove.
+    fn delete_mesh(&self, id: &str) -> Result<MeshDeletion, StoreError>;
     /// Calls `wake` whenever another process may have made a job claimable (a submission
     /// on another node), until `wake` returns false. A backend only ever written by this
     /// process (SQLite: the API wakes its own workers) does nothing.

@@ -40,10 +40,13 @@ use uuid::Uuid;
 
 use super::claim::{verdict, Candidate, Verdict};
 use super::row::{
-    check_lease, into_page, json_text, page_bounds, status_counts, to_i64, to_usize, RawJob,
-    FINISHED,
+    check_lease, into_mesh_page, into_page, json_text, page_bounds, status_counts, to_i64,
+    to_usize, RawJob, RawMesh, FINISHED, UNFINISHED,
 };
-use super::{Enqueued, JobRecord, JobStatus, NewJob, Page, Progress, Store, StoreError, Wake};
+use super::{
+    Enqueued, JobRecord, JobStatus, MeshDeletion, MeshPage, MeshRecord, NewJob, Page, Progress,
+    Store, StoreError, Wake,
+};
 
 /// Schema migrations; entry `i` brings the schema from version `i` to `i + 1`.
 /// Append only: never edit a released migration.
@@ -87,7 +90,23 @@ const MIGRATIONS: &[&str] = &[
         state bytea NOT NULL
     );
     ",
+    // Version 2: uploaded meshes, and the one a job uses (deleting a mesh is refused while
+    // a queued or running job uses it).
+    "
+    CREATE TABLE meshes (
+        id         text PRIMARY KEY,
+        seq        bigint GENERATED ALWAYS AS IDENTITY UNIQUE,
+        bytes      bigint NOT NULL,
+        created_at float8 NOT NULL,
+        summary    text NOT NULL
+    );
+    ALTER TABLE jobs ADD COLUMN mesh text;
+    CREATE INDEX jobs_mesh ON jobs (mesh) WHERE mesh IS NOT NULL;
+    ",
 ];
+
+/// Columns of a [`MeshRecord`] (plus `seq`), in the order [`raw_mesh`] reads them.
+const MESH_COLS: &str = "id, bytes, created_at, summary, seq";
 
 /// The number of migrations applied.
 const SCHEMA_VERSION: &str = "SELECT COALESCE(MAX(version), 0) FROM contact_sim_schema";
@@ -135,6 +154,28 @@ fn raw_job(r: &Row) -> Result<RawJob, postgres::Error> {
         checkpoint_step: r.try_get(17)?,
         seq: r.try_get(18)?,
     })
+}
+
+fn raw_mesh(r: &Row) -> Result<RawMesh, postgres::Error> {
+    Ok(RawMesh {
+        id: r.try_get(0)?,
+        bytes: r.try_get(1)?,
+        created_at: r.try_get(2)?,
+        summary: r.try_get(3)?,
+        seq: r.try_get(4)?,
+    })
+}
+
+/// The mesh row `id`; `lock` is appended to the query (`""`, `FOR SHARE`, `FOR UPDATE`).
+fn select_mesh(
+    c: &mut impl GenericClient,
+    id: &str,
+    lock: &str,
+) -> Result<Option<RawMesh>, postgres::Error> {
+    let sql = format!("SELECT {MESH_COLS} FROM meshes WHERE id = $1 {lock}");
+    c.query_opt(sql.as_str(), &[&id])?
+        .map(|r| raw_mesh(&r))
+        .transpose()
 }
 
 /// Whether the error means "the database is not reachable right now" rather than "this
@@ -477,7 +518,18 @@ impl Store for PgStore {
                 if let Some(existing) =
                     select_one(&mut tx, "idempotency_key = $1", &[key]).map_err(classify)?
                 {
-                    return Ok((false, existing));
+                    return Ok(Some((false, existing)));
+                }
+            }
+            // The mesh row stays locked (shared) until the job is committed: `delete_mesh`
+            // locks it exclusively first, so it either waits and then sees this job, or
+            // deletes first and this finds no row.
+            if let Some(mesh) = &job.mesh {
+                if select_mesh(&mut tx, mesh, "FOR SHARE")
+                    .map_err(classify)?
+                    .is_none()
+                {
+                    return Ok(None);
                 }
             }
             let id = Uuid::new_v4();
@@ -485,8 +537,8 @@ impl Store for PgStore {
                 .query_opt(
                     format!(
                         "INSERT INTO jobs (id, status, scene, scene_hash, idempotency_key,
-                                           request_hash, created_at, steps)
-                         VALUES ($1, 'queued', $2, $3, $4, $5, {NOW_S}, $6)
+                                           request_hash, created_at, steps, mesh)
+                         VALUES ($1, 'queued', $2, $3, $4, $5, {NOW_S}, $6, $7)
                          ON CONFLICT (idempotency_key) DO NOTHING
                          RETURNING {COLS}"
                     )
@@ -498,6 +550,7 @@ impl Store for PgStore {
                         &job.idempotency_key,
                         &job.request_hash,
                         &steps,
+                        &job.mesh,
                     ],
                 )
                 .map_err(classify)?;
@@ -510,15 +563,17 @@ impl Store for PgStore {
                     let existing = select_one(c, "idempotency_key = $1", &[key])
                         .map_err(classify)?
                         .ok_or_else(|| StoreError::Db("idempotency key vanished".into()))?;
-                    return Ok((false, existing));
+                    return Ok(Some((false, existing)));
                 }
             };
             tx.batch_execute(&format!("NOTIFY {CHANNEL}"))
                 .map_err(classify)?;
             tx.commit().map_err(classify)?;
-            Ok(result)
+            Ok(Some(result))
         })?;
-        let (new, raw) = raw;
+        let Some((new, raw)) = raw else {
+            return Ok(Enqueued::NoMesh(job.mesh.clone().unwrap_or_default()));
+        };
         let record = raw.into_record()?;
         Ok(if new {
             Enqueued::New(record)
@@ -762,6 +817,94 @@ impl Store for PgStore {
             )
         })?;
         usize::try_from(n).map_err(|_| StoreError::Db(format!("{n} rows")))
+    }
+
+    /// `ON CONFLICT DO NOTHING`, then the stored row; should the row be deleted in between
+    /// (a concurrent `delete_mesh`), the insert is tried again.
+    fn add_mesh(
+        &self,
+        id: &str,
+        bytes: u64,
+        summary: &serde_json::Value,
+    ) -> Result<(MeshRecord, bool), StoreError> {
+        let bytes = i64::try_from(bytes)
+            .map_err(|_| StoreError::Db(format!("mesh size {bytes} out of range")))?;
+        let summary = json_text(summary)?;
+        for _ in 0..3 {
+            let got = self.exec(|c| {
+                let inserted = c.query_opt(
+                    format!(
+                        "INSERT INTO meshes (id, bytes, created_at, summary)
+                         VALUES ($1, $2, {NOW_S}, $3)
+                         ON CONFLICT (id) DO NOTHING
+                         RETURNING {MESH_COLS}"
+                    )
+                    .as_str(),
+                    &[&id, &bytes, &summary],
+                )?;
+                match inserted {
+                    Some(row) => Ok(Some((raw_mesh(&row)?, true))),
+                    None => Ok(select_mesh(c, id, "")?.map(|raw| (raw, false))),
+                }
+            })?;
+            if let Some((raw, new)) = got {
+                return Ok((raw.into_record()?, new));
+            }
+        }
+        Err(StoreError::Db(format!(
+            "mesh {id} was deleted and added concurrently, three times in a row"
+        )))
+    }
+
+    fn get_mesh(&self, id: &str) -> Result<Option<MeshRecord>, StoreError> {
+        self.read(|c| select_mesh(c, id, ""))?
+            .map(RawMesh::into_record)
+            .transpose()
+    }
+
+    fn list_meshes(&self, cursor: Option<&str>, limit: usize) -> Result<MeshPage, StoreError> {
+        let Some((before, fetch)) = page_bounds(cursor, limit) else {
+            return Ok(MeshPage {
+                meshes: Vec::new(),
+                next: None,
+            });
+        };
+        let raws = self.read(|c| {
+            c.query(
+                format!("SELECT {MESH_COLS} FROM meshes WHERE seq < $1 ORDER BY seq DESC LIMIT $2")
+                    .as_str(),
+                &[&before, &fetch],
+            )?
+            .iter()
+            .map(raw_mesh)
+            .collect::<Result<Vec<_>, _>>()
+        })?;
+        into_mesh_page(raws, limit)
+    }
+
+    /// Locks the mesh row exclusively, then looks for a job that needs it (see `enqueue`).
+    fn delete_mesh(&self, id: &str) -> Result<MeshDeletion, StoreError> {
+        let outcome = self.exec(|c| {
+            let mut tx = c.transaction()?;
+            if select_mesh(&mut tx, id, "FOR UPDATE")?.is_none() {
+                return Ok(None);
+            }
+            let user = select_one(
+                &mut tx,
+                &format!("mesh = $1 AND status IN {UNFINISHED} ORDER BY seq"),
+                &[&id],
+            )?;
+            if user.is_none() {
+                tx.execute("DELETE FROM meshes WHERE id = $1", &[&id])?;
+            }
+            tx.commit()?;
+            Ok(Some(user))
+        })?;
+        Ok(match outcome {
+            None => MeshDeletion::Absent,
+            Some(None) => MeshDeletion::Deleted,
+            Some(Some(raw)) => MeshDeletion::InUse(Box::new(raw.into_record()?)),
+        })
     }
 
     /// Starts a thread with its own connection that LISTENs for submissions (see

@@ -48,7 +48,7 @@ fn invalid_name(name: &str) -> io::Error {
 
 /// Makes a directory's entries (creations, renames) durable. On platforms where a
 /// directory cannot be opened for syncing this is a no-op.
-fn sync_dir(dir: &Path) -> io::Result<()> {
+pub(super) fn sync_dir(dir: &Path) -> io::Result<()> {
     #[cfg(unix)]
     {
         File::open(dir)?.sync_all()
@@ -60,12 +60,35 @@ fn sync_dir(dir: &Path) -> io::Result<()> {
     }
 }
 
+/// Writes `bytes` as `dir/name` atomically: a temporary file ([`TEMP_PREFIX`]) in `dir`,
+/// fsynced, renamed over the target, then the directory fsynced. `name` is trusted (the
+/// callers check it).
+pub(super) fn write_atomic_in(dir: &Path, name: &str, bytes: &[u8]) -> io::Result<()> {
+    let target = dir.join(name);
+    let temp = dir.join(format!("{TEMP_PREFIX}{name}-{}", Uuid::new_v4().simple()));
+    let written = (|| {
+        let mut f = OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&temp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        fs::rename(&temp, &target)
+    })();
+    if let Err(e) = written {
+        let _ = fs::remove_file(&temp);
+        return Err(e);
+    }
+    sync_dir(dir)
+}
+
 /// Age beyond which a temporary file in a shared result directory is certainly abandoned
 /// (a write takes from its creation to its rename milliseconds, seconds at worst).
-const STALE_TEMP: std::time::Duration = std::time::Duration::from_secs(3600);
+pub(super) const STALE_TEMP: std::time::Duration = std::time::Duration::from_secs(3600);
 
 /// Removes the temporary files at least `min_age` old left in one job directory.
-fn remove_temp_files(dir: &Path, min_age: std::time::Duration) -> io::Result<()> {
+pub(super) fn remove_temp_files(dir: &Path, min_age: std::time::Duration) -> io::Result<()> {
     let entries = match fs::read_dir(dir) {
         Ok(e) => e,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
@@ -151,29 +174,16 @@ impl ResultFiles {
     /// content (see the module documentation). Creates the job directory if needed.
     /// An invalid name is [`io::ErrorKind::InvalidInput`].
     pub fn write_atomic(&self, id: Uuid, name: &str, bytes: &[u8]) -> io::Result<()> {
-        let target = self.path(id, name).ok_or_else(|| invalid_name(name))?;
+        if !valid_name(name) {
+            return Err(invalid_name(name));
+        }
         let dir = self.job_dir(id);
         if !dir.is_dir() {
             fs::create_dir_all(&dir)?;
             // Make the new directory's entry in `results/` durable too.
             sync_dir(&self.root)?;
         }
-        let temp = dir.join(format!("{TEMP_PREFIX}{name}-{}", Uuid::new_v4().simple()));
-        let written = (|| {
-            let mut f = OpenOptions::new()
-                .write(true)
-                .create_new(true)
-                .open(&temp)?;
-            f.write_all(bytes)?;
-            f.sync_all()?;
-            drop(f);
-            fs::rename(&temp, &target)
-        })();
-        if let Err(e) = written {
-            let _ = fs::remove_file(&temp);
-            return Err(e);
-        }
-        sync_dir(&dir)
+        write_atomic_in(&dir, name, bytes)
     }
 
     /// The content of result `name` of job `id`; None if it does not exist or the name is

@@ -1,7 +1,7 @@
 //! What both job-store backends share: the row as read before validation, its conversion
 //! into a [`JobRecord`], and list cursors.
 
-use super::{JobRecord, JobStatus, Page, Progress, StoreError};
+use super::{JobRecord, JobStatus, MeshPage, MeshRecord, Page, Progress, StoreError};
 use uuid::Uuid;
 
 /// Parses a list cursor produced by [`Store::list`] (`"s<seq>"`, seq > 0).
@@ -164,3 +164,50 @@ pub(super) fn status_counts(
     }
     Ok(counts)
 }
+
+/// A `meshes` row as read, before validation.
+pub(super) struct RawMesh {
+    pub(super) id: String,
+    pub(super) bytes: i64,
+    pub(super) created_at: f64,
+    pub(super) summary: String,
+    pub(super) seq: i64,
+}
+
+impl RawMesh {
+    /// Validates and converts; any malformed value is [`StoreError::Corrupt`].
+    pub(super) fn into_record(self) -> Result<MeshRecord, StoreError> {
+        let summary = serde_json::from_str(&self.summary)
+            .map_err(|e| StoreError::Corrupt(format!("mesh {}: summary JSON: {e}", self.id)))?;
+        let bytes = u64::try_from(self.bytes).map_err(|_| {
+            StoreError::Corrupt(format!("mesh {}: bytes = {}", self.id, self.bytes))
+        })?;
+        Ok(MeshRecord {
+            id: self.id,
+            bytes,
+            created_at: self.created_at,
+            summary,
+        })
+    }
+}
+
+/// The page of mesh rows fetched with [`page_bounds`] (newest first).
+pub(super) fn into_mesh_page(raws: Vec<RawMesh>, limit: usize) -> Result<MeshPage, StoreError> {
+    let limit = limit.max(1);
+    let more = raws.len() > limit;
+    let mut meshes = Vec::with_capacity(raws.len().min(limit));
+    let mut last_seq = None;
+    for raw in raws.into_iter().take(limit) {
+        last_seq = Some(raw.seq);
+        meshes.push(raw.into_record()?);
+    }
+    let next = if more {
+        last_seq.map(make_cursor)
+    } else {
+        None
+    };
+    Ok(MeshPage { meshes, next })
+}
+
+/// SQL list of the statuses of a job that still needs its mesh.
+pub(super) const UNFINISHED: &str = "('queued', 'running')";

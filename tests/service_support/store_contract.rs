@@ -9,7 +9,8 @@
 //! clock has moved on, see [`expire`]).
 
 use contact_sim::store::{
-    now, parse_cursor, Enqueued, JobRecord, JobStatus, NewJob, Progress, Store, StoreError,
+    now, parse_cursor, Enqueued, JobRecord, JobStatus, MeshDeletion, NewJob, Progress, Store,
+    StoreError,
 };
 use serde_json::json;
 use std::collections::HashSet;
@@ -69,6 +70,18 @@ const CASES: &[(&str, Case)] = &[
         "concurrent_claims_take_each_job_once",
         concurrent_claims_take_each_job_once,
     ),
+    (
+        "meshes_are_added_once_and_listed_newest_first",
+        meshes_are_added_once_and_listed_newest_first,
+    ),
+    (
+        "a_mesh_is_not_deleted_under_an_unfinished_job",
+        a_mesh_is_not_deleted_under_an_unfinished_job,
+    ),
+    (
+        "concurrent_mesh_deletes_and_submissions_agree",
+        concurrent_mesh_deletes_and_submissions_agree,
+    ),
 ];
 
 /// Runs every case on its own fixture from `fresh` (given the case's name) and fails naming
@@ -98,6 +111,7 @@ fn new_job(n: usize) -> NewJob {
         steps: 10 + n,
         idempotency_key: None,
         request_hash: None,
+        mesh: None,
     }
 }
 
@@ -657,4 +671,204 @@ fn concurrent_claims_take_each_job_once(f: &Fixture) {
         .counts()
         .unwrap()
         .contains(&(JobStatus::Succeeded, 50)));
+}
+
+/// A mesh id (64 hex digits) made from `n`, and a summary like the service's.
+fn mesh(n: usize) -> (String, serde_json::Value) {
+    (
+        format!("{n:064x}"),
+        json!({"dimension": 2, "nodes": 10 + n, "cells": 2 * n + 1,
+               "groups": [{"name": "contact", "facets": n, "measure": 0.5}],
+               "bounding_box": {"min": [0.0, 0.0], "max": [2.0, 1.0]}}),
+    )
+}
+
+fn job_on_mesh(n: usize, mesh: &str) -> NewJob {
+    NewJob {
+        mesh: Some(mesh.to_string()),
+        ..new_job(n)
+    }
+}
+
+fn meshes_are_added_once_and_listed_newest_first(f: &Fixture) {
+    let store = &*f.store;
+    assert!(store.list_meshes(None, 10).unwrap().meshes.is_empty());
+    let (id, summary) = mesh(1);
+    assert_eq!(store.get_mesh(&id).unwrap(), None);
+    let before = now();
+    let (rec, new) = store.add_mesh(&id, 1234, &summary).unwrap();
+    let after = now();
+    assert!(new);
+    assert_eq!((rec.id.as_str(), rec.bytes), (id.as_str(), 1234));
+    assert_eq!(rec.summary, summary);
+    assert!((before..=after).contains(&rec.created_at));
+    assert_eq!(store.get_mesh(&id).unwrap(), Some(rec.clone()));
+    // The same id again: the first record, not a second row.
+    expire();
+    let (again, new) = store.add_mesh(&id, 1234, &json!({"other": 1})).unwrap();
+    assert!(!new);
+    assert_eq!(again, rec);
+    // From another handle too.
+    let other = (f.connect)();
+    assert_eq!(
+        other.add_mesh(&id, 1234, &summary).unwrap(),
+        (rec.clone(), false)
+    );
+    assert_eq!(
+        store.list_meshes(None, 10).unwrap().meshes,
+        vec![rec.clone()]
+    );
+
+    let ids: Vec<String> = (2..9)
+        .map(|n| {
+            let (id, summary) = mesh(n);
+            assert!(store.add_mesh(&id, n as u64, &summary).unwrap().1);
+            id
+        })
+        .collect();
+    assert_eq!(store.delete_mesh(&ids[3]).unwrap(), MeshDeletion::Deleted);
+    let mut expected: Vec<String> = std::iter::once(id.clone())
+        .chain(ids.iter().cloned())
+        .filter(|i| *i != ids[3])
+        .collect();
+    expected.reverse();
+    let mut seen = Vec::new();
+    let mut cursor: Option<String> = None;
+    let mut pages = 0;
+    loop {
+        let page = store.list_meshes(cursor.as_deref(), 3).unwrap();
+        pages += 1;
+        seen.extend(page.meshes.into_iter().map(|m| m.id));
+        match page.next {
+            Some(c) => {
+                assert!(parse_cursor(&c).is_some());
+                cursor = Some(c);
+            }
+            None => break,
+        }
+    }
+    assert_eq!(pages, 3);
+    assert_eq!(seen, expected);
+    let p = store.list_meshes(None, 7).unwrap();
+    assert_eq!((p.meshes.len(), p.next), (7, None));
+    assert_eq!(store.list_meshes(None, 0).unwrap().meshes.len(), 1);
+    for bad in ["", "s0", "x", "s-1"] {
+        let p = store.list_meshes(Some(bad), 10).unwrap();
+        assert!(p.meshes.is_empty() && p.next.is_none(), "{bad}");
+    }
+    // Deleted: gone, and a second delete finds nothing; added again it is new.
+    assert_eq!(store.get_mesh(&ids[3]).unwrap(), None);
+    assert_eq!(store.delete_mesh(&ids[3]).unwrap(), MeshDeletion::Absent);
+    let (back, new) = store.add_mesh(&ids[3], 5, &mesh(5).1).unwrap();
+    assert!(new);
+    assert_eq!(store.list_meshes(None, 1).unwrap().meshes, vec![back]);
+}
+
+fn a_mesh_is_not_deleted_under_an_unfinished_job(f: &Fixture) {
+    let store = &*f.store;
+    let (id, summary) = mesh(7);
+    // No such mesh: nothing is enqueued.
+    assert_eq!(
+        store.enqueue(job_on_mesh(0, &id)).unwrap(),
+        Enqueued::NoMesh(id.clone())
+    );
+    assert!(store.list(None, None, 10).unwrap().jobs.is_empty());
+    store.add_mesh(&id, 10, &summary).unwrap();
+    let (other, other_summary) = mesh(8);
+    store.add_mesh(&other, 10, &other_summary).unwrap();
+    let Enqueued::New(first) = store.enqueue(job_on_mesh(1, &id)).unwrap() else {
+        panic!("not enqueued");
+    };
+    let Enqueued::New(second) = store.enqueue(job_on_mesh(2, &id)).unwrap() else {
+        panic!("not enqueued");
+    };
+    // Queued, then running: refused, naming the oldest unfinished job.
+    assert_eq!(
+        store.delete_mesh(&id).unwrap(),
+        MeshDeletion::InUse(Box::new(store.get(first.id).unwrap().unwrap()))
+    );
+    assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, first.id);
+    match store.delete_mesh(&id).unwrap() {
+        MeshDeletion::InUse(j) => {
+            assert_eq!((j.id, j.status), (first.id, JobStatus::Running))
+        }
+        other => panic!("{other:?}"),
+    }
+    store.finish(first.id, JobStatus::Succeeded, None).unwrap();
+    match store.delete_mesh(&id).unwrap() {
+        MeshDeletion::InUse(j) => assert_eq!(j.id, second.id),
+        other => panic!("{other:?}"),
+    }
+    // Another mesh is free meanwhile.
+    assert_eq!(store.delete_mesh(&other).unwrap(), MeshDeletion::Deleted);
+    store.request_cancel(second.id).unwrap();
+    // Only finished jobs are left: deleted; the finished jobs stay.
+    assert_eq!(store.delete_mesh(&id).unwrap(), MeshDeletion::Deleted);
+    assert_eq!(store.get_mesh(&id).unwrap(), None);
+    assert_eq!(
+        store.get(first.id).unwrap().unwrap().status,
+        JobStatus::Succeeded
+    );
+    assert_eq!(
+        store.enqueue(job_on_mesh(3, &id)).unwrap(),
+        Enqueued::NoMesh(id.clone())
+    );
+}
+
+/// Deletes of a mesh race submissions of jobs on it from other connections: whenever the
+/// delete wins, no job was enqueued on the mesh before it; whenever a submission wins, the
+/// mesh is still there for it.
+fn concurrent_mesh_deletes_and_submissions_agree(f: &Fixture) {
+    let own: Vec<Box<dyn Store>> = (0..2).map(|_| (f.connect)()).collect();
+    for round in 0..10 {
+        let (id, summary) = mesh(100 + round);
+        f.store.add_mesh(&id, 1, &summary).unwrap();
+        let (deleted, enqueued): (bool, Vec<Enqueued>) = std::thread::scope(|s| {
+            let submitters: Vec<_> = own
+                .iter()
+                .enumerate()
+                .map(|(k, store)| {
+                    let id = id.clone();
+                    s.spawn(move || {
+                        (0..3)
+                            .map(|i| {
+                                store
+                                    .enqueue(job_on_mesh(round * 10 + k * 3 + i, &id))
+                                    .unwrap()
+                            })
+                            .collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            let deleted = f.store.delete_mesh(&id).unwrap() == MeshDeletion::Deleted;
+            let enqueued = submitters
+                .into_iter()
+                .flat_map(|h| h.join().unwrap())
+                .collect();
+            (deleted, enqueued)
+        });
+        let new: Vec<&JobRecord> = enqueued
+            .iter()
+            .filter_map(|e| match e {
+                Enqueued::New(j) => Some(j),
+                Enqueued::NoMesh(m) => {
+                    assert_eq!(*m, id);
+                    None
+                }
+                other => panic!("{other:?}"),
+            })
+            .collect();
+        if deleted {
+            // No job is on it: a queued one would have blocked the delete, and later
+            // submissions found no mesh.
+            assert!(new.is_empty(), "round {round}: a job on a deleted mesh");
+            assert_eq!(f.store.get_mesh(&id).unwrap(), None);
+        } else {
+            assert!(!new.is_empty());
+            assert!(f.store.get_mesh(&id).unwrap().is_some());
+        }
+        for j in new {
+            f.store.request_cancel(j.id).unwrap();
+        }
+    }
 }

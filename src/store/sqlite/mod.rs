@@ -44,10 +44,13 @@ use uuid::Uuid;
 
 use super::claim::{verdict, Candidate, Verdict};
 use super::row::{
-    check_lease, into_page, json_text, page_bounds, status_counts, to_i64, to_usize, RawJob,
-    FINISHED,
+    check_lease, into_mesh_page, into_page, json_text, page_bounds, status_counts, to_i64,
+    to_usize, RawJob, RawMesh, FINISHED, UNFINISHED,
 };
-use super::{now, Enqueued, JobRecord, JobStatus, NewJob, Page, Progress, Store, StoreError};
+use super::{
+    now, Enqueued, JobRecord, JobStatus, MeshDeletion, MeshPage, MeshRecord, NewJob, Page,
+    Progress, Store, StoreError,
+};
 
 /// Schema migrations; entry `i` brings the database from `user_version` `i` to `i + 1`.
 /// Append only: never edit a released migration.
@@ -93,7 +96,23 @@ const MIGRATIONS: &[&str] = &[
     ALTER TABLE jobs ADD COLUMN claim_step INTEGER;
     ALTER TABLE jobs ADD COLUMN stalls INTEGER NOT NULL DEFAULT 0;
     ",
+    // Version 3: uploaded meshes, and the one a job uses (deleting a mesh is refused while
+    // a queued or running job uses it).
+    "
+    CREATE TABLE meshes (
+        seq        INTEGER PRIMARY KEY AUTOINCREMENT,
+        id         TEXT NOT NULL UNIQUE,
+        bytes      INTEGER NOT NULL,
+        created_at REAL NOT NULL,
+        summary    TEXT NOT NULL
+    );
+    ALTER TABLE jobs ADD COLUMN mesh TEXT;
+    CREATE INDEX jobs_mesh ON jobs (mesh) WHERE mesh IS NOT NULL;
+    ",
 ];
+
+/// Columns of a [`MeshRecord`] (plus `seq`), in the order [`RawMesh::from_row`] reads them.
+const MESH_COLS: &str = "id, bytes, created_at, summary, seq";
 
 /// Columns of a [`JobRecord`] (plus `seq`), in the order [`RawJob::from_row`] reads them.
 /// The checkpoint blob is deliberately absent.
@@ -138,6 +157,26 @@ impl RawJob {
             seq: r.get(18)?,
         })
     }
+}
+
+impl RawMesh {
+    fn from_row(r: &Row<'_>) -> rusqlite::Result<RawMesh> {
+        Ok(RawMesh {
+            id: r.get(0)?,
+            bytes: r.get(1)?,
+            created_at: r.get(2)?,
+            summary: r.get(3)?,
+            seq: r.get(4)?,
+        })
+    }
+}
+
+fn select_mesh(conn: &Connection, id: &str) -> Result<Option<MeshRecord>, StoreError> {
+    let sql = format!("SELECT {MESH_COLS} FROM meshes WHERE id = ?1");
+    let raw = conn
+        .query_row(&sql, params![id], RawMesh::from_row)
+        .optional()?;
+    raw.map(RawMesh::into_record).transpose()
 }
 
 /// Reads at most one job matching `where_clause` (a constant SQL fragment from this file,
@@ -404,6 +443,11 @@ impl Store for SqliteStore {
                 });
             }
         }
+        if let Some(mesh) = &job.mesh {
+            if select_mesh(&tx, mesh)?.is_none() {
+                return Ok(Enqueued::NoMesh(mesh.clone()));
+            }
+        }
         let seq: i64 = tx.query_row("SELECT value FROM meta WHERE key = 'next_seq'", [], |r| {
             r.get(0)
         })?;
@@ -414,8 +458,8 @@ impl Store for SqliteStore {
         let id = Uuid::new_v4();
         tx.execute(
             "INSERT INTO jobs (id, seq, status, scene, scene_hash, idempotency_key, request_hash,
-                               created_at, step, steps, cancel_requested, attempt)
-             VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6, ?7, 0, ?8, 0, 0)",
+                               created_at, step, steps, cancel_requested, attempt, mesh)
+             VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6, ?7, 0, ?8, 0, 0, ?9)",
             params![
                 id.to_string(),
                 seq,
@@ -424,7 +468,8 @@ impl Store for SqliteStore {
                 job.idempotency_key,
                 job.request_hash,
                 now(),
-                steps
+                steps,
+                job.mesh
             ],
         )?;
         let record = select_by_id(&tx, id)?
@@ -629,6 +674,73 @@ impl Store for SqliteStore {
             .query_row(&sql, params![scene_hash], RawJob::from_row)
             .optional()?;
         raw.map(RawJob::into_record).transpose()
+    }
+
+    /// Inserts unless the id is stored, in one immediate transaction.
+    fn add_mesh(
+        &self,
+        id: &str,
+        bytes: u64,
+        summary: &serde_json::Value,
+    ) -> Result<(MeshRecord, bool), StoreError> {
+        let bytes = i64::try_from(bytes)
+            .map_err(|_| StoreError::Db(format!("mesh size {bytes} out of range")))?;
+        let summary = json_text(summary)?;
+        let mut conn = self.lock();
+        let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
+        let inserted = tx.execute(
+            "INSERT INTO meshes (id, bytes, created_at, summary) VALUES (?1, ?2, ?3, ?4)
+             ON CONFLICT (id) DO NOTHING",
+            params![id, bytes, now(), summary],
+        )?;
+        let record = select_mesh(&tx, id)?
+            .ok_or_else(|| StoreError::Db(format!("mesh {id} missing right after insert")))?;
+        tx.commit()?;
+        Ok((record, inserted > 0))
+    }
+
+    fn get_mesh(&self, id: &str) -> Result<Option<MeshRecord>, StoreError> {
+        select_mesh(&self.lock(), id)
+    }
+
+    fn list_meshes(&self, cursor: Option<&str>, limit: usize) -> Result<MeshPage, StoreError> {
+        let Some((before, fetch)) = page_bounds(cursor, limit) else {
+            return Ok(MeshPage {
+                meshes: Vec::new(),
+                next: None,
+            });
+        };
+        let conn = self.lock();
+        let mut stmt = conn.prepare_cached(&format!(
+            "SELECT {MESH_COLS} FROM meshes WHERE seq < ?1 ORDER BY seq DESC LIMIT ?2"
+        ))?;
+        let raws: Vec<RawMesh> = stmt
+            .query_map(params![before, fetch], RawMesh::from_row)?
+            .collect::<rusqlite::Result<_>>()?;
+        drop(stmt);
+        drop(conn);
+        into_mesh_page(raws, limit)
+    }
+
+    /// The check and the delete share one immediate transaction, which `enqueue`'s look-up
+    /// of the mesh cannot interleave with.
+    fn delete_mesh(&self, id: &str) -> Result<MeshDeletion, StoreError> {
+        let mut conn = self.lock();
+        let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
+        if select_mesh(&tx, id)?.is_none() {
+            return Ok(MeshDeletion::Absent);
+        }
+        let user = select_one(
+            &tx,
+            &format!("mesh = ?1 AND status IN {UNFINISHED} ORDER BY seq"),
+            params![id],
+        )?;
+        if let Some(job) = user {
+            return Ok(MeshDeletion::InUse(Box::new(job)));
+        }
+        tx.execute("DELETE FROM meshes WHERE id = ?1", params![id])?;
+        tx.commit()?;
+        Ok(MeshDeletion::Deleted)
     }
 }
 

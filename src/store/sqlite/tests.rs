@@ -30,6 +30,7 @@ fn new_job(n: usize) -> NewJob {
         steps: 10 + n,
         idempotency_key: None,
         request_hash: None,
+        mesh: None,
     }
 }
 

@@ -21,7 +21,7 @@ pub mod spec;
 
 pub use compare::{StudyReference, StudyResult, StudyRow};
 pub use reference::ReferenceCache;
-pub use spec::{parse, Plan, Vary};
+pub use spec::{parse, parse_with, Plan, Vary};
 
 use crate::problem::Problem;
 use crate::run::RunError;

@@ -62,6 +62,15 @@ pub fn resolution(p: &Problem) -> usize {
 /// reported there). Returns the plan and the expanded document (presets resolved), which is
 /// what a job stores.
 pub fn parse(doc: &Value, at: &str) -> Result<(Plan, Value), ValidationErrors> {
+    parse_with(doc, at, &scene::Bundled)
+}
+
+/// [`parse`], with the meshes a scene names (`domain.mesh`) looked up in `files`.
+pub fn parse_with(
+    doc: &Value,
+    at: &str,
+    files: &dyn scene::MeshFiles,
+) -> Result<(Plan, Value), ValidationErrors> {
     let err = |p: &str, m: String| {
         ValidationErrors(vec![FieldError {
             pointer: format!("{at}{p}"),
@@ -102,7 +111,7 @@ pub fn parse(doc: &Value, at: &str) -> Result<(Plan, Value), ValidationErrors> {
                 ),
             )
         })?;
-        return parse(&expanded, at);
+        return parse_with(&expanded, at, files);
     }
     let name = match obj.get("name") {
         None => None,
@@ -222,7 +231,7 @@ pub fn parse(doc: &Value, at: &str) -> Result<(Plan, Value), ValidationErrors> {
                 }
             }
         }
-        match scene::validate(&d) {
+        match scene::validate_with(&d, files) {
             Ok(p) => Some(p),
             Err(ValidationErrors(es)) => {
                 for e in es {

@@ -1,0 +1,293 @@
+//! Uploaded meshes: what `POST /meshes` stores (the file in [`MeshBlobs`], a row with its
+//! summary in the job store) and how the service resolves a scene's `domain.mesh`
+//! ([`Meshes`] is the service's [`MeshFiles`]).
+//!
+//! A scene names an uploaded mesh by its id, the lowercase hex SHA-256 of the file, so the
+//! scene's content hash covers the mesh's bytes: identical requests are answered from the
+//! store, and a different file (a different id) never is. Besides ids, only the names of
+//! the meshes bundled with the presets are known (`plate-with-hole.msh`); anything else — a
+//! path in particular — is refused.
+//!
+//! Parsed meshes are kept in a small LRU cache by id (parsing is deterministic and the id
+//! fixes the bytes), shared by the submissions, the workers and the result routes of one
+//! node. The cache is only consulted once the store says the mesh exists, so a mesh deleted
+//! through another node is not found here either.
+//!
+//! Everything here blocks (store, files, parsing): call it from worker threads or the
+//! blocking pool, never on the async runtime's threads.
+
+use crate::problem::Problem;
+use crate::store::meshes::{is_mesh_id, mesh_id, MeshBlobs};
+use crate::store::{MeshDeletion, MeshRecord, Store, StoreError};
+use axum::http::StatusCode;
+use contact_core::mesh::import::{import, summarize};
+use contact_core::mesh::Mesh;
+use contact_core::scene::{presets, Bundled, MeshFiles};
+use serde_json::Value;
+use std::sync::{Arc, Mutex};
+
+/// Parsed meshes kept in memory per node.
+const CACHED: usize = 4;
+/// Uploads parsed at once per node.
+const PARSES: usize = 2;
+
+/// The uploaded-mesh id a job document uses: `domain.mesh` of a scene, or of a study's
+/// scene object, when it has the form of an id (bundled names are not uploads).
+pub fn mesh_ref(doc: &Value) -> Option<String> {
+    let scene = match doc.get("study") {
+        Some(study) => study.get("scene")?,
+        None => doc,
+    };
+    scene
+        .get("domain")?
+        .get("mesh")?
+        .as_str()
+        .filter(|s| is_mesh_id(s))
+        .map(str::to_string)
+}
+
+/// The sentence for a `domain.mesh` the service does not know.
+pub fn unknown_mesh(name: &str) -> String {
+    if is_mesh_id(name) {
+        format!("no uploaded mesh with id {name}; upload the .msh with POST /meshes")
+    } else {
+        format!(
+            "no uploaded mesh with id {name:?}; upload the .msh with POST /meshes and give the id it answers (64 hex digits; file paths are not read by the service)"
+        )
+    }
+}
+
+/// The uploaded meshes of one node: store rows, files, and the parsed-mesh cache.
+pub struct Meshes {
+    store: Arc<dyn Store>,
+    blobs: MeshBlobs,
+    /// Most recently used last.
+    cache: Mutex<Vec<(String, Arc<Mesh>)>>,
+    /// Uploads parsed at the same time (each holds its file and its mesh in memory); the
+    /// handler waits for a slot before handing an upload to the blocking pool.
+    pub parse_slots: tokio::sync::Semaphore,
+}
+
+impl Meshes {
+    pub fn new(store: Arc<dyn Store>, blobs: MeshBlobs) -> Meshes {
+        Meshes {
+            store,
+            blobs,
+            cache: Mutex::new(Vec::new()),
+            parse_slots: tokio::sync::Semaphore::new(PARSES),
+        }
+    }
+
+    /// Stores an uploaded file: its id, and whether it is new (a repeated upload of the same
+    /// bytes is answered with the first upload's record, without parsing it again).
+    ///
+    /// A file that is not a usable mesh is a 422 whose detail is the reader's or the
+    /// checker's message (section and line, or the offending cell). The file is written
+    /// before its row, so a row never names a file that was not written (a crash in between
+    /// leaves an unlisted file, replaced by the next upload of the same bytes).
+    pub fn upload(&self, bytes: &[u8]) -> Result<(MeshRecord, bool), Problem> {
+        if bytes.is_empty() {
+            return Err(Problem::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid mesh",
+                "the body is empty: send the bytes of a gmsh .msh file (MSH 4.1, ASCII or binary)",
+            )
+            .with_type("/problems/invalid-mesh"));
+        }
+        let id = mesh_id(bytes);
+        let io = |e: std::io::Error| Problem::internal(format!("mesh file {id}: {e}"));
+        if let Some(existing) = self.store.get_mesh(&id)? {
+            // Repair a file lost or damaged after its row was written (a delete racing an
+            // upload, a disk gone wrong): the bytes are at hand.
+            if !matches!(self.blobs.read(&id), Ok(Some(_))) {
+                self.blobs.write(&id, bytes).map_err(io)?;
+            }
+            return Ok((existing, false));
+        }
+        let summary = summarize(bytes).map_err(|e| {
+            Problem::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid mesh",
+                e.to_string(),
+            )
+            .with_type("/problems/invalid-mesh")
+        })?;
+        let summary =
+            serde_json::to_value(&summary).map_err(|e| Problem::internal(e.to_string()))?;
+        self.blobs.write(&id, bytes).map_err(io)?;
+        let (record, new) = self.store.add_mesh(&id, bytes.len() as u64, &summary)?;
+        if !self.blobs.exists(&id) {
+            // Deleted and re-added between our write and our row: write it again.
+            self.blobs.write(&id, bytes).map_err(io)?;
+        }
+        Ok((record, new))
+    }
+
+    pub fn get(&self, id: &str) -> Result<Option<MeshRecord>, StoreError> {
+        if !is_mesh_id(id) {
+            return Ok(None);
+        }
+        self.store.get_mesh(id)
+    }
+
+    /// The file of a stored mesh (checked against its id), None if there is no such mesh.
+    pub fn file(&self, id: &str) -> Result<Option<Vec<u8>>, Problem> {
+        if self.get(id)?.is_none() {
+            return Ok(None);
+        }
+        match self.blobs.read(id) {
+            Ok(Some(b)) => Ok(Some(b)),
+            Ok(None) => Err(missing_file(id)),
+            Err(e) => Err(Problem::internal(e.to_string())),
+        }
+    }
+
+    /// Deletes a mesh unless a queued or running job uses it: the row, then the file, then
+    /// this node's cached copy.
+    pub fn delete(&self, id: &str) -> Result<MeshDeletion, Problem> {
+        if !is_mesh_id(id) {
+            return Ok(MeshDeletion::Absent);
+        }
+        let outcome = self.store.delete_mesh(id)?;
+        if outcome == MeshDeletion::Deleted {
+            self.blobs
+                .remove(id)
+                .map_err(|e| Problem::internal(format!("mesh file {id}: {e}")))?;
+            self.cache.lock().unwrap().retain(|(k, _)| k != id);
+        }
+        Ok(outcome)
+    }
+
+    /// The checked 2D mesh of an uploaded id or a bundled name, cached.
+    fn load_cached(&self, name: &str) -> Result<Arc<Mesh>, String> {
+        let uploaded = is_mesh_id(name);
+        if uploaded {
+            match self.store.get_mesh(name) {
+                Ok(Some(_)) => {}
+                Ok(None) => return Err(unknown_mesh(name)),
+                Err(e) => return Err(format!("mesh {name}: the job store cannot be read: {e}")),
+            }
+        } else if presets::bundled_mesh(name).is_none() {
+            return Err(unknown_mesh(name));
+        }
+        {
+            let mut cache = self.cache.lock().unwrap();
+            if let Some(i) = cache.iter().position(|(k, _)| k == name) {
+                let hit = cache.remove(i);
+                let mesh = hit.1.clone();
+                cache.push(hit);
+                return Ok(mesh);
+            }
+        }
+        let mesh = if uploaded {
+            let bytes = match self.blobs.read(name) {
+                Ok(Some(b)) => b,
+                Ok(None) => return Err(missing_file(name).detail),
+                Err(e) => return Err(e.to_string()),
+            };
+            // 3D meshes are stored, but scenes are 2D: the importer says so.
+            import::<2>(&bytes).map_err(|e| format!("mesh {name}: {e}"))?
+        } else {
+            Bundled.load(name)?
+        };
+        let mesh = Arc::new(mesh);
+        let mut cache = self.cache.lock().unwrap();
+        cache.retain(|(k, _)| k != name);
+        if cache.len() >= CACHED {
+            cache.remove(0);
+        }
+        cache.push((name.to_string(), mesh.clone()));
+        Ok(mesh)
+    }
+}
+
+fn missing_file(id: &str) -> Problem {
+    Problem::conflict(format!(
+        "the file of mesh {id} is missing from the data directory; upload the .msh again with POST /meshes"
+    ))
+}
+
+impl MeshFiles for Meshes {
+    /// An uploaded mesh by id, or a mesh bundled with the presets by name; anything else is
+    /// refused with [`unknown_mesh`]'s sentence.
+    fn load(&self, name: &str) -> Result<Mesh, String> {
+        self.load_cached(name).map(|m| (*m).clone())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn mesh_references_of_scenes_and_studies() {
+        let id = "a".repeat(64);
+        assert_eq!(mesh_ref(&json!({"domain": {"mesh": id}})), Some(id.clone()));
+        assert_eq!(
+            mesh_ref(&json!({"study": {"scene": {"domain": {"mesh": id}}}})),
+            Some(id.clone())
+        );
+        for doc in [
+            json!({"domain": {"mesh": "plate-with-hole.msh"}}),
+            json!({"domain": {"width": 1, "height": 1}}),
+            json!({"domain": {"mesh": id.to_uppercase()}}),
+            json!({"study": {"scene": "paper-convergence"}}),
+            json!({"domain": {"mesh": 3}}),
+            json!([]),
+        ] {
+            assert_eq!(mesh_ref(&doc), None, "{doc}");
+        }
+    }
+
+    #[test]
+    fn unknown_names_point_to_the_upload() {
+        let m = unknown_mesh("../../etc/passwd");
+        assert!(
+            m.starts_with("no uploaded mesh with id \"../../etc/passwd\""),
+            "{m}"
+        );
+        assert!(m.contains("POST /meshes"), "{m}");
+        let id = "0".repeat(64);
+        assert_eq!(
+            unknown_mesh(&id),
+            format!("no uploaded mesh with id {id}; upload the .msh with POST /meshes")
+        );
+    }
+
+    #[test]
+    fn loads_uploads_and_bundled_meshes_and_nothing_else() {
+        let dir =
+            std::env::temp_dir().join(format!("contact-sim-meshlib-{}", uuid::Uuid::new_v4()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let store: Arc<dyn Store> =
+            Arc::new(crate::store::sqlite::SqliteStore::open_in_memory().unwrap());
+        let meshes = Meshes::new(store, MeshBlobs::new(&dir).unwrap());
+        let bytes = presets::bundled_mesh("plate-with-hole.msh").unwrap();
+        let bundled = meshes.load("plate-with-hole.msh").unwrap();
+        let (rec, new) = meshes.upload(bytes).unwrap();
+        assert!(new);
+        assert_eq!(rec.id, mesh_id(bytes));
+        assert_eq!(rec.summary["nodes"], bundled.n_nodes());
+        let (again, new) = meshes.upload(bytes).unwrap();
+        assert!(!new);
+        assert_eq!(again, rec);
+        let uploaded = meshes.load(&rec.id).unwrap();
+        assert_eq!(uploaded.nodes, bundled.nodes);
+        // Served from the cache the second time, the same mesh.
+        assert_eq!(meshes.load(&rec.id).unwrap().nodes, bundled.nodes);
+        let e = meshes.load("/etc/passwd").unwrap_err();
+        assert!(e.starts_with("no uploaded mesh with id"), "{e}");
+        let e = meshes
+            .upload(b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n")
+            .unwrap_err();
+        assert_eq!(e.status, 422);
+        assert!(e.detail.contains("2.2"), "{}", e.detail);
+        assert_eq!(meshes.upload(b"").unwrap_err().status, 422);
+        assert_eq!(meshes.delete(&rec.id).unwrap(), MeshDeletion::Deleted);
+        let e = meshes.load(&rec.id).unwrap_err();
+        assert_eq!(e, unknown_mesh(&rec.id));
+        assert_eq!(meshes.delete(&rec.id).unwrap(), MeshDeletion::Absent);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
