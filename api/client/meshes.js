@@ -4,7 +4,7 @@
 // the scene editor, where it can still be edited before it is run.
 //
 // The summary's figures may come at the top level of the answer or under "summary":
-//   {id, bytes, created, dimension, nodes, cells, boundary_facets, groups: [{name, facets,
+//   {id, bytes, created_at, dimension, nodes, cells, boundary_facets, groups: [{name, facets,
 //    measure}], bounding_box: {min, max}, min_cell_size, max_cell_size, min_quality,
 //    mean_quality}
 
@@ -27,7 +27,7 @@ export function guessKind(name) {
 /** The summary figures of a POST /meshes answer (top level or under "summary"). */
 export function summaryOf(answer) {
   const s = answer?.summary ?? answer ?? {};
-  return { ...s, id: answer?.id ?? s.id, bytes: answer?.bytes ?? s.bytes, created: answer?.created ?? s.created };
+  return { ...s, id: answer?.id ?? s.id, bytes: answer?.bytes ?? s.bytes, created: answer?.created_at ?? answer?.created ?? s.created_at ?? s.created };
 }
 
 /**

@@ -230,7 +230,11 @@ fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), Proble
     let nodes = plan.base.n_nodes();
     if nodes > cfg.max_nodes {
         return Err(Problem::invalid_field(
-            "/study/reference/h",
+            if plan.base.body.is_some() {
+                "/study/reference/refine"
+            } else {
+                "/study/reference/h"
+            },
             format!(
                 "the reference mesh has {nodes} nodes, more than this server's limit of {}",
                 cfg.max_nodes
