@@ -25,8 +25,8 @@ pub enum ImportError {
     Mesh(#[from] MeshError),
 }
 
-/// Reads, checks and converts an MSH 4.1 file (ASCII or binary) into a D-dimensional mesh.
-pub fn import<const D: usize>(bytes: &[u8]) -> Result<Mesh<D>, ImportError> {
+/// Reads an MSH 4.1 file of at most [`MAX_FILE_BYTES`].
+fn read(bytes: &[u8]) -> Result<MshMesh, ImportError> {
     if bytes.len() > MAX_FILE_BYTES {
         return Err(MeshError::TooLarge {
             what: "bytes",
@@ -35,8 +35,12 @@ pub fn import<const D: usize>(bytes: &[u8]) -> Result<Mesh<D>, ImportError> {
         }
         .into());
     }
-    let m = msh::read(bytes)?;
-    Ok(from_msh(&m)?)
+    Ok(msh::read(bytes)?)
+}
+
+/// Reads, checks and converts an MSH 4.1 file (ASCII or binary) into a D-dimensional mesh.
+pub fn import<const D: usize>(bytes: &[u8]) -> Result<Mesh<D>, ImportError> {
+    Ok(from_msh(&read(bytes)?)?)
 }
 
 /// The checked mesh of a read file (see the module doc).
@@ -160,15 +164,7 @@ pub fn summary<const D: usize>(mesh: &Mesh<D>) -> MeshSummary {
 
 /// Reads and checks an uploaded file of any supported dimension and summarises it.
 pub fn summarize(bytes: &[u8]) -> Result<MeshSummary, ImportError> {
-    if bytes.len() > MAX_FILE_BYTES {
-        return Err(MeshError::TooLarge {
-            what: "bytes",
-            count: bytes.len(),
-            max: MAX_FILE_BYTES,
-        }
-        .into());
-    }
-    let m = msh::read(bytes)?;
+    let m = read(bytes)?;
     Ok(match m.dim {
         2 => summary(&from_msh::<2>(&m)?),
         _ => summary(&from_msh::<3>(&m)?),
