@@ -61,7 +61,7 @@ fn main() {
             .map(|_| {
                 let p = contact_core::scene::validate(&scene).expect("valid scene");
                 let t = Instant::now();
-                contact_core::run::run(p, Default::default(), |_, _| {
+                contact_core::run::run::<2>(p, Default::default(), |_, _| {
                     std::ops::ControlFlow::Continue(())
                 })
                 .expect("run");

@@ -391,7 +391,6 @@ impl Runtime {
         worker: &str,
         cancel: &AtomicBool,
     ) -> Result<Outcome, Problem> {
-        let id = job.id;
         if let Some(mesh) = super::meshes::mesh_ref(&job.scene) {
             // The mesh is read through the store: wait for a shared database that is
             // restarting rather than fail the job for it.
@@ -400,10 +399,25 @@ impl Runtime {
         }
         let problem = scene::validate_with(&job.scene, &*self.meshes)
             .map_err(|e| failure("stored scene no longer validates", &e.to_string()))?;
+        match problem.dim() {
+            2 => self.execute_in::<2>(job, worker, cancel, problem),
+            _ => self.execute_in::<3>(job, worker, cancel, problem),
+        }
+    }
+
+    /// [`Self::execute`] of a validated problem of dimension D.
+    fn execute_in<const D: usize>(
+        &self,
+        job: &JobRecord,
+        worker: &str,
+        cancel: &AtomicBool,
+        problem: contact_core::problem::Problem,
+    ) -> Result<Outcome, Problem> {
+        let id = job.id;
         let steps = problem.steps;
         let output = problem.output;
         let settings = SolverSettings::default();
-        let mut sim = Simulation::new(problem, settings).map_err(|e| solve_problem(&e))?;
+        let mut sim = Simulation::<D>::new(problem, settings).map_err(|e| solve_problem(&e))?;
         let mut estimator = match sim.problem.error_estimate {
             true => Some(ErrorEstimator::new(&sim, settings).map_err(|e| solve_problem(&e))?),
             false => None,
@@ -560,12 +574,12 @@ impl Runtime {
     /// [`Self::save_checkpoint`]; a store that is unreachable just now (shared database
     /// restarting) skips this checkpoint — the job goes on and the next one is tried a
     /// second later — while any other failure fails the job.
-    fn checkpoint(
+    fn checkpoint<const D: usize>(
         &self,
         id: Uuid,
-        sim: &Simulation,
+        sim: &Simulation<D>,
         reports: &[StepReport],
-        estimator: Option<&ErrorEstimator>,
+        estimator: Option<&ErrorEstimator<D>>,
     ) -> Result<(), Problem> {
         match self.save_checkpoint(id, sim, reports, estimator) {
             Ok(()) => Ok(()),
@@ -579,12 +593,12 @@ impl Runtime {
 
     /// Saves the per-step reports, then (u, ζ, step) in the store. A crash between the two
     /// leaves more reports than the checkpoint step; `resume` truncates them.
-    fn save_checkpoint(
+    fn save_checkpoint<const D: usize>(
         &self,
         id: Uuid,
-        sim: &Simulation,
+        sim: &Simulation<D>,
         reports: &[StepReport],
-        estimator: Option<&ErrorEstimator>,
+        estimator: Option<&ErrorEstimator<D>>,
     ) -> Result<(), StoreError> {
         let bytes = serde_json::to_vec(reports).expect("reports serialise");
         self.results.write_atomic(id, REPORTS_FILE, &bytes)?;
@@ -606,7 +620,11 @@ impl Runtime {
 
     /// Restores the last checkpoint, if any; returns the reports and error-estimate rows up
     /// to it.
-    fn resume(&self, id: Uuid, sim: &mut Simulation) -> Result<Option<Resumed>, String> {
+    fn resume<const D: usize>(
+        &self,
+        id: Uuid,
+        sim: &mut Simulation<D>,
+    ) -> Result<Option<Resumed>, String> {
         let Some((step, bytes)) = self
             .with_store_retry(|| self.store.load_checkpoint(id))
             .map_err(|e| e.to_string())?

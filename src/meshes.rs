@@ -20,8 +20,8 @@ use crate::problem::Problem;
 use crate::store::meshes::{is_mesh_id, mesh_id, MeshBlobs};
 use crate::store::{MeshDeletion, MeshRecord, Store, StoreError};
 use axum::http::StatusCode;
-use contact_core::mesh::import::{import, summarize};
-use contact_core::mesh::Mesh;
+use contact_core::mesh::import::{import_any, summarize};
+use contact_core::mesh::AnyMesh;
 use contact_core::scene::{presets, Bundled, MeshFiles};
 use serde_json::Value;
 use std::sync::{Arc, Mutex};
@@ -62,7 +62,7 @@ pub struct Meshes {
     store: Arc<dyn Store>,
     blobs: MeshBlobs,
     /// Most recently used last.
-    cache: Mutex<Vec<(String, Arc<Mesh>)>>,
+    cache: Mutex<Vec<(String, Arc<AnyMesh>)>>,
     /// Uploads parsed at the same time (each holds its file and its mesh in memory); the
     /// handler waits for a slot before handing an upload to the blocking pool.
     pub parse_slots: tokio::sync::Semaphore,
@@ -159,7 +159,7 @@ impl Meshes {
     }
 
     /// The checked 2D mesh of an uploaded id or a bundled name, cached.
-    fn load_cached(&self, name: &str) -> Result<Arc<Mesh>, String> {
+    fn load_cached(&self, name: &str) -> Result<Arc<AnyMesh>, String> {
         let uploaded = is_mesh_id(name);
         if uploaded {
             match self.store.get_mesh(name) {
@@ -186,7 +186,7 @@ impl Meshes {
                 Err(e) => return Err(e.to_string()),
             };
             // 3D meshes are stored, but scenes are 2D: the importer says so.
-            import::<2>(&bytes).map_err(|e| format!("mesh {name}: {e}"))?
+            import_any(&bytes).map_err(|e| format!("mesh {name}: {e}"))?
         } else {
             Bundled.load(name)?
         };
@@ -210,7 +210,7 @@ fn missing_file(id: &str) -> Problem {
 impl MeshFiles for Meshes {
     /// An uploaded mesh by id, or a mesh bundled with the presets by name; anything else is
     /// refused with [`unknown_mesh`]'s sentence.
-    fn load(&self, name: &str) -> Result<Mesh, String> {
+    fn load(&self, name: &str) -> Result<AnyMesh, String> {
         self.load_cached(name).map(|m| (*m).clone())
     }
 }
@@ -273,9 +273,12 @@ mod tests {
         assert!(!new);
         assert_eq!(again, rec);
         let uploaded = meshes.load(&rec.id).unwrap();
-        assert_eq!(uploaded.nodes, bundled.nodes);
+        assert_eq!(uploaded.get::<2>().nodes, bundled.get::<2>().nodes);
         // Served from the cache the second time, the same mesh.
-        assert_eq!(meshes.load(&rec.id).unwrap().nodes, bundled.nodes);
+        assert_eq!(
+            meshes.load(&rec.id).unwrap().get::<2>().nodes,
+            bundled.get::<2>().nodes
+        );
         let e = meshes.load("/etc/passwd").unwrap_err();
         assert!(e.starts_with("no uploaded mesh with id"), "{e}");
         let e = meshes

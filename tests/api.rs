@@ -273,7 +273,7 @@ fn check_vtu_arrays(vtu: &str, nodes: usize, cells: usize) {
         assert_eq!(len, bytes.len() - 8, "{name}");
         let count = len / width / comps;
         let expect = match name.as_str() {
-            "Points" | "u" | "w" | "zeta" => nodes,
+            "Points" | "u" | "w" | "zeta" | "contact_state" | "slip_velocity" => nodes,
             "connectivity" => 3 * cells,
             "offsets" | "types" | "sigma" | "von_mises" => cells,
             "TimeValue" | "Step" => 1,
@@ -528,7 +528,7 @@ fn restart_keeps_results_and_resumes_running_jobs_from_checkpoints() {
     // The same result as an uninterrupted run, bit for bit (the checkpoint carries the
     // solvers' warm starts).
     let p = contact_core::scene::validate(&scene).unwrap();
-    let straight = contact_core::run::run(p, Default::default(), |_, _| {
+    let straight = contact_core::run::run::<2>(p, Default::default(), |_, _| {
         std::ops::ControlFlow::Continue(())
     })
     .unwrap();

@@ -254,7 +254,7 @@ fn kill_9_and_restart_loses_nothing() {
         .sort_by_key(|j| std::cmp::Reverse(interrupted.get(&j.id).copied().unwrap_or(0)));
     for j in by_interruptions.iter().take(2) {
         let p = contact_core::scene::validate(&j.scene).unwrap();
-        let straight = contact_core::run::run(p, Default::default(), |_, _| {
+        let straight = contact_core::run::run::<2>(p, Default::default(), |_, _| {
             std::ops::ControlFlow::Continue(())
         })
         .unwrap();

@@ -781,8 +781,49 @@ fn jobs_on_uploaded_meshes() {
     let p = assert_problem(&post_json(a, "/jobs", &with_h), 422);
     assert!(p.to_string().contains("refine, not h"), "{p}");
     // A stored 3D mesh: scenes are 2D.
+    // The plate's 2D scene on the tetrahedra of the cylinder: its 2-vectors are refused as
+    // such.
     let p = assert_problem(&post_json(a, "/jobs", &plate_scene(&c_id, "x", 8)), 422);
-    assert_eq!(p["errors"][0]["pointer"], "/domain/mesh", "{p}");
+    let errors = p["errors"].as_array().unwrap();
+    assert!(
+        errors
+            .iter()
+            .any(|e| e["pointer"] == "/boundary/2/f2"
+                && e["message"].as_str().unwrap().contains("3D")),
+        "{p}"
+    );
+    // A 3D job on the uploaded tetrahedra: fields with 3-vectors and tetrahedra, VTK_TETRA.
+    let mut solid = contact_core::scene::presets::get("standing-cylinder").unwrap();
+    solid["domain"] = json!({"mesh": c_id});
+    solid["time"] = json!({"t_end": 1, "N": 2});
+    let r = post_json(a, "/jobs", &solid);
+    assert_eq!(r.status, 202, "{}", r.text());
+    let solid_job = r.json()["id"].as_str().unwrap().to_string();
+    let done = wait_status(
+        a,
+        &solid_job,
+        &["succeeded", "failed"],
+        Duration::from_secs(120),
+    );
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let f = get(a, &format!("/jobs/{solid_job}/fields?step=last&mesh=1")).json();
+    let c_nodes = f["mesh"]["nodes"].as_array().unwrap().len();
+    assert_eq!(f["mesh"]["dim"], 3);
+    assert_eq!(f["mesh"]["nodes"][0].as_array().unwrap().len(), 3);
+    assert_eq!(f["u"].as_array().unwrap().len(), 3 * c_nodes);
+    let tets = f["mesh"]["tetrahedra"].as_array().unwrap().len();
+    assert_eq!(f["sigma"].as_array().unwrap().len(), tets);
+    assert_eq!(f["sigma"][0].as_array().unwrap().len(), 6);
+    assert!(
+        f["contact"][0]["tangential_velocity"].is_array(),
+        "{}",
+        f["contact"][0]
+    );
+    let vtu = get(a, &format!("/jobs/{solid_job}/fields/last.vtu")).text();
+    assert!(vtu.contains(&format!("NumberOfCells=\"{tets}\"")));
+    let summary = get(a, &format!("/jobs/{solid_job}/summary")).json();
+    assert_eq!(summary["mesh"]["dim"], 3);
+    assert_eq!(summary["mesh"]["tetrahedra"], tets);
     // A bundled mesh is still known by its name.
     let mut bundled = plate_scene("plate-with-hole.msh", "bundled", 4);
     bundled["output"]["every"] = json!(4);

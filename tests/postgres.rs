@@ -229,7 +229,7 @@ fn wait_for_checkpoint(addr: SocketAddr, id: &str) -> (String, u64) {
 /// The job's w_V at T equals an in-process run's of `scene`, bit for bit.
 fn assert_w_v_of_in_process_run(addr: SocketAddr, id: &str, scene: &Value) {
     let p = contact_core::scene::validate(scene).unwrap();
-    let inproc = contact_core::run::run(p, Default::default(), |_, _| {
+    let inproc = contact_core::run::run::<2>(p, Default::default(), |_, _| {
         std::ops::ControlFlow::Continue(())
     })
     .unwrap();

@@ -1,8 +1,8 @@
 //! `domain.mesh` on the command line: a gmsh file path relative to the scene file's folder
 //! (or absolute), else a mesh bundled with the presets.
 
-use contact_core::mesh::import::{import, MAX_FILE_BYTES};
-use contact_core::mesh::Mesh;
+use contact_core::mesh::import::{import_any, MAX_FILE_BYTES};
+use contact_core::mesh::AnyMesh;
 use contact_core::scene::{Bundled, MeshFiles};
 use std::path::PathBuf;
 
@@ -10,7 +10,7 @@ use std::path::PathBuf;
 pub struct SceneDir(pub PathBuf);
 
 impl MeshFiles for SceneDir {
-    fn load(&self, name: &str) -> Result<Mesh, String> {
+    fn load(&self, name: &str) -> Result<AnyMesh, String> {
         let path = self.0.join(name);
         let meta = match std::fs::metadata(&path) {
             Ok(m) => m,
@@ -28,6 +28,6 @@ impl MeshFiles for SceneDir {
         }
         let bytes = std::fs::read(&path)
             .map_err(|e| format!("cannot read the mesh file {}: {e}", path.display()))?;
-        import::<2>(&bytes).map_err(|e| format!("{}: {e}", path.display()))
+        import_any(&bytes).map_err(|e| format!("{}: {e}", path.display()))
     }
 }

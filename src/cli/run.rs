@@ -3,7 +3,11 @@
 use super::mesh_files::SceneDir;
 use super::{fail, preset, pretty, progress};
 use clap::Args;
+use contact_core::mesh::AnyMesh;
 use contact_core::output::fields::MeshJson;
+use contact_core::output::Summary;
+use contact_core::problem::Problem;
+use contact_core::run::RunError;
 use contact_core::scene::{self, presets, Overrides};
 use contact_core::solve::SolverSettings;
 use serde_json::Value;
@@ -82,35 +86,10 @@ pub fn main(args: RunArgs) -> ExitCode {
         ..Default::default()
     };
     let bar = progress::bar(problem.steps as u64, "steps");
-    let mut io_error = None;
-    let mut wrote_mesh = false;
-    let result = contact_core::run::run(problem, settings, |sim, r| {
-        bar.inc(1);
-        let Some(dir) = &fields_dir else {
-            return ControlFlow::Continue(());
-        };
-        let mut write = |path: PathBuf, json: String| match std::fs::write(&path, json) {
-            Ok(()) => ControlFlow::Continue(()),
-            Err(e) => {
-                io_error = Some(format!("cannot write {}: {e}", path.display()));
-                ControlFlow::Break(())
-            }
-        };
-        if !wrote_mesh {
-            wrote_mesh = true;
-            write(
-                dir.parent().unwrap().join("mesh.json"),
-                to_json(&MeshJson::new(&sim.mesh, &sim.problem.boundary)),
-            )?;
-        }
-        if sim.problem.output.stores(r.n, sim.problem.steps) {
-            write(
-                dir.join(format!("step_{:05}.json", r.n)),
-                to_json(&sim.fields()),
-            )?;
-        }
-        ControlFlow::Continue(())
-    });
+    let (result, io_error) = match problem.dim() {
+        2 => run_writing::<2>(problem, settings, fields_dir.as_deref(), &bar),
+        _ => run_writing::<3>(problem, settings, fields_dir.as_deref(), &bar),
+    };
     bar.finish_and_clear();
     match result {
         Ok(summary) => {
@@ -125,6 +104,47 @@ pub fn main(args: RunArgs) -> ExitCode {
         }
         Err(e) => fail(1, &io_error.unwrap_or_else(|| e.to_string())),
     }
+}
+
+/// Runs the problem (of dimension D), writing `mesh.json` and the stored steps' JSON into
+/// `fields_dir`'s parent and `fields_dir` when given; the error of a failed write, if any.
+fn run_writing<const D: usize>(
+    problem: Problem,
+    settings: SolverSettings,
+    fields_dir: Option<&Path>,
+    bar: &indicatif::ProgressBar,
+) -> (Result<Summary, RunError>, Option<String>) {
+    let mut io_error = None;
+    let mut wrote_mesh = false;
+    let result = contact_core::run::run::<D>(problem, settings, |sim, r| {
+        bar.inc(1);
+        let Some(dir) = fields_dir else {
+            return ControlFlow::Continue(());
+        };
+        let mut write = |path: PathBuf, json: String| match std::fs::write(&path, json) {
+            Ok(()) => ControlFlow::Continue(()),
+            Err(e) => {
+                io_error = Some(format!("cannot write {}: {e}", path.display()));
+                ControlFlow::Break(())
+            }
+        };
+        if !wrote_mesh {
+            wrote_mesh = true;
+            let mesh = AnyMesh::from_mesh(sim.mesh.clone());
+            write(
+                dir.parent().unwrap().join("mesh.json"),
+                to_json(&MeshJson::new(&mesh, &sim.problem.boundary)),
+            )?;
+        }
+        if sim.problem.output.stores(r.n, sim.problem.steps) {
+            write(
+                dir.join(format!("step_{:05}.json", r.n)),
+                to_json(&sim.fields()),
+            )?;
+        }
+        ControlFlow::Continue(())
+    });
+    (result, io_error)
 }
 
 /// The scene document of a file or a preset (exactly one of them).

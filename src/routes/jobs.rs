@@ -200,15 +200,21 @@ fn check_limits(
         ));
     }
     let f = p.output.fields;
-    let per_node = 2 * f.u as usize + 2 * f.w as usize + f.zeta as usize;
-    let per_cell = 3 * f.sigma as usize + f.von_mises as usize;
-    // Cells: at most 4 per rectangle cell (the cross pattern); ≈ 2 per node on any triangulation.
-    let cells = match &p.body {
-        None => {
+    let d = p.dim();
+    let per_node = d * f.u as usize + d * f.w as usize + f.zeta as usize;
+    let per_cell = 3 * (d - 1) * f.sigma as usize + f.von_mises as usize;
+    // Cells: at most 4 per rectangle cell (the cross pattern), 6 per box cell; ≈ 2 per node on
+    // any triangulation, ≈ 6 per node on a tetrahedral mesh.
+    let cells = match (&p.body, p.depth_cells()) {
+        (None, Some(nz)) => {
+            let (nx, ny) = p.cells();
+            6 * nx * ny * nz
+        }
+        (None, None) => {
             let (nx, ny) = p.cells();
             4 * nx * ny
         }
-        Some(_) => 2 * nodes,
+        (Some(_), _) => 2 * (d - 1) * (d - 1) * nodes,
     };
     let per_step = 8 * (per_node * nodes + per_cell * cells) as u64 + 64;
     let stored = (1..=p.steps)

@@ -18,11 +18,11 @@ use crate::stream::blocking_body;
 use axum::extract::{Path, State};
 use axum::http::{header, HeaderValue};
 use axum::response::{IntoResponse, Response};
-use contact_core::mesh::Mesh;
+use contact_core::mesh::AnyMesh;
 use contact_core::output::fields::MeshJson;
 use contact_core::output::stored::decode_step;
-use contact_core::output::vtk::{write_pvd, write_vtu};
-use contact_core::solve::stepper::{initial_fields, StepFields};
+use contact_core::output::vtk::{write_mesh_vtu, write_pvd};
+use contact_core::solve::stepper::{initial_fields_of, StepFields};
 use uuid::Uuid;
 
 const FIELD_NAMES: [&str; 6] = ["u", "w", "zeta", "sigma", "von_mises", "contact"];
@@ -108,7 +108,7 @@ pub(super) fn with_type(bytes: Vec<u8>, content_type: &'static str) -> Response 
 fn scene_of(
     meshes: &Meshes,
     rec: &JobRecord,
-) -> Result<(contact_core::problem::Problem, Mesh), Problem> {
+) -> Result<(contact_core::problem::Problem, AnyMesh), Problem> {
     let p = contact_core::scene::validate_with(&rec.scene, meshes).map_err(|e| {
         match e.0.iter().find(|f| f.pointer == "/domain/mesh") {
             Some(f) if crate::meshes::mesh_ref(&rec.scene).is_some() => Problem::conflict(format!(
@@ -119,13 +119,13 @@ fn scene_of(
         }
     })?;
     let mesh = p
-        .mesh()
+        .any_mesh()
         .map_err(|e| Problem::internal(format!("stored scene: {e}")))?;
     Ok((p, mesh))
 }
 
 /// The mesh and the time step k. Blocking.
-fn mesh_of(meshes: &Meshes, rec: &JobRecord) -> Result<(Mesh, f64), Problem> {
+fn mesh_of(meshes: &Meshes, rec: &JobRecord) -> Result<(AnyMesh, f64), Problem> {
     let (p, mesh) = scene_of(meshes, rec)?;
     Ok((mesh, p.k()))
 }
@@ -176,7 +176,7 @@ fn load_step(state: &AppState, rec: &JobRecord, n: usize) -> Result<StepFields, 
     let id = rec.id;
     if n == 0 {
         let (p, mesh) = scene_of(&state.rt.meshes, rec)?;
-        return initial_fields(&p, &mesh)
+        return initial_fields_of(&p, &mesh)
             .map_err(|e| Problem::internal(format!("initial state of the stored scene: {e}")));
     }
     let bytes = state
@@ -407,7 +407,7 @@ pub async fn vtu(
     })
     .await?;
     Ok(blocking_body("application/xml", move |w| {
-        write_vtu(w, &mesh.nodes, mesh.triangles(), &f)
+        write_mesh_vtu(w, &mesh, &f)
     }))
 }
 
@@ -486,7 +486,7 @@ pub async fn archive(
         for n in steps {
             let f = load_step(&st, &rec, n).map_err(io)?;
             let mut buf = Vec::new();
-            write_vtu(&mut buf, &mesh.nodes, mesh.triangles(), &f)?;
+            write_mesh_vtu(&mut buf, &mesh, &f)?;
             member(&name(n), &buf)?;
         }
         tar.finish()

@@ -109,7 +109,7 @@ fn step_time(mut doc: serde_json::Value, steps: usize) -> (f64, usize, usize) {
     let mut t = f64::INFINITY;
     let mut sizes = (0, 0);
     for _ in 0..3 {
-        let mut sim = Simulation::new(p.clone(), SolverSettings::default()).expect("set-up");
+        let mut sim = Simulation::<2>::new(p.clone(), SolverSettings::default()).expect("set-up");
         let s = Instant::now();
         while !sim.finished() {
             sim.step().expect("step");

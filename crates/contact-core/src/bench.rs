@@ -93,7 +93,19 @@ fn one(preset: &str, level: usize) -> Result<BenchLevel, Box<dyn std::error::Err
         },
     );
     let problem = scene::validate(&doc)?;
-    let mut sim = Simulation::new(problem, SolverSettings::default())?;
+    match problem.dim() {
+        2 => measure::<2>(problem, level, start),
+        _ => measure::<3>(problem, level, start),
+    }
+}
+
+/// Runs a validated problem to the end and measures it (the clock started at `start`).
+fn measure<const D: usize>(
+    problem: crate::problem::Problem,
+    level: usize,
+    start: Instant,
+) -> Result<BenchLevel, Box<dyn std::error::Error>> {
+    let mut sim = Simulation::<D>::new(problem, SolverSettings::default())?;
     let setup_s = start.elapsed().as_secs_f64();
     let t0 = Instant::now();
     let mut last = None;

@@ -52,9 +52,14 @@ pub fn unsupported(p: &Problem) -> Option<String> {
         ));
     }
     let (nx, ny) = p.cells();
-    if nx % 2 != 0 || ny % 2 != 0 {
+    let nz = p.depth_cells();
+    if nx % 2 != 0 || ny % 2 != 0 || nz.is_some_and(|nz| nz % 2 != 0) {
+        let cells = match nz {
+            Some(nz) => format!("{nx} × {ny} × {nz}"),
+            None => format!("{nx} × {ny}"),
+        };
         return Some(format!(
-            "the {nx} × {ny} cells of the domain cannot be coarsened by 2"
+            "the {cells} cells of the domain cannot be coarsened by 2"
         ));
     }
     None
@@ -92,9 +97,9 @@ pub struct ErrorEstimate {
 }
 
 /// Runs the coarse companions in lock-step with the fine run.
-pub struct ErrorEstimator {
-    coarse: Simulation,
-    coarser: Option<Simulation>,
+pub struct ErrorEstimator<const D: usize = 2> {
+    coarse: Simulation<D>,
+    coarser: Option<Simulation<D>>,
     mass: Csr,
     damage: bool,
     seconds: f64,
@@ -128,14 +133,18 @@ fn has_coarser(p: &Problem) -> bool {
         Some(b) => b.refine >= 2,
         None => {
             let (nx, ny) = p.cells();
-            p.cells_per_unit.is_multiple_of(4) && nx % 4 == 0 && ny % 4 == 0
+            let nz = p.depth_cells().unwrap_or(0);
+            p.cells_per_unit.is_multiple_of(4) && nx % 4 == 0 && ny % 4 == 0 && nz.is_multiple_of(4)
         }
     }
 }
 
-impl ErrorEstimator {
+impl<const D: usize> ErrorEstimator<D> {
     /// Set-up for `fine`, whose problem must pass [`unsupported`].
-    pub fn new(fine: &Simulation, settings: SolverSettings) -> Result<ErrorEstimator, SolveError> {
+    pub fn new(
+        fine: &Simulation<D>,
+        settings: SolverSettings,
+    ) -> Result<ErrorEstimator<D>, SolveError> {
         let start = Instant::now();
         let p = &fine.problem;
         let coarse = Simulation::new(coarsened(p, 2), settings)?;
@@ -157,7 +166,7 @@ impl ErrorEstimator {
 
     /// Call after every fine step: advances the companions to the fine run's time when it
     /// is one of their nodes, and records an estimate at stored steps and at T.
-    pub fn after_step(&mut self, fine: &Simulation, stored: bool) -> Result<(), SolveError> {
+    pub fn after_step(&mut self, fine: &Simulation<D>, stored: bool) -> Result<(), SolveError> {
         let start = Instant::now();
         let n = fine.state.step;
         self.advance(n)?;
@@ -198,13 +207,13 @@ impl ErrorEstimator {
         Ok(())
     }
 
-    fn estimate(&self, fine: &Simulation) -> EstimateRow {
+    fn estimate(&self, fine: &Simulation<D>) -> EstimateRow {
         let n = fine.state.step;
         let (mesh, geo) = (&fine.mesh, &fine.geo);
         let mut scratch = vec![0.0; mesh.n_nodes()];
-        let lift = |s: &Simulation| {
+        let lift = |s: &Simulation<D>| {
             (
-                prolongate(&s.mesh, &s.w, 2, mesh).expect("nested meshes"),
+                prolongate(&s.mesh, &s.w, D, mesh).expect("nested meshes"),
                 prolongate(&s.mesh, &s.state.zeta, 1, mesh).expect("nested meshes"),
             )
         };

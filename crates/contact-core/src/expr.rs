@@ -93,14 +93,16 @@ const CONSTANTS: &[(&str, f64)] = &[
 ];
 
 /// The coordinates a formula may use, in the order of [`Expr::eval`]'s arguments.
-const VARIABLES: [&str; 3] = ["x", "y", "t"];
+/// Variables in the order of the evaluation point (x, y, t, z): z last so 2D callers that
+/// never bind it keep their indices.
+const VARIABLES: [&str; 4] = ["x", "y", "t", "z"];
 
 /// A parsed formula f(x, y, t).
 #[derive(Clone)]
 pub struct Expr {
     source: String,
     tree: Ast,
-    uses: [bool; 3],
+    uses: [bool; 4],
 }
 
 impl fmt::Debug for Expr {
@@ -136,7 +138,7 @@ impl Expr {
                 ),
             });
         }
-        let mut uses = [false; 3];
+        let mut uses = [false; 4];
         tree.mark_variables(&mut uses);
         Ok(Expr {
             source: src.to_string(),
@@ -148,7 +150,17 @@ impl Expr {
     /// f(x, y, t).
     #[inline]
     pub fn eval(&self, x: f64, y: f64, t: f64) -> f64 {
-        self.tree.eval(&[x, y, t])
+        self.tree.eval(&[x, y, t, 0.0])
+    }
+
+    /// Value at the point (x, y, z) and time t.
+    #[inline]
+    pub fn eval3(&self, x: f64, y: f64, z: f64, t: f64) -> f64 {
+        self.tree.eval(&[x, y, t, z])
+    }
+
+    pub fn uses_z(&self) -> bool {
+        self.uses[3]
     }
 
     pub fn uses_x(&self) -> bool {
@@ -297,8 +309,8 @@ impl Ast {
         }
     }
 
-    /// The value at `xyt` = [x, y, t].
-    fn eval(&self, xyt: &[f64; 3]) -> f64 {
+    /// The value at `xyt` = [x, y, t, z].
+    fn eval(&self, xyt: &[f64; 4]) -> f64 {
         match self {
             Ast::Num(c) => *c,
             Ast::Var(i) => xyt[*i],
@@ -308,7 +320,7 @@ impl Ast {
     }
 
     /// Sets `uses[i]` for every coordinate i that occurs.
-    fn mark_variables(&self, uses: &mut [bool; 3]) {
+    fn mark_variables(&self, uses: &mut [bool; 4]) {
         match self {
             Ast::Num(_) => {}
             Ast::Var(i) => uses[*i] = true,
@@ -414,7 +426,7 @@ impl Parser<'_> {
                     ));
                 }
                 Err(format!(
-                    "unknown variable '{name}' at position {pos}: formulas may use only x, y, t \
+                    "unknown variable '{name}' at position {pos}: formulas may use only x, y, z, t \
                      (and the constants pi, e)"
                 ))
             }
@@ -579,8 +591,9 @@ mod tests {
 
     #[test]
     fn unknown_variables_are_refused_by_name() {
-        let err = Expr::parse("x + z").unwrap_err();
-        assert!(err.contains("'z'") && err.contains("x, y, t"), "{err}");
+        let err = Expr::parse("x + w").unwrap_err();
+        assert!(err.contains("'w'") && err.contains("x, y, z, t"), "{err}");
+        assert!(Expr::parse("x + z").unwrap().uses_z());
         assert!(Expr::parse("NaN").unwrap_err().contains("'NaN'"));
         assert!(Expr::parse("inf").unwrap_err().contains("'inf'"));
         assert!(Expr::parse("xy").unwrap_err().contains("'xy'"));

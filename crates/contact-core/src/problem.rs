@@ -10,10 +10,10 @@ use std::sync::Arc;
 use crate::expr::Expr;
 pub use crate::mesh::support::Support;
 use crate::mesh::support::TagError;
-use crate::mesh::Mesh;
+use crate::mesh::{AnyMesh, Mesh};
 pub use crate::mesh::{MeshPattern, Segment};
 
-/// A scalar datum f(x, y, t): a constant or a user formula parsed once.
+/// A scalar datum f(x, y, z, t): a constant or a user formula parsed once (z = 0 in 2D).
 #[derive(Debug, Clone)]
 pub enum ScalarField {
     Const(f64),
@@ -21,7 +21,7 @@ pub enum ScalarField {
 }
 
 impl ScalarField {
-    /// Value at the point (x, y) and time t.
+    /// Value at the point (x, y) (z = 0) and time t.
     #[inline]
     pub fn eval(&self, x: f64, y: f64, t: f64) -> f64 {
         match self {
@@ -30,11 +30,21 @@ impl ScalarField {
         }
     }
 
-    /// True when the value does not depend on x or y (load vectors then integrate exactly).
+    /// Value at the point p of R^D (D = 2 or 3) and time t.
+    #[inline]
+    pub fn at<const D: usize>(&self, p: &[f64; D], t: f64) -> f64 {
+        match self {
+            ScalarField::Const(c) => *c,
+            ScalarField::Expr(e) if D == 2 => e.eval(p[0], p[1], t),
+            ScalarField::Expr(e) => e.eval3(p[0], p[1], p[D - 1], t),
+        }
+    }
+
+    /// True when the value does not depend on x, y or z (load vectors then integrate exactly).
     pub fn is_constant_in_space(&self) -> bool {
         match self {
             ScalarField::Const(_) => true,
-            ScalarField::Expr(e) => !e.uses_x() && !e.uses_y(),
+            ScalarField::Expr(e) => !e.uses_x() && !e.uses_y() && !e.uses_z(),
         }
     }
 
@@ -43,13 +53,24 @@ impl ScalarField {
     }
 }
 
-/// A vector datum (f_x, f_y)(x, y, t).
+/// A vector datum (f_x, f_y, f_z)(x, y, z, t); in 2D only the first two components are read
+/// (the third is the constant 0).
 #[derive(Debug, Clone)]
-pub struct VectorField(pub [ScalarField; 2]);
+pub struct VectorField(pub [ScalarField; 3]);
 
 impl VectorField {
+    /// The constant plane vector (v_x, v_y, 0).
     pub fn constant(v: [f64; 2]) -> Self {
-        VectorField([ScalarField::Const(v[0]), ScalarField::Const(v[1])])
+        VectorField::constant3([v[0], v[1], 0.0])
+    }
+
+    pub fn constant3(v: [f64; 3]) -> Self {
+        VectorField(v.map(ScalarField::Const))
+    }
+
+    /// A plane vector field (f_x, f_y, 0).
+    pub fn plane(x: ScalarField, y: ScalarField) -> Self {
+        VectorField([x, y, ScalarField::Const(0.0)])
     }
 
     #[inline]
@@ -57,12 +78,18 @@ impl VectorField {
         [self.0[0].eval(x, y, t), self.0[1].eval(x, y, t)]
     }
 
+    /// Its first D components at the point p of R^D and time t.
+    #[inline]
+    pub fn at<const D: usize>(&self, p: &[f64; D], t: f64) -> [f64; D] {
+        std::array::from_fn(|c| self.0[c].at(p, t))
+    }
+
     pub fn is_zero(&self) -> bool {
-        self.0[0].is_zero() && self.0[1].is_zero()
+        self.0.iter().all(ScalarField::is_zero)
     }
 
     pub fn is_constant_in_space(&self) -> bool {
-        self.0[0].is_constant_in_space() && self.0[1].is_constant_in_space()
+        self.0.iter().all(ScalarField::is_constant_in_space)
     }
 }
 
@@ -179,10 +206,14 @@ pub struct Problem {
     pub name: String,
     /// The body when it is not a rectangle: a given mesh. None: the rectangle below.
     pub body: Option<Arc<Body>>,
-    /// Rectangle [0, width] × [0, height] (for a [`Body`], its bounding box's extents).
+    /// Rectangle [0, width] × [0, height], or with `depth` the box [0, width] × [0, height] ×
+    /// [0, depth] (for a [`Body`], its bounding box's extents).
     pub width: f64,
     pub height: f64,
-    /// n = round(1/h) cells per unit length; width·n and height·n are integers (checked).
+    /// Some: a box (d = 3); None: a rectangle, or the given body's dimension.
+    pub depth: Option<f64>,
+    /// n = round(1/h) cells per unit length; width·n, height·n (and depth·n) are integers
+    /// (checked).
     /// Unused for a [`Body`].
     pub cells_per_unit: usize,
     pub pattern: MeshPattern,
@@ -212,49 +243,102 @@ pub struct Problem {
 pub struct Body {
     /// Where it came from, for summaries: `mesh <id or file>` or `polygon`.
     pub source: String,
-    pub base: Mesh,
+    pub base: AnyMesh,
     pub refine: usize,
 }
 
 impl Body {
-    /// The mesh the scheme runs on: `base` after `refine` red refinements.
-    pub fn mesh(&self) -> Mesh {
-        (0..self.refine).fold(self.base.clone(), |m, _| m.refine())
+    /// The mesh the scheme runs on: `base` after `refine` red refinements (its dimension is
+    /// D; panics on the other one, a programming error since [`Problem::dim`] tells which).
+    pub fn mesh<const D: usize>(&self) -> Mesh<D> {
+        refined(self.base.get::<D>(), self.refine)
     }
 
     /// Its node count, without refining: each refinement adds one node per edge.
     pub fn n_nodes(&self) -> usize {
-        let (mut n, mut e, mut c) = (self.base.n_nodes(), edges(&self.base), self.base.n_cells());
+        let (mut n, mut e, mut c) = (
+            self.base.n_nodes(),
+            self.base.n_edges(),
+            self.base.n_cells(),
+        );
+        // 3D: faces F = (4C + B)/2, B boundary faces.
+        let mut f = match &self.base {
+            AnyMesh::Plane(_) => 0,
+            AnyMesh::Solid(m) => (4 * c + m.facets.len()) / 2,
+        };
         for _ in 0..self.refine {
-            // A triangle's red refinement: every edge splits in two, each cell adds 3 edges.
             n += e;
-            e = 2 * e + 3 * c;
-            c *= 4;
+            match self.base {
+                // A triangle's red refinement: every edge splits in two, each cell adds 3 edges.
+                AnyMesh::Plane(_) => {
+                    e = 2 * e + 3 * c;
+                    c *= 4;
+                }
+                // Bey's refinement: every edge splits in two, each face adds 3 edges and each
+                // cell 1 (the octahedron's diagonal); each face splits in 4 and each cell adds
+                // 8 interior faces.
+                AnyMesh::Solid(_) => {
+                    e = 2 * e + 3 * f + c;
+                    f = 4 * f + 8 * c;
+                    c *= 8;
+                }
+            }
         }
         n
     }
 }
 
-/// Edges of a triangulation from Euler's formula: E = (3C + B)/2 with B boundary edges.
-fn edges(m: &Mesh) -> usize {
-    (3 * m.n_cells() + m.facets.len()) / 2
+fn refined<const D: usize>(m: &Mesh<D>, levels: usize) -> Mesh<D> {
+    (0..levels).fold(m.clone(), |m, _| m.refine())
 }
 
 impl Problem {
-    /// The mesh the scheme runs on, boundary facets tagged. Validation has tagged the same
-    /// mesh already (except rectangles too large to mesh during validation), so an error here
-    /// is a part that selects no facet, or a facet two parts select, on such a rectangle.
-    pub fn mesh(&self) -> Result<Mesh, TagError> {
+    /// The dimension d of the body: 2 or 3.
+    pub fn dim(&self) -> usize {
+        match (&self.body, self.depth) {
+            (Some(b), _) => b.base.dim(),
+            (None, Some(_)) => 3,
+            (None, None) => 2,
+        }
+    }
+
+    /// The mesh the scheme runs on, boundary facets tagged; D must be [`Problem::dim`].
+    /// Validation has tagged the same mesh already (except rectangles and boxes too large to
+    /// mesh during validation), so an error here is a part that selects no facet, or a facet
+    /// two parts select, on such a mesh.
+    pub fn mesh<const D: usize>(&self) -> Result<Mesh<D>, TagError> {
+        assert_eq!(D, self.dim(), "mesh of the problem's dimension");
         match &self.body {
             Some(b) => Ok(b.mesh()),
             None => {
-                let (nx, ny) = self.cells();
-                let mut mesh = Mesh::rectangle(self.width, self.height, nx, ny, self.pattern);
                 let supports: Vec<_> = self.boundary.iter().map(|p| p.support.clone()).collect();
-                mesh.tag_boundary(&supports)?;
-                Ok(mesh)
+                let any: Box<dyn std::any::Any> = match self.depth {
+                    None => {
+                        let (nx, ny) = self.cells();
+                        let mut mesh =
+                            Mesh::rectangle(self.width, self.height, nx, ny, self.pattern);
+                        mesh.tag_boundary(&supports)?;
+                        Box::new(mesh)
+                    }
+                    Some(depth) => {
+                        let (nx, ny) = self.cells();
+                        let nz = self.depth_cells().unwrap_or(1);
+                        let mut mesh = Mesh::cuboid(self.width, self.height, depth, nx, ny, nz);
+                        mesh.tag_boundary(&supports)?;
+                        Box::new(mesh)
+                    }
+                };
+                Ok(*any.downcast::<Mesh<D>>().expect("dimension checked above"))
             }
         }
+    }
+
+    /// [`Problem::mesh`] in whichever dimension the problem has.
+    pub fn any_mesh(&self) -> Result<AnyMesh, TagError> {
+        Ok(match self.dim() {
+            2 => AnyMesh::Plane(self.mesh::<2>()?),
+            _ => AnyMesh::Solid(self.mesh::<3>()?),
+        })
     }
 
     /// Nodes of [`Problem::mesh`], without building it.
@@ -263,6 +347,9 @@ impl Problem {
             Some(b) => b.n_nodes(),
             None => {
                 let (nx, ny) = self.cells();
+                if let Some(nz) = self.depth_cells() {
+                    return (nx + 1) * (ny + 1) * (nz + 1);
+                }
                 let centres = if self.pattern == MeshPattern::Cross {
                     nx * ny
                 } else {
@@ -276,6 +363,14 @@ impl Problem {
     /// Time step k = T/N.
     pub fn k(&self) -> f64 {
         self.t_end / self.steps as f64
+    }
+
+    /// Cells along z of a box (None for a rectangle or a given mesh).
+    pub fn depth_cells(&self) -> Option<usize> {
+        match (&self.body, self.depth) {
+            (None, Some(d)) => Some((d * self.cells_per_unit as f64).round() as usize),
+            _ => None,
+        }
     }
 
     /// Cells along x and along y.

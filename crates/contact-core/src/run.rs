@@ -20,12 +20,13 @@ pub enum RunError {
 
 /// Runs `problem` to t = T. `each` sees the simulation after every step (fields of stored
 /// steps are available from `sim.fields()`); returning `ControlFlow::Break` cancels.
-pub fn run(
+/// D is the problem's dimension ([`Problem::dim`]).
+pub fn run<const D: usize>(
     problem: Problem,
     settings: SolverSettings,
-    mut each: impl FnMut(&Simulation, &StepReport) -> ControlFlow<()>,
+    mut each: impl FnMut(&Simulation<D>, &StepReport) -> ControlFlow<()>,
 ) -> Result<Summary, RunError> {
-    let mut sim = Simulation::new(problem, settings)?;
+    let mut sim = Simulation::<D>::new(problem, settings)?;
     let mut estimator = match sim.problem.error_estimate {
         true => Some(ErrorEstimator::new(&sim, settings)?),
         false => None,
@@ -49,8 +50,11 @@ pub fn run(
 
 /// Runs `problem` to t = T and returns the simulation in its final state (no callback, no
 /// summary): what convergence studies need.
-pub fn run_to_end(problem: Problem, settings: SolverSettings) -> Result<Simulation, RunError> {
-    let mut sim = Simulation::new(problem, settings)?;
+pub fn run_to_end<const D: usize>(
+    problem: Problem,
+    settings: SolverSettings,
+) -> Result<Simulation<D>, RunError> {
+    let mut sim = Simulation::<D>::new(problem, settings)?;
     while !sim.finished() {
         sim.step()?;
     }

@@ -144,6 +144,46 @@ fn beam(contact: bool) -> Value {
     doc
 }
 
+/// Slip-weakening slopes for the box: its discrete trace constant is large (cτ² ≈ 18 at
+/// h = 1/4, 21 at h = 1/8: a body clamped at one end bends softly), so (2.31),
+/// c2τ cτ² < m_A = 4, admits only c2τ = 0.8 α below about 0.19, and each discrete step stays
+/// strongly convex up to c2τ ≈ 0.24–0.27.
+const ALPHA_NEAR_3D: f64 = 0.2;
+const SLIPWEAK_NEAR_3D: &str =
+    "3D, slip-weakening μ0 = 1.2, μ1 = 0.4, α = 0.2 (c2τ = 0.16): inside (2.31)";
+const ALPHA_BEYOND_3D: f64 = 0.5;
+const SLIPWEAK_BEYOND_3D: &str =
+    "3D, α = 0.5 (c2τ = 0.4): (2.31) and the discrete strong convexity both fail";
+
+/// box-exp3 (the 2 × 1 × 1 box, contact on z = 0) with friction and traction f2 on the top
+/// and the far end.
+fn box_with(friction: Value, f2: Value) -> Value {
+    edit(
+        "box-exp3",
+        &[
+            ("/friction", friction),
+            ("/boundary/2/f2", f2.clone()),
+            ("/boundary/3/f2", f2),
+        ],
+    )
+}
+
+/// A 10 × 1 × 1 beam of tetrahedra on a frictional (g = 1) base, clamped at x = 0, pushed on
+/// its top.
+fn box_beam() -> Value {
+    let mut doc = edit(
+        "box-exp3",
+        &[("/domain", json!({"width": 10, "height": 1, "depth": 1}))],
+    );
+    doc["boundary"] = json!([
+        {"type": "clamped", "on": "x"},
+        {"type": "contact", "on": "z"},
+        {"type": "traction", "on": "z - 1", "f2": [-2, 0, -1]}
+    ]);
+    doc["friction"] = tresca(1.0);
+    doc
+}
+
 /// The table.
 pub fn cases() -> Vec<Case> {
     use Expect::*;
@@ -421,6 +461,83 @@ pub fn cases() -> Vec<Case> {
             quick: Some((8, 8)),
             build: || exp3_with(tresca(20.0), json!(["-1e4*t", "-1e4*t"])),
         },
+        // --- three dimensions: box-exp3, Γ3 the bottom z = 0 ------------------------------------
+        Case {
+            name: "box-g0",
+            about: "3D, g = 0: frictionless, every Γ3 node slides (2-vector tangents)",
+            expect: Complete,
+            slip: Slip::FullSlip,
+            full: (8, 8),
+            quick: Some((4, 8)),
+            build: || box_with(tresca(0.0), json!([-1, 0, -1])),
+        },
+        Case {
+            name: "box-g2",
+            about: "3D, g = 2: partial slip",
+            expect: Complete,
+            slip: Slip::Some,
+            full: (8, 8),
+            quick: Some((4, 8)),
+            build: || box_with(tresca(2.0), json!([-1, 0, -1])),
+        },
+        Case {
+            name: "box-g1e4",
+            about: "3D, g = 1e4: full stick",
+            expect: Complete,
+            slip: Slip::FullStick,
+            full: (8, 8),
+            quick: Some((4, 8)),
+            build: || box_with(tresca(1e4), json!([-1, 0, -1])),
+        },
+        Case {
+            name: "box-slipweak-near",
+            about: SLIPWEAK_NEAR_3D,
+            expect: Complete,
+            slip: Slip::Some,
+            full: (8, 8),
+            quick: Some((4, 8)),
+            build: || box_with(slip_weakening(ALPHA_NEAR_3D), json!([-1, 0, -1])),
+        },
+        Case {
+            name: "box-slipweak-beyond",
+            about: SLIPWEAK_BEYOND_3D,
+            expect: Refused("not strongly convex"),
+            slip: Slip::Any,
+            full: (8, 8),
+            quick: Some((4, 8)),
+            build: || box_with(slip_weakening(ALPHA_BEYOND_3D), json!([-1, 0, -1])),
+        },
+        Case {
+            name: "box-damage-total",
+            about: "3D, φ with b = 2000: ζ → 0 over most of the body",
+            expect: Complete,
+            slip: Slip::Any,
+            full: (8, 8),
+            quick: Some((4, 8)),
+            build: || {
+                let mut d = box_with(tresca(2.0), json!([-1, 0, -1]));
+                d["damage"]["source"]["b"] = json!(2000);
+                d
+            },
+        },
+        Case {
+            name: "box-beam-10:1-contact",
+            about: "3D, a 10 × 1 × 1 beam on a frictional (g = 1) base, pushed on its top",
+            expect: Complete,
+            slip: Slip::Some,
+            full: (4, 16),
+            quick: Some((2, 8)),
+            build: box_beam,
+        },
+        Case {
+            name: "box-ramp-1e4",
+            about: "3D, f2 = −1e4·t·(1, 0, 1), g = 20: stick, then slip",
+            expect: Complete,
+            slip: Slip::Some,
+            full: (8, 8),
+            quick: Some((4, 8)),
+            build: || box_with(tresca(20.0), json!(["-1e4*t", 0, "-1e4*t"])),
+        },
     ]
 }
 
@@ -578,10 +695,16 @@ enum Stop {
 }
 
 fn simulate(problem: Problem, report: &mut CaseReport) -> Result<(), Stop> {
-    let (nx, ny) = problem.cells();
-    report.nodes = (nx + 1) * (ny + 1);
+    match problem.dim() {
+        2 => simulate_in::<2>(problem, report),
+        _ => simulate_in::<3>(problem, report),
+    }
+}
+
+fn simulate_in<const D: usize>(problem: Problem, report: &mut CaseReport) -> Result<(), Stop> {
+    report.nodes = problem.n_nodes();
     report.steps = problem.steps;
-    let mut sim = match Simulation::new(problem, SolverSettings::default()) {
+    let mut sim = match Simulation::<D>::new(problem, SolverSettings::default()) {
         Ok(sim) => sim,
         Err(e @ SolveError::Smallness(_)) => return Err(Stop::Refused(e.to_string())),
         Err(e) => return Err(Stop::Failed(format!("set-up failed: {e}"))),
@@ -591,7 +714,7 @@ fn simulate(problem: Problem, report: &mut CaseReport) -> Result<(), Stop> {
         report.smallness_ratio = Some(sim.smallness.lhs / sim.smallness.m_a);
         report.discrete_margin = sim.smallness.discrete_margin;
     }
-    let contact_dofs = sim.dofs.n_contact();
+    let contact_nodes = sim.dofs.n_contact() / (D - 1);
     let (mut vel_it, mut dam_it) = (Vec::new(), Vec::new());
     let (mut vel_res, mut dam_res) = (0.0f64, None::<f64>);
     let mut slip = [f64::INFINITY, 0.0f64];
@@ -606,8 +729,8 @@ fn simulate(problem: Problem, report: &mut CaseReport) -> Result<(), Stop> {
             dam_it.push(d.iterations as f64);
             dam_res = Some(dam_res.unwrap_or(0.0).max(d.residual));
         }
-        if contact_dofs > 0 {
-            let f = r.slip_nodes as f64 / contact_dofs as f64;
+        if contact_nodes > 0 {
+            let f = r.slip_nodes as f64 / contact_nodes as f64;
             slip = [slip[0].min(f), slip[1].max(f)];
         }
         zeta_min = zeta_min.min(r.zeta_min);
@@ -615,7 +738,7 @@ fn simulate(problem: Problem, report: &mut CaseReport) -> Result<(), Stop> {
         report.damage_iterations = MaxMean::of(&dam_it);
         report.velocity_residual_max = Some(vel_res);
         report.damage_residual_max = dam_res;
-        report.slip_fraction = (contact_dofs > 0).then_some(slip);
+        report.slip_fraction = (contact_nodes > 0).then_some(slip);
         report.zeta_min = Some(zeta_min);
     }
     let zeros = sim.state.zeta.iter().filter(|z| **z == 0.0).count();

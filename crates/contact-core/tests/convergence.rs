@@ -129,7 +129,7 @@ fn error_estimate_brackets_the_true_error() {
         &[("/error_estimate", serde_json::json!(true))],
     );
     let mut sim =
-        contact_core::solve::stepper::Simulation::new(p.clone(), Default::default()).unwrap();
+        contact_core::solve::stepper::Simulation::<2>::new(p.clone(), Default::default()).unwrap();
     let mut est = ErrorEstimator::new(&sim, Default::default()).unwrap();
     while !sim.finished() {
         sim.step().unwrap();
@@ -171,7 +171,8 @@ fn error_estimate_without_damage_has_no_zeta() {
         8,
         &[("/damage", serde_json::Value::Null)],
     );
-    let mut sim = contact_core::solve::stepper::Simulation::new(p, Default::default()).unwrap();
+    let mut sim =
+        contact_core::solve::stepper::Simulation::<2>::new(p, Default::default()).unwrap();
     let mut est = ErrorEstimator::new(&sim, Default::default()).unwrap();
     while !sim.finished() {
         sim.step().unwrap();

@@ -59,9 +59,9 @@ fn msh(nodes: &[[f64; 2]], tris: &[[usize; 3]], groups: &[(&str, Vec<[usize; 2]>
 struct OneFile(String);
 
 impl MeshFiles for OneFile {
-    fn load(&self, name: &str) -> Result<Mesh, String> {
+    fn load(&self, name: &str) -> Result<contact_core::mesh::AnyMesh, String> {
         assert_eq!(name, "body.msh");
-        contact_core::mesh::import::import::<2>(self.0.as_bytes()).map_err(|e| e.to_string())
+        contact_core::mesh::import::import_any(self.0.as_bytes()).map_err(|e| e.to_string())
     }
 }
 
@@ -288,7 +288,7 @@ fn the_error_estimate_of_a_given_mesh_uses_one_refinement_less() {
     );
     doc["mesh"]["refine"] = json!(2);
     let p = scene::validate(&doc).unwrap();
-    let out = contact_core::run::run(p, Default::default(), |_, _| {
+    let out = contact_core::run::run::<2>(p, Default::default(), |_, _| {
         std::ops::ControlFlow::Continue(())
     })
     .unwrap();
@@ -332,7 +332,7 @@ fn the_discrete_trace_constant_is_the_same_in_a_rotated_frame() {
         doc
     };
     let builtin =
-        Simulation::new(scene::validate(&with_law()).unwrap(), Default::default()).unwrap();
+        Simulation::<2>::new(scene::validate(&with_law()).unwrap(), Default::default()).unwrap();
     let (c, s) = (0.9f64.cos(), 0.9f64.sin());
     let rot = |v: [f64; 2]| [c * v[0] - s * v[1], s * v[0] + c * v[1]];
     let mut doc = with_law();
@@ -344,7 +344,7 @@ fn the_discrete_trace_constant_is_the_same_in_a_rotated_frame() {
         {"type": "contact", "group": "contact"}
     ]);
     let p = scene::validate_with(&doc, &OneFile(rectangle_file(rot))).unwrap();
-    let rotated = Simulation::new(p, Default::default()).unwrap();
+    let rotated = Simulation::<2>::new(p, Default::default()).unwrap();
     assert!(rotated.dofs.frames.len() == rotated.dofs.n_contact());
     let (a, b) = (&builtin.smallness, &rotated.smallness);
     let (ca, cb) = (a.c_tau.unwrap(), b.c_tau.unwrap());

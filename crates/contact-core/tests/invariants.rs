@@ -75,7 +75,7 @@ fn slip_weakening_is_solved_as_a_true_hvi() {
     // condition: (2.31) fails (cτ ≈ 1.55: c2τ·cτ² ≈ 5.8 > m_A = 4) and so does the discrete
     // strong convexity of the velocity step, so the scene is refused by default.
     let p = problem("paper-exp3", 8, 16, &[("/friction", law.clone())]);
-    let err = Simulation::new(p, SolverSettings::default())
+    let err = Simulation::<2>::new(p, SolverSettings::default())
         .err()
         .expect("refused by (2.31)");
     assert!(
@@ -85,7 +85,7 @@ fn slip_weakening_is_solved_as_a_true_hvi() {
     // α = 2 (c2τ = 1.6) on experiment 3 and α = 3 on the unit square satisfy (2.31).
     for (preset, law, c2) in [("paper-exp3", &mild, 1.6), ("paper-convergence", &law, 2.4)] {
         let p = problem(preset, 8, 16, &[("/friction", law.clone())]);
-        let sim = Simulation::new(p.clone(), SolverSettings::default()).unwrap();
+        let sim = Simulation::<2>::new(p.clone(), SolverSettings::default()).unwrap();
         assert!((sim.smallness.c2 - c2).abs() < 1e-12);
         assert!(
             sim.smallness.holds && sim.smallness.discrete_margin.unwrap() > 0.0,
@@ -102,7 +102,7 @@ fn piecewise_linear_friction_slips() {
     // Slope −1 then +0.1: c2τ = 1, within (2.31) for experiment 3 (cτ² ≈ 2.4 < 4).
     let law = json!({"law": "piecewise_linear", "points": [[0, 1.0], [0.5, 0.5], [1, 0.55]]});
     let p = problem("paper-exp3", 8, 16, &[("/friction", law)]);
-    let sim = Simulation::new(p.clone(), SolverSettings::default()).unwrap();
+    let sim = Simulation::<2>::new(p.clone(), SolverSettings::default()).unwrap();
     assert!(sim.smallness.holds && sim.smallness.c2 == 1.0);
     let o = check_run(p);
     assert!(o.steps_with_slip > 0);
@@ -133,7 +133,7 @@ fn von_mises_elasticity_and_full_stick_limits() {
 fn smallness_violation_is_refused_or_warned() {
     let law = json!({"law": "slip_weakening", "mu0": 50, "mu1": 0, "alpha": 100});
     let p = problem("paper-exp3", 8, 8, &[("/friction", law.clone())]);
-    let err = Simulation::new(p, SolverSettings::default())
+    let err = Simulation::<2>::new(p, SolverSettings::default())
         .err()
         .expect("refused");
     assert!(err.to_string().contains("smallness"), "{err}");
@@ -143,7 +143,7 @@ fn smallness_violation_is_refused_or_warned() {
         8,
         &[("/friction", law), ("/smallness", json!("warn"))],
     );
-    let sim = Simulation::new(p, SolverSettings::default()).expect("warn runs");
+    let sim = Simulation::<2>::new(p, SolverSettings::default()).expect("warn runs");
     assert!(!sim.smallness.holds);
 }
 

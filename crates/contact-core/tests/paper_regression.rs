@@ -65,7 +65,8 @@ fn k_one_half_makes_the_final_velocity_vanish() {
 #[test]
 fn experiment_1_matches_a_direct_linear_solve() {
     let p = problem("paper-exp1", 4, 8, &[]);
-    let mut sim = contact_core::solve::stepper::Simulation::new(p, Default::default()).unwrap();
+    let mut sim =
+        contact_core::solve::stepper::Simulation::<2>::new(p, Default::default()).unwrap();
     let mesh = sim.mesh.clone();
     let geo = Geometry::new(&mesh);
     let dofs = DofMap::new(&mesh, &sim.problem.boundary);

@@ -16,18 +16,18 @@ fn bits(v: &[f64]) -> Vec<u64> {
 /// Runs `p` straight through, and again stopped after `stop` steps, checkpointed, restored
 /// into a fresh simulation and continued; compares every value of u, ζ and w at T.
 fn assert_bit_for_bit(p: contact_core::problem::Problem, stop: usize) -> usize {
-    let mut straight = Simulation::new(p.clone(), SolverSettings::default()).unwrap();
+    let mut straight = Simulation::<2>::new(p.clone(), SolverSettings::default()).unwrap();
     let mut slipping_steps = 0;
     while !straight.finished() {
         slipping_steps += usize::from(straight.step().unwrap().slip_nodes > 0);
     }
-    let mut first = Simulation::new(p.clone(), SolverSettings::default()).unwrap();
+    let mut first = Simulation::<2>::new(p.clone(), SolverSettings::default()).unwrap();
     for _ in 0..stop {
         first.step().unwrap();
     }
     let bytes = encode_state(&first.checkpoint_state());
     drop(first);
-    let mut resumed = Simulation::new(p, SolverSettings::default()).unwrap();
+    let mut resumed = Simulation::<2>::new(p, SolverSettings::default()).unwrap();
     resumed.restore(decode_state(&bytes).unwrap());
     while !resumed.finished() {
         resumed.step().unwrap();

@@ -99,10 +99,10 @@ fn strain_error(mesh: &Mesh, w: &[f64], eps: impl Fn([f64; 2]) -> [f64; 3]) -> f
 }
 
 fn field(fx: &str, fy: &str) -> VectorField {
-    VectorField([
+    VectorField::plane(
         ScalarField::Expr(Expr::parse(fx).unwrap()),
         ScalarField::Expr(Expr::parse(fy).unwrap()),
-    ])
+    )
 }
 
 #[test]

@@ -1,36 +1,38 @@
 //! σ = A ε(w) + B(ε(u), ζ), equation (2.1), with A and B of (4.1) or the von Mises B of
 //! (2.15–2.16).
 
+use super::Tensor;
+#[cfg(test)]
 use super::Tensor2;
 use crate::problem::{Elasticity, Viscosity};
 
 /// A(τ) = 2η τ + ξ tr(τ) I, (4.1).
 #[inline]
-pub fn viscous_stress(a: &Viscosity, eps: &Tensor2<f64>) -> Tensor2<f64> {
-    eps * (2.0 * a.eta) + Tensor2::identity() * (a.xi * eps.trace())
+pub fn viscous_stress<const D: usize>(a: &Viscosity, eps: &Tensor<D>) -> Tensor<D> {
+    eps * (2.0 * a.eta) + Tensor::<D>::identity() * (a.xi * eps.trace())
 }
 
-/// Deviatoric part τ^D = τ − tr(τ)/2 I (d = 2).
+/// Deviatoric part τ^D = τ − tr(τ)/d I.
 #[inline]
-pub fn deviator(t: &Tensor2<f64>) -> Tensor2<f64> {
-    t - Tensor2::identity() * (0.5 * t.trace())
+pub fn deviator<const D: usize>(t: &Tensor<D>) -> Tensor<D> {
+    t - Tensor::<D>::identity() * (t.trace() / D as f64)
 }
 
 /// B(ε, ζ): (4.1) ζ(2μ ε + λ tr(ε) I), or (2.15–2.16) η_B (ε − P_K(ζ) ε) where P_K(ζ) is the
 /// projection onto K(ζ) = {τ : |τ^D| ≤ ζ σ_Y}: it keeps the spherical part and shrinks the
 /// deviator to radius ζ σ_Y, so ε − P ε = ε^D · max(0, 1 − ζσ_Y/|ε^D|).
 #[inline]
-pub fn elastic_stress(b: &Elasticity, eps: &Tensor2<f64>, zeta: f64) -> Tensor2<f64> {
+pub fn elastic_stress<const D: usize>(b: &Elasticity, eps: &Tensor<D>, zeta: f64) -> Tensor<D> {
     match *b {
         Elasticity::Linear { mu, lambda } => {
-            (eps * (2.0 * mu) + Tensor2::identity() * (lambda * eps.trace())) * zeta
+            (eps * (2.0 * mu) + Tensor::<D>::identity() * (lambda * eps.trace())) * zeta
         }
         Elasticity::VonMises { eta_b, sigma_y } => {
             let dev = deviator(eps);
             let n = dev.norm();
             let radius = zeta * sigma_y;
             if n <= radius {
-                Tensor2::zeros()
+                Tensor::<D>::zeros()
             } else {
                 dev * (eta_b * (1.0 - radius / n))
             }
@@ -38,9 +40,9 @@ pub fn elastic_stress(b: &Elasticity, eps: &Tensor2<f64>, zeta: f64) -> Tensor2<
     }
 }
 
-/// Von Mises equivalent stress of a plane tensor, sqrt(3/2 · σ^D : σ^D) with the 2D deviator.
+/// Von Mises equivalent stress sqrt(3/2 · σ^D : σ^D) with the d-dimensional deviator.
 #[inline]
-pub fn von_mises(s: &Tensor2<f64>) -> f64 {
+pub fn von_mises<const D: usize>(s: &Tensor<D>) -> f64 {
     (1.5 * deviator(s).norm_squared()).sqrt()
 }
 

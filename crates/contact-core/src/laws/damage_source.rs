@@ -1,12 +1,14 @@
 //! The damage source φ(ε, ζ) of (4.2) with its constants as parameters.
 
+use super::Tensor;
+#[cfg(test)]
 use super::Tensor2;
 use crate::problem::DamageSource;
 
 /// φ(τ, ζ) = a (1 − ζ)/ζ − b |τ|² for ζ ≥ ζ*, and a (1 − ζ*)/ζ* − b |τ|² for ζ < ζ*
 /// (|τ| the Frobenius norm). Continuous at ζ = ζ*; the paper has a = 2, b = 20, ζ* = 0.2.
 #[inline]
-pub fn phi(src: &DamageSource, eps: &Tensor2<f64>, zeta: f64) -> f64 {
+pub fn phi<const D: usize>(src: &DamageSource, eps: &Tensor<D>, zeta: f64) -> f64 {
     let z = zeta.max(src.zeta_star);
     src.a * (1.0 - z) / z - src.b * eps.norm_squared()
 }

@@ -6,7 +6,7 @@
 use serde::Serialize;
 
 use super::quality::{figures, Figures, IndexMap, MeshError};
-use super::{Group, Mesh};
+use super::{AnyMesh, Group, Mesh};
 use crate::msh::{self, MshMesh};
 
 /// Most nodes of an imported mesh (the structured generator's limit is of the same order).
@@ -41,6 +41,16 @@ fn read(bytes: &[u8]) -> Result<MshMesh, ImportError> {
 /// Reads, checks and converts an MSH 4.1 file (ASCII or binary) into a D-dimensional mesh.
 pub fn import<const D: usize>(bytes: &[u8]) -> Result<Mesh<D>, ImportError> {
     Ok(from_msh(&read(bytes)?)?)
+}
+
+/// Reads, checks and converts an MSH 4.1 file of either dimension: tetrahedra make a
+/// [`AnyMesh::Solid`], triangles (all z = 0) an [`AnyMesh::Plane`].
+pub fn import_any(bytes: &[u8]) -> Result<AnyMesh, ImportError> {
+    let m = read(bytes)?;
+    Ok(match m.dim {
+        2 => AnyMesh::Plane(from_msh::<2>(&m)?),
+        _ => AnyMesh::Solid(from_msh::<3>(&m)?),
+    })
 }
 
 /// The checked mesh of a read file (see the module doc).
@@ -164,9 +174,13 @@ pub fn summary<const D: usize>(mesh: &Mesh<D>) -> MeshSummary {
 
 /// Reads and checks an uploaded file of any supported dimension and summarises it.
 pub fn summarize(bytes: &[u8]) -> Result<MeshSummary, ImportError> {
-    let m = read(bytes)?;
-    Ok(match m.dim {
-        2 => summary(&from_msh::<2>(&m)?),
-        _ => summary(&from_msh::<3>(&m)?),
-    })
+    Ok(summary_any(&import_any(bytes)?))
+}
+
+/// [`summary`] of a mesh of either dimension.
+pub fn summary_any(mesh: &AnyMesh) -> MeshSummary {
+    match mesh {
+        AnyMesh::Plane(m) => summary(m),
+        AnyMesh::Solid(m) => summary(m),
+    }
 }

@@ -5,6 +5,8 @@
 //! - [`Mesh::rectangle`]: the structured generator. n = round(1/h) cells per unit length,
 //!   every square cell cut by its lower-left → upper-right diagonal (default), so the meshes
 //!   of h and h/2 are nested.
+//! - [`Mesh::cuboid`] ([`cuboid`]): the structured box, every cuboid cell cut into the 6 Kuhn
+//!   tetrahedra, so that the boxes of h and h/2 are nested.
 //! - [`Mesh::from_cells`] (used by [`import`] for gmsh files and by the polygon mesher): any
 //!   conforming simplicial mesh, checked by [`quality`] and with its boundary facets found
 //!   as the faces that belong to one cell only.
@@ -16,12 +18,15 @@
 
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
+pub mod any;
+pub mod cuboid;
 pub mod import;
 pub mod polygon;
 pub mod quality;
 pub mod refine;
 pub mod support;
 
+pub use any::AnyMesh;
 pub use quality::MeshError;
 
 /// How each square cell of the structured mesh is cut into triangles.
@@ -67,6 +72,15 @@ pub struct Grid {
     pub pattern: MeshPattern,
 }
 
+/// The lattice of a structured box ([`Mesh::cuboid`]; what nesting of boxes relies on).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Lattice {
+    /// (lx, ly, lz): the box is [0, lx] × [0, ly] × [0, lz].
+    pub size: [f64; 3],
+    /// (nx, ny, nz): cuboid cells along x, y and z.
+    pub cells: [usize; 3],
+}
+
 /// A named set of boundary facets: a physical group of an imported mesh.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Group {
@@ -95,6 +109,8 @@ pub struct Mesh<const D: usize = 2> {
     pub groups: Vec<Group>,
     /// Set for the structured rectangle.
     pub grid: Option<Grid>,
+    /// Set for the structured box (as for `grid`, not for its red refinements).
+    pub lattice: Option<Lattice>,
     /// One entry per red refinement that made this mesh from the mesh as given, coarsest
     /// first (empty for a mesh as given).
     pub nesting: Vec<Nesting>,
@@ -121,6 +137,11 @@ impl<const D: usize> Mesh<D> {
     /// The cells in order, D + 1 vertices each.
     pub fn cells(&self) -> std::slice::ChunksExact<'_, usize> {
         self.cells.chunks_exact(D + 1)
+    }
+
+    /// The cells' node indices, D + 1 per cell, flat.
+    pub fn cells_flat(&self) -> &[usize] {
+        &self.cells
     }
 
     /// The smallest box [min, max] that holds every node.
@@ -171,6 +192,7 @@ impl<const D: usize> Mesh<D> {
             facets,
             groups,
             grid: None,
+            lattice: None,
             nesting,
         }
     }
@@ -297,6 +319,7 @@ impl Mesh<2> {
                 ny,
                 pattern,
             }),
+            lattice: None,
             nesting: Vec::new(),
         }
     }

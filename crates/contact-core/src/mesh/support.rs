@@ -123,9 +123,9 @@ impl Support {
         match self {
             Support::Segment(s) => D == 2 && super::on_segment([p[0], p[1]], s, tol),
             Support::Zero { on, within } => {
-                let (x, y) = (p[0], p[1]);
-                on.eval(x, y, 0.0).abs() <= tol
-                    && within.as_ref().is_none_or(|w| w.eval(x, y, 0.0) >= 0.0)
+                let (x, y, z) = (p[0], p[1], if D > 2 { p[2] } else { 0.0 });
+                on.eval3(x, y, z, 0.0).abs() <= tol
+                    && within.as_ref().is_none_or(|w| w.eval3(x, y, z, 0.0) >= 0.0)
             }
             Support::Group(_) => false,
         }

@@ -1,12 +1,23 @@
-//! Fields as JSON: the mesh once (nodes, triangles, Γ3 nodes), then one document per stored
-//! step with the requested nodal (u, w, ζ) and element (σ, von Mises) fields.
+//! Fields as JSON: the mesh once (nodes, cells, boundary facets with their parts), then one
+//! document per stored step with the requested nodal (u, w, ζ) and element (σ, von Mises)
+//! fields.
 
-use crate::mesh::Mesh;
+use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::{BoundaryKind, BoundaryPart, Support};
 use serde::Serialize;
 
+/// The mesh of a job: in 2D `nodes` (x, y), `triangles` and `boundary_edges`; in 3D
+/// `nodes` (x, y, z), `tetrahedra` and `boundary_faces`.
 #[derive(Debug, Serialize)]
-pub struct MeshJson<'a> {
+#[serde(untagged)]
+pub enum MeshJson<'a> {
+    Plane(PlaneMeshJson<'a>),
+    Solid(SolidMeshJson<'a>),
+}
+
+#[derive(Debug, Serialize)]
+pub struct PlaneMeshJson<'a> {
+    pub dim: usize,
     pub nodes: &'a [[f64; 2]],
     pub triangles: &'a [[usize; 3]],
     /// Boundary edges with the index of their part (null: traction-free).
@@ -14,6 +25,17 @@ pub struct MeshJson<'a> {
     /// The scene's boundary parts, in its order (the indices in `boundary_edges`): what kind
     /// of condition each is, and the physical group it was selected by, if any. Lets a
     /// client colour the boundary by kind without the scene.
+    pub parts: Vec<PartJson<'a>>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct SolidMeshJson<'a> {
+    pub dim: usize,
+    pub nodes: &'a [[f64; 3]],
+    pub tetrahedra: Vec<[usize; 4]>,
+    /// Boundary triangles (counter-clockwise seen from outside) with the index of their part
+    /// (null: traction-free) and of the tetrahedron they bound (for cell fields).
+    pub boundary_faces: Vec<([usize; 3], Option<usize>, usize)>,
     pub parts: Vec<PartJson<'a>>,
 }
 
@@ -29,25 +51,70 @@ pub struct PartJson<'a> {
 
 impl<'a> MeshJson<'a> {
     /// The mesh with the boundary parts it was tagged with (`Problem::boundary`).
-    pub fn new(mesh: &'a Mesh, parts: &'a [BoundaryPart]) -> Self {
-        MeshJson {
-            nodes: &mesh.nodes,
-            triangles: mesh.triangles(),
-            boundary_edges: mesh.facets.iter().map(|e| (e.nodes, e.part)).collect(),
-            parts: parts
-                .iter()
-                .map(|p| PartJson {
-                    kind: match p.kind {
-                        BoundaryKind::Clamped => "clamped",
-                        BoundaryKind::Traction(_) => "traction",
-                        BoundaryKind::Contact => "contact",
-                    },
-                    group: match &p.support {
-                        Support::Group(name) => Some(name.as_str()),
-                        _ => None,
-                    },
-                })
-                .collect(),
+    pub fn new(mesh: &'a AnyMesh, parts: &'a [BoundaryPart]) -> Self {
+        match mesh {
+            AnyMesh::Plane(m) => MeshJson::Plane(PlaneMeshJson {
+                dim: 2,
+                nodes: &m.nodes,
+                triangles: m.triangles(),
+                boundary_edges: m.facets.iter().map(|e| (e.nodes, e.part)).collect(),
+                parts: part_list(parts),
+            }),
+            AnyMesh::Solid(m) => MeshJson::Solid(SolidMeshJson {
+                dim: 3,
+                nodes: &m.nodes,
+                tetrahedra: m.cells().map(|c| [c[0], c[1], c[2], c[3]]).collect(),
+                boundary_faces: faces_with_cells(m),
+                parts: part_list(parts),
+            }),
         }
     }
+}
+
+fn part_list(parts: &[BoundaryPart]) -> Vec<PartJson<'_>> {
+    parts
+        .iter()
+        .map(|p| PartJson {
+            kind: match p.kind {
+                BoundaryKind::Clamped => "clamped",
+                BoundaryKind::Traction(_) => "traction",
+                BoundaryKind::Contact => "contact",
+            },
+            group: match &p.support {
+                Support::Group(name) => Some(name.as_str()),
+                _ => None,
+            },
+        })
+        .collect()
+}
+
+/// Every boundary facet with its part and the tetrahedron it is a face of.
+fn faces_with_cells(m: &Mesh<3>) -> Vec<([usize; 3], Option<usize>, usize)> {
+    let key = |mut f: [usize; 3]| {
+        f.sort_unstable();
+        f
+    };
+    let mut owner = std::collections::HashMap::with_capacity(m.facets.len());
+    for f in &m.facets {
+        owner.insert(key(f.nodes), usize::MAX);
+    }
+    for (e, c) in m.cells().enumerate() {
+        for skip in 0..4 {
+            let mut face = [0; 3];
+            let mut k = 0;
+            for (a, &n) in c.iter().enumerate() {
+                if a != skip {
+                    face[k] = n;
+                    k += 1;
+                }
+            }
+            if let Some(o) = owner.get_mut(&key(face)) {
+                *o = e;
+            }
+        }
+    }
+    m.facets
+        .iter()
+        .map(|f| (f.nodes, f.part, owner[&key(f.nodes)]))
+        .collect()
 }

@@ -11,13 +11,18 @@ use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct MeshInfo {
+    /// The body's dimension d: 2 (triangles) or 3 (tetrahedra).
+    pub dim: usize,
     pub nodes: usize,
-    pub triangles: usize,
-    /// Rectangle: n = round(1/h); 0 for a given mesh.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub triangles: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tetrahedra: Option<usize>,
+    /// Rectangle or box: n = round(1/h); 0 for a given mesh.
     pub cells_per_unit: usize,
     /// Rectangle: 1/n; a given mesh: its longest cell edge.
     pub h: f64,
-    /// Rectangle: the diagonal pattern; a given mesh: "unstructured".
+    /// Rectangle: the diagonal pattern; box: "kuhn"; a given mesh: "unstructured".
     pub pattern: &'static str,
     /// A given mesh: where it came from ("mesh <id or file>", "polygon").
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -34,6 +39,9 @@ pub struct MeshInfo {
     /// Size and factor fill of the velocity system actually factored (interior DOFs).
     pub factor_n: usize,
     pub factor_nnz: usize,
+    /// How the reduced friction problem on Γ3 is solved: "none" (no Γ3), or "dense Schur
+    /// complement" (S formed by substitutions, semismooth Newton on it).
+    pub contact_solver: &'static str,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -104,7 +112,11 @@ pub struct Summary {
 }
 
 impl Summary {
-    pub fn new(sim: &Simulation, steps: Vec<StepReport>, solve_s: f64) -> Summary {
+    pub fn new<const D: usize>(
+        sim: &Simulation<D>,
+        steps: Vec<StepReport>,
+        solve_s: f64,
+    ) -> Summary {
         let p: &Problem = &sim.problem;
         let (factor_n, factor_nnz) = sim.velocity_factor_size();
         let contact = sim.dofs.n_contact() > 0;
@@ -138,8 +150,10 @@ impl Summary {
             scene: p.name.clone(),
             version: env!("CARGO_PKG_VERSION"),
             mesh: MeshInfo {
+                dim: D,
                 nodes: sim.mesh.n_nodes(),
-                triangles: sim.mesh.n_cells(),
+                triangles: (D == 2).then(|| sim.mesh.n_cells()),
+                tetrahedra: (D == 3).then(|| sim.mesh.n_cells()),
                 cells_per_unit: p.cells_per_unit,
                 h: match &p.body {
                     None => 1.0 / p.cells_per_unit as f64,
@@ -147,6 +161,7 @@ impl Summary {
                 },
                 pattern: match (&p.body, p.pattern) {
                     (Some(_), _) => "unstructured",
+                    (None, _) if D == 3 => "kuhn",
                     (None, MeshPattern::Diagonal) => "diagonal",
                     (None, MeshPattern::AntiDiagonal) => "anti_diagonal",
                     (None, MeshPattern::Cross) => "cross",
@@ -158,6 +173,11 @@ impl Summary {
                 contact_dofs: sim.dofs.n_contact(),
                 factor_n,
                 factor_nnz,
+                contact_solver: if contact {
+                    "dense Schur complement"
+                } else {
+                    "none"
+                },
             },
             time: TimeInfo {
                 t_end: p.t_end,

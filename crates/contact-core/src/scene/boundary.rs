@@ -66,6 +66,7 @@ pub(super) fn boundary(
         Some(Shape::Rectangle { width, height }) => Some((*width, *height)),
         _ => None,
     };
+    let dim = shape.map_or(2, Shape::dim);
     let Some(items) = v.as_array() else {
         cx.err(
             ptr,
@@ -161,6 +162,14 @@ pub(super) fn boundary(
                 );
                 None
             }
+            ["from"] if dim == 3 => {
+                cx.err(
+                    &join(&pptr, if m.contains_key("from") { "from" } else { "to" }),
+                    "a segment {from, to} selects edges of a 2D body; select faces of a 3D body \
+                     by a formula \"on\" (e.g. \"on\": \"z\" for the plane z = 0) or a group",
+                );
+                None
+            }
             ["from"] => None.or_else(|| {
                 let from = required(cx, m, &pptr, "from", "the start point [x, y]")
                     .and_then(|p| point(cx, p, &join(&pptr, "from")));
@@ -201,7 +210,7 @@ pub(super) fn boundary(
                 None => Some(BoundaryKind::Traction(VectorField::constant([0.0, 0.0]))),
                 Some(f2) => {
                     let on = segment.as_ref().map(|(s, _)| *s);
-                    vector_field(cx, f2, &join(&pptr, "f2"), true, on, sampled)
+                    vector_field(cx, f2, &join(&pptr, "f2"), true, on, sampled, dim)
                         .map(BoundaryKind::Traction)
                 }
             },
@@ -317,23 +326,30 @@ fn place(
     Some((Segment { a, b }, Some(Placed { side, lo, hi })))
 }
 
-/// A formula in x and y (no t: the boundary does not move).
+/// A formula in x, y and z (no t: the boundary does not move).
 fn formula(cx: &mut Cx, v: &Value, ptr: &str) -> Option<Expr> {
     let Some(src) = v.as_str() else {
         cx.err(
             ptr,
             format!(
-                "expected a formula in x and y such as \"x^2 + y^2 - 2.25\", got {}",
+                "expected a formula in x, y (and z) such as \"x^2 + y^2 - 2.25\", got {}",
                 describe(v)
             ),
         );
         return None;
     };
     match Expr::parse(src) {
+        Ok(e) if e.uses_z() && !cx.solid => {
+            cx.err(
+                ptr,
+                format!("unknown variable 'z' in \"{src}\": the body is 2D (x and y only)"),
+            );
+            None
+        }
         Ok(e) if e.uses_t() => {
             cx.err(
                 ptr,
-                format!("\"{src}\" uses t; a boundary part is fixed in time (x and y only)"),
+                format!("\"{src}\" uses t; a boundary part is fixed in time (x, y and z only)"),
             );
             None
         }

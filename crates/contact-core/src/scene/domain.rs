@@ -1,6 +1,8 @@
-//! The `domain` section: the body. Three forms (docs/numerics.md#meshes):
+//! The `domain` section: the body. Four forms (docs/numerics.md#meshes):
 //! - the rectangle `{width, height}` (or `{"rectangle": {width, height}}`), meshed by the
 //!   structured generator at `mesh.h`;
+//! - the box `{width, height, depth}` (d = 3), meshed at `mesh.h` into cubes of 6 Kuhn
+//!   tetrahedra;
 //! - `{"mesh": NAME}`: a gmsh MSH 4.1 file, looked up through [`MeshFiles`] (the CLI reads
 //!   it relative to the scene file, the service takes the id of an uploaded mesh);
 //! - `{"polygon": [[x, y], ...], "holes": [[[x, y], ...], ...]}`: meshed in-process at
@@ -11,7 +13,7 @@ use serde_json::Value;
 use super::fields::{DOMAIN_FIELDS, RECTANGLE_FIELDS};
 use super::read::{describe, index, join, object, point, required_number, Cx, Range};
 use super::MeshFiles;
-use crate::mesh::Mesh;
+use crate::mesh::AnyMesh;
 
 /// Most vertices of a polygon, over all its rings.
 pub(super) const MAX_POLYGON_VERTICES: usize = 100_000;
@@ -22,10 +24,16 @@ pub(super) enum Shape {
         width: f64,
         height: f64,
     },
-    /// An imported mesh, checked, and the name it was given by.
+    /// [0, width] × [0, height] × [0, depth].
+    Cuboid {
+        width: f64,
+        height: f64,
+        depth: f64,
+    },
+    /// An imported mesh (triangles or tetrahedra), checked, and the name it was given by.
     Mesh {
         name: String,
-        mesh: Box<Mesh>,
+        mesh: Box<AnyMesh>,
     },
     Polygon {
         outer: Vec<[f64; 2]>,
@@ -34,12 +42,30 @@ pub(super) enum Shape {
 }
 
 impl Shape {
-    /// The bounding box [lo, hi] of the body.
-    pub(super) fn bounds(&self) -> ([f64; 2], [f64; 2]) {
+    /// The body's dimension d.
+    pub(super) fn dim(&self) -> usize {
         match self {
-            Shape::Rectangle { width, height } => ([0.0, 0.0], [*width, *height]),
-            Shape::Mesh { mesh, .. } => mesh.bounding_box(),
-            Shape::Polygon { outer, .. } => outer.iter().fold(
+            Shape::Cuboid { .. } => 3,
+            Shape::Mesh { mesh, .. } => mesh.dim(),
+            Shape::Rectangle { .. } | Shape::Polygon { .. } => 2,
+        }
+    }
+
+    /// The bounding box [lo, hi] of the body (z = 0 in 2D).
+    pub(super) fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let plane = |(lo, hi): ([f64; 2], [f64; 2])| ([lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0]);
+        match self {
+            Shape::Rectangle { width, height } => ([0.0; 3], [*width, *height, 0.0]),
+            Shape::Cuboid {
+                width,
+                height,
+                depth,
+            } => ([0.0; 3], [*width, *height, *depth]),
+            Shape::Mesh { mesh, .. } => match &**mesh {
+                AnyMesh::Plane(m) => plane(m.bounding_box()),
+                AnyMesh::Solid(m) => m.bounding_box(),
+            },
+            Shape::Polygon { outer, .. } => plane(outer.iter().fold(
                 ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
                 |(lo, hi), p| {
                     (
@@ -47,7 +73,7 @@ impl Shape {
                         [hi[0].max(p[0]), hi[1].max(p[1])],
                     )
                 },
-            ),
+            )),
         }
     }
 }
@@ -70,6 +96,13 @@ pub(super) fn domain(cx: &mut Cx, v: &Value, ptr: &str, files: &dyn MeshFiles) -
                 "give one form of the domain: width and height, a rectangle, a mesh or a polygon; got {}",
                 forms.join(" and ")
             ),
+        );
+        return None;
+    }
+    if m.contains_key("depth") && !(m.contains_key("width") || m.contains_key("height")) {
+        cx.err(
+            &join(ptr, "depth"),
+            "depth belongs to a box {width, height, depth}",
         );
         return None;
     }
@@ -150,6 +183,14 @@ pub(super) fn domain(cx: &mut Cx, v: &Value, ptr: &str, files: &dyn MeshFiles) -
     };
     let w = required_number(cx, m, &ptr, "width", Range::Positive, "length along x");
     let h = required_number(cx, m, &ptr, "height", Range::Positive, "length along y");
+    if m.contains_key("depth") {
+        let d = required_number(cx, m, &ptr, "depth", Range::Positive, "length along z");
+        return Some(Shape::Cuboid {
+            width: w?,
+            height: h?,
+            depth: d?,
+        });
+    }
     Some(Shape::Rectangle {
         width: w?,
         height: h?,

@@ -18,8 +18,15 @@ pub(super) const TOP_FIELDS: &[&str] = &[
     "output",
     "error_estimate",
 ];
-pub(super) const DOMAIN_FIELDS: &[&str] =
-    &["width", "height", "rectangle", "mesh", "polygon", "holes"];
+pub(super) const DOMAIN_FIELDS: &[&str] = &[
+    "width",
+    "height",
+    "depth",
+    "rectangle",
+    "mesh",
+    "polygon",
+    "holes",
+];
 pub(super) const RECTANGLE_FIELDS: &[&str] = &["width", "height"];
 pub(super) const MESH_FIELDS: &[&str] = &["h", "pattern", "refine"];
 pub(super) const TIME_FIELDS: &[&str] = &["t_end", "T", "k", "N", "steps"];

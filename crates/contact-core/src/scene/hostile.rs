@@ -278,7 +278,7 @@ fn exercise(doc: &Value, limit: Duration) -> Result<(), TestCaseError> {
     if (nx + 1) * (ny + 1) > 2000 {
         return Ok(());
     }
-    let mut sim = match Simulation::new(p, SolverSettings::default()) {
+    let mut sim = match Simulation::<2>::new(p, SolverSettings::default()) {
         Ok(sim) => sim,
         Err(_) => return Ok(()),
     };
@@ -427,7 +427,7 @@ fn non_numbers_in_strings_are_refused() {
 /// The error of set-up or of the first step for a scene that validation accepts.
 fn first_error(doc: &Value) -> SolveError {
     let p = validate(doc).unwrap_or_else(|e| panic!("validation should pass: {e}"));
-    let mut sim = match Simulation::new(p, SolverSettings::default()) {
+    let mut sim = match Simulation::<2>::new(p, SolverSettings::default()) {
         Ok(sim) => sim,
         Err(e) => return e,
     };

@@ -20,7 +20,7 @@ pub(super) struct VectorSection {
     time_dependent: bool,
 }
 
-/// The body force f0(x, y, t).
+/// The body force f0(x, y, z, t).
 pub(super) const LOADS: VectorSection = VectorSection {
     name: "loads",
     fields: LOADS_FIELDS,
@@ -28,7 +28,7 @@ pub(super) const LOADS: VectorSection = VectorSection {
     time_dependent: true,
 };
 
-/// The initial displacement u0(x, y).
+/// The initial displacement u0(x, y, z).
 pub(super) const INITIAL: VectorSection = VectorSection {
     name: "initial",
     fields: INITIAL_FIELDS,
@@ -42,6 +42,7 @@ pub(super) fn vector_section(
     top: &Map<String, Value>,
     s: &VectorSection,
     sampled: &mut Vec<Sampled>,
+    dim: usize,
 ) -> Option<VectorField> {
     let Some(v) = top.get(s.name) else {
         return Some(VectorField::constant([0.0, 0.0]));
@@ -50,6 +51,14 @@ pub(super) fn vector_section(
     let m = object(cx, v, &ptr, s.name, s.fields)?;
     match m.get(s.key) {
         None => Some(VectorField::constant([0.0, 0.0])),
-        Some(f) => vector_field(cx, f, &join(&ptr, s.key), s.time_dependent, None, sampled),
+        Some(f) => vector_field(
+            cx,
+            f,
+            &join(&ptr, s.key),
+            s.time_dependent,
+            None,
+            sampled,
+            dim,
+        ),
     }
 }

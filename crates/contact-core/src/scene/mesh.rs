@@ -35,10 +35,23 @@ pub(super) fn mesh_section(
     ptr: &str,
     shape: Option<&Shape>,
 ) -> Option<MeshSpec> {
-    let rect = match shape {
-        Some(Shape::Rectangle { width, height }) => Some((*width, *height)),
+    // The sides of a rectangle or box, which h must divide.
+    let rect: Option<Vec<(&str, f64)>> = match shape {
+        Some(Shape::Rectangle { width, height }) => {
+            Some(vec![("width", *width), ("height", *height)])
+        }
+        Some(Shape::Cuboid {
+            width,
+            height,
+            depth,
+        }) => Some(vec![
+            ("width", *width),
+            ("height", *height),
+            ("depth", *depth),
+        ]),
         _ => None,
     };
+    let cuboid = matches!(shape, Some(Shape::Cuboid { .. }));
     let imported = matches!(shape, Some(Shape::Mesh { .. }));
     let Some(v) = v else {
         if imported {
@@ -57,7 +70,7 @@ pub(super) fn mesh_section(
         Some(_) if rect.is_some() => {
             cx.err(
                 &join(ptr, "refine"),
-                "refine applies to imported and polygon meshes; a rectangle is refined by a smaller h",
+                "refine applies to imported and polygon meshes; a rectangle or box is refined by a smaller h",
             );
             None
         }
@@ -108,6 +121,17 @@ pub(super) fn mesh_section(
     let m = object(cx, v, ptr, "mesh", MESH_FIELDS)?;
     let pattern = match m.get("pattern") {
         None => Some(MeshPattern::Diagonal),
+        Some(p) if cuboid => {
+            cx.err(
+                &join(ptr, "pattern"),
+                format!(
+                    "pattern applies to rectangles only (a box's cubes are cut into the 6 Kuhn \
+                     tetrahedra), got {}",
+                    describe(p)
+                ),
+            );
+            None
+        }
         Some(p) => choice(cx, p, &join(ptr, "pattern"), "pattern", PATTERNS).map(|i| match i {
             0 => MeshPattern::Diagonal,
             1 => MeshPattern::AntiDiagonal,
@@ -138,9 +162,8 @@ pub(super) fn mesh_section(
                 );
                 return None;
             }
-            let (w, ht) = dims?;
             let mut fits = true;
-            for (side, len) in [("width", w), ("height", ht)] {
+            for (side, len) in dims? {
                 let c = len * n;
                 let whole = c.round();
                 if whole < 1.0 || (c - whole).abs() > WHOLE_TOL * c.max(1.0) {

@@ -57,7 +57,7 @@ use std::sync::Arc;
 
 use serde_json::Value;
 
-use crate::mesh::Mesh;
+use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::{Body, OutputSpec, Problem, SmallnessPolicy};
 use boundary::boundary;
 use damage::damage;
@@ -82,17 +82,18 @@ const WHOLE_TOL: f64 = 1e-9;
 /// service looks up uploaded meshes by id. Both also know the meshes bundled with the
 /// presets ([`presets::bundled_mesh`]).
 pub trait MeshFiles {
-    /// The checked 2D mesh called `name`, or a sentence saying why there is none.
-    fn load(&self, name: &str) -> Result<Mesh, String>;
+    /// The checked mesh (triangles or tetrahedra) called `name`, or a sentence saying why
+    /// there is none.
+    fn load(&self, name: &str) -> Result<AnyMesh, String>;
 }
 
 /// Only the meshes bundled with the presets.
 pub struct Bundled;
 
 impl MeshFiles for Bundled {
-    fn load(&self, name: &str) -> Result<Mesh, String> {
+    fn load(&self, name: &str) -> Result<AnyMesh, String> {
         match presets::bundled_mesh(name) {
-            Some(bytes) => crate::mesh::import::import::<2>(bytes).map_err(|e| format!("mesh \"{name}\": {e}")),
+            Some(bytes) => crate::mesh::import::import_any(bytes).map_err(|e| format!("mesh \"{name}\": {e}")),
             None => Err(format!(
                 "no mesh \"{name}\" here: give the id of a mesh uploaded with POST /meshes, or (from the command line) a .msh file next to the scene"
             )),
@@ -149,6 +150,7 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
         "the body: width and height, a mesh or a polygon",
     )
     .and_then(|v| domain(cx, v, "/domain", files));
+    cx.solid = shape.as_ref().is_some_and(|s| s.dim() == 3);
     let time = required(
         cx,
         top,
@@ -166,7 +168,8 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
         "the clamped, traction and contact segments",
     )
     .and_then(|v| boundary(cx, v, "/boundary", shape.as_ref(), &mut sampled));
-    let body_force = vector_section(cx, top, &LOADS, &mut sampled);
+    let dim = shape.as_ref().map_or(2, Shape::dim);
+    let body_force = vector_section(cx, top, &LOADS, &mut sampled, dim);
     let material = required(cx, top, "", "material", "viscosity and elasticity")
         .and_then(|v| material(cx, v, "/material"));
     let friction = match top.get("friction") {
@@ -186,7 +189,7 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
         None => Some(None),
         Some(v) => damage(cx, v, "/damage", &mut sampled).map(Some),
     };
-    let u0 = vector_section(cx, top, &INITIAL, &mut sampled);
+    let u0 = vector_section(cx, top, &INITIAL, &mut sampled, dim);
     let output = match top.get("output") {
         None => Some(OutputSpec {
             every: 1,
@@ -222,9 +225,13 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
 
     // Every section has reported its errors by now; the problem exists only if none failed.
     let (shape, (t_end, steps), spec, base) = (shape?, time?, mesh?, base?);
-    let ([x0, y0], [x1, y1]) = shape.bounds();
+    let ([x0, y0, _], [x1, y1, _]) = shape.bounds();
+    let depth = match shape {
+        Shape::Cuboid { depth, .. } => Some(depth),
+        _ => None,
+    };
     let body = match shape {
-        Shape::Rectangle { .. } => None,
+        Shape::Rectangle { .. } | Shape::Cuboid { .. } => None,
         Shape::Mesh { name, .. } => Some(format!("mesh {name}")),
         Shape::Polygon { .. } => Some("polygon".to_string()),
     }
@@ -240,6 +247,7 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
         body,
         width: x1 - x0,
         height: y1 - y0,
+        depth,
         cells_per_unit: spec.cells_per_unit,
         pattern: spec.pattern,
         t_end,
@@ -296,8 +304,46 @@ fn base_mesh(
     shape: &Shape,
     spec: &mesh::MeshSpec,
     parts: &[crate::problem::BoundaryPart],
-) -> Option<Mesh> {
-    let mut m = match shape {
+) -> Option<AnyMesh> {
+    let supports: Vec<_> = parts.iter().map(|p| p.support.clone()).collect();
+    let tagged = |cx: &mut Cx, mut m: AnyMesh| {
+        let tag = match &mut m {
+            AnyMesh::Plane(m) => m.tag_boundary(&supports),
+            AnyMesh::Solid(m) => m.tag_boundary(&supports),
+        };
+        match tag {
+            Ok(()) => Some(m),
+            Err(e) => {
+                cx.err(&format!("/boundary/{}", e.part()), e.to_string());
+                None
+            }
+        }
+    };
+    let m = match shape {
+        Shape::Cuboid {
+            width,
+            height,
+            depth,
+        } => {
+            let n = spec.cells_per_unit as f64;
+            let cells = [*width, *height, *depth].map(|l| (l * n).round() as usize);
+            let nodes = cells
+                .iter()
+                .map(|c| c + 1)
+                .fold(1usize, usize::saturating_mul);
+            if nodes > MAX_VALIDATION_NODES {
+                // As for a large rectangle: the run tags the box it meshes.
+                return Some(AnyMesh::Solid(Mesh::cuboid(
+                    *width, *height, *depth, 1, 1, 1,
+                )));
+            }
+            let [nx, ny, nz] = cells;
+            return tagged(
+                cx,
+                AnyMesh::Solid(Mesh::cuboid(*width, *height, *depth, nx, ny, nz)),
+            );
+        }
+        Shape::Mesh { mesh, .. } => return tagged(cx, (**mesh).clone()),
         Shape::Rectangle { width, height } => {
             let n = spec.cells_per_unit as f64;
             let (nx, ny) = ((width * n).round() as usize, (height * n).round() as usize);
@@ -306,11 +352,16 @@ fn base_mesh(
                 // parts were checked on the rectangle's sides, and the run reports a part
                 // that selects nothing ([`Problem::mesh`]). The base mesh of a rectangle is
                 // not kept.
-                return Some(Mesh::rectangle(*width, *height, 1, 1, spec.pattern));
+                return Some(AnyMesh::Plane(Mesh::rectangle(
+                    *width,
+                    *height,
+                    1,
+                    1,
+                    spec.pattern,
+                )));
             }
             Mesh::rectangle(*width, *height, nx, ny, spec.pattern)
         }
-        Shape::Mesh { mesh, .. } => (**mesh).clone(),
         Shape::Polygon { outer, holes } => {
             let h = spec.h?;
             match crate::mesh::polygon::triangulate(outer, holes, h, MAX_VALIDATION_NODES) {
@@ -344,14 +395,7 @@ fn base_mesh(
             }
         }
     };
-    let supports: Vec<_> = parts.iter().map(|p| p.support.clone()).collect();
-    match m.tag_boundary(&supports) {
-        Ok(()) => Some(m),
-        Err(e) => {
-            cx.err(&format!("/boundary/{}", e.part()), e.to_string());
-            None
-        }
-    }
+    tagged(cx, AnyMesh::Plane(m))
 }
 
 /// "/3" for vertex 3 of a ring, "" for the whole ring.
@@ -362,11 +406,28 @@ fn at_vertex(v: Option<usize>) -> String {
 /// Most nodes of a mesh built during validation.
 const MAX_VALIDATION_NODES: usize = 4_000_000;
 
-/// Where formulas are sampled: the rectangle's grid, or (at most ~4,000 of) the body's nodes.
-fn sample_points(shape: &Shape, base: Option<&Mesh>) -> Vec<[f64; 2]> {
+/// Where formulas are sampled: the rectangle's or box's grid, or (at most ~4,000 of) the
+/// body's nodes (z = 0 in 2D).
+fn sample_points(shape: &Shape, base: Option<&AnyMesh>) -> Vec<[f64; 3]> {
     match (shape, base) {
-        (Shape::Rectangle { width, height }, _) => formulas::grid_points(*width, *height),
-        (_, Some(m)) => {
+        (Shape::Rectangle { width, height }, _) => formulas::grid_points(*width, *height, None),
+        (
+            Shape::Cuboid {
+                width,
+                height,
+                depth,
+            },
+            _,
+        ) => formulas::grid_points(*width, *height, Some(*depth)),
+        (_, Some(AnyMesh::Plane(m))) => {
+            let stride = m.n_nodes().div_ceil(4000).max(1);
+            m.nodes
+                .iter()
+                .step_by(stride)
+                .map(|p| [p[0], p[1], 0.0])
+                .collect()
+        }
+        (_, Some(AnyMesh::Solid(m))) => {
             let stride = m.n_nodes().div_ceil(4000).max(1);
             m.nodes.iter().step_by(stride).copied().collect()
         }

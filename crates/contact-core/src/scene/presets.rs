@@ -63,6 +63,29 @@ const PRESETS: &[Preset] = &[
                       step y = 0.5, x ≥ 1; parts selected by formulas; k = 1/32.",
         build: l_bracket,
     },
+    Preset {
+        name: "box-exp3",
+        description: "Experiment 3 in 3D: the box (0,2)×(0,1)×(0,1) of Kuhn tetrahedra, clamped \
+                      on x = 0, frictional contact on the bottom z = 0, traction \
+                      f2 = (−1, 0, −1) on the top z = 1 and the end x = 2; paper material, \
+                      damage and g = 20; h = k = 1/8.",
+        build: box_exp3,
+    },
+    Preset {
+        name: "box-convergence",
+        description: "The convergence test in 3D: the unit cube, clamped on x = 0, contact on \
+                      z = 0, traction f2 = (−1.4, 0, −0.2) on x = 1 and z = 1; h = k = 1/16 \
+                      (the reference of the 3D study h = 1/2, 1/4, 1/8).",
+        build: box_convergence,
+    },
+    Preset {
+        name: "standing-cylinder",
+        description: "A cylinder (r = 0.5, height 1.5) of tetrahedra imported from gmsh, standing \
+                      on its base: frictional contact on the base z = 0 (g = 1), held at its \
+                      top, pushed sideways by f2 = (−1, 0, 0) on the half x ≥ 0 of its side; \
+                      paper material and damage; k = 1/16.",
+        build: standing_cylinder,
+    },
 ];
 
 /// The meshes the presets import, bundled into the binary (generated once with gmsh by
@@ -75,6 +98,10 @@ const BUNDLED: &[(&str, &[u8])] = &[
     (
         "arch-on-support.msh",
         include_bytes!("../../tests/meshes/arch-on-support.msh"),
+    ),
+    (
+        "standing-cylinder.msh",
+        include_bytes!("../../tests/meshes/standing-cylinder.msh"),
     ),
 ];
 
@@ -93,6 +120,9 @@ pub fn names() -> &'static [&'static str] {
         "plate-with-hole",
         "arch-on-support",
         "l-bracket",
+        "box-exp3",
+        "box-convergence",
+        "standing-cylinder",
     ];
     NAMES
 }
@@ -229,6 +259,37 @@ fn convergence() -> Value {
     )
 }
 
+/// A paper scene on the box [0, width] × [0, height] × [0, depth]: clamped on x = 0, contact
+/// on z = 0, traction f2 on the top z = depth and the end x = width.
+fn box_scene(name: &str, (width, height, depth): (f64, f64, f64), hk: &str, f2: [f64; 3]) -> Value {
+    let f2 = json!([num(f2[0]), num(f2[1]), num(f2[2])]);
+    let mut doc = paper_scene(name, (width, height), hk, Vec::new(), [0.0, 0.0]);
+    doc["domain"] = json!({"width": num(width), "height": num(height), "depth": num(depth)});
+    doc["mesh"] = json!({"h": hk});
+    doc["boundary"] = json!([
+        {"type": "clamped", "on": "x"},
+        {"type": "contact", "on": "z"},
+        {"type": "traction", "on": format!("z - {}", num(depth)), "f2": f2},
+        {"type": "traction", "on": format!("x - {}", num(width)), "f2": f2},
+    ]);
+    doc["loads"] = json!({"f0": [0, 0, 0]});
+    doc["initial"] = json!({"u0": [0, 0, 0]});
+    doc
+}
+
+fn box_exp3() -> Value {
+    box_scene("box-exp3", (2.0, 1.0, 1.0), "1/8", [-1.0, 0.0, -1.0])
+}
+
+fn box_convergence() -> Value {
+    box_scene(
+        "box-convergence",
+        (1.0, 1.0, 1.0),
+        "1/16",
+        [-1.4, 0.0, -0.2],
+    )
+}
+
 /// A preset on a bundled gmsh mesh: the paper's material and damage, Tresca bound g.
 fn imported(name: &str, file: &str, boundary: Vec<Value>, g: f64) -> Value {
     let mut doc = paper_scene(name, (1.0, 1.0), "1/32", boundary, [0.0, 0.0]);
@@ -262,6 +323,23 @@ fn arch_on_support() -> Value {
         ],
         1.0,
     )
+}
+
+fn standing_cylinder() -> Value {
+    let mut doc = imported(
+        "standing-cylinder",
+        "standing-cylinder.msh",
+        vec![
+            json!({"type": "clamped", "group": "top"}),
+            json!({"type": "contact", "group": "base"}),
+            json!({"type": "traction", "on": "x^2 + y^2 - 0.25", "where": "x", "f2": [-1, 0, 0]}),
+        ],
+        1.0,
+    );
+    doc["time"]["k"] = json!("1/16");
+    doc["loads"] = json!({"f0": [0, 0, 0]});
+    doc["initial"] = json!({"u0": [0, 0, 0]});
+    doc
 }
 
 fn l_bracket() -> Value {
@@ -315,6 +393,7 @@ mod tests {
                 "plate-with-hole" => 0.5,
                 "arch-on-support" => 1.0,
                 "l-bracket" => 0.3,
+                "standing-cylinder" => 1.0,
                 _ => 20.0,
             };
             assert_eq!(p.friction, FrictionLaw::Tresca { g });

@@ -18,6 +18,8 @@ pub(super) struct Cx {
     pub(super) errors: Vec<FieldError>,
     /// Errors beyond [`MAX_ERRORS`], counted but not kept.
     dropped: usize,
+    /// The body is 3D (set once the domain is read): formulas may use z.
+    pub(super) solid: bool,
 }
 
 impl Cx {

@@ -3,6 +3,7 @@
 //! smallness condition (2.31), and the time loop that couples them.
 
 pub mod damage;
+pub mod friction_isotropic;
 pub mod friction_reduced;
 pub mod invariants;
 pub mod smallness;

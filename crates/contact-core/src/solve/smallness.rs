@@ -1,6 +1,8 @@
 //! The smallness condition (2.31), c2τ · cτ² < m_A, for a scene, in two forms:
 //! - the paper's estimate: m_A = 2η (monotonicity of A in (4.1), ξ ≥ 0), c2τ the
-//!   relaxed-monotonicity constant of ∂j, and cτ the discrete trace constant
+//!   relaxed-monotonicity constant of ∂j (in 3D of ξ ↦ μ(|ξ|) ξ/|ξ| on R², the same
+//!   sup(−μ'), since the tangential curvature μ(r)/r is non-negative), and cτ the discrete
+//!   trace constant
 //!   ‖v_τ‖_{L2(Γ3)} ≤ cτ ‖ε(v)‖_{L2(Ω)} on V^h with the nodal quadrature of the friction term,
 //!   i.e. cτ² = 1 / λ_min(W^{-½} S_G W^{-½}) with S_G the Schur complement onto the Γ3
 //!   tangential DOFs of the Gram matrix of ‖ε(·)‖ and W = diag(ω_i);
@@ -33,11 +35,11 @@ pub struct SmallnessReport {
 }
 
 /// Evaluates both forms; forms the Schur complements only for non-convex laws.
-pub fn check(
+pub fn check<const D: usize>(
     problem: &Problem,
-    mesh: &Mesh,
-    geo: &Geometry,
-    dofs: &DofMap,
+    mesh: &Mesh<D>,
+    geo: &Geometry<D>,
+    dofs: &DofMap<D>,
     velocity: &mut VelocityStep,
 ) -> Result<SmallnessReport, SolveError> {
     let m_a = 2.0 * problem.material.viscosity.eta;

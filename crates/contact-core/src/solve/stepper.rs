@@ -16,9 +16,9 @@ use super::{SolveError, SolverReport, SolverSettings};
 use crate::fem::{assembly, loads, norms, DofMap, Geometry};
 use crate::laws::constitutive::{elastic_stress, viscous_stress, von_mises};
 use crate::laws::damage_source::phi;
-use crate::laws::Tensor2;
+use crate::laws::Tensor;
 use crate::linalg::Csr;
-use crate::mesh::Mesh;
+use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::{Problem, SmallnessPolicy};
 use std::time::Instant;
 
@@ -31,7 +31,7 @@ const PARALLEL_MIN_NODES: usize = 3000;
 pub struct State {
     /// Index n of the time node t_n = n k.
     pub step: usize,
-    /// Displacement u_n, interleaved (x, y) per node.
+    /// Displacement u_n, interleaved (x, y[, z]) per node.
     pub u: Vec<f64>,
     /// Damage ζ_n per node.
     pub zeta: Vec<f64>,
@@ -64,17 +64,68 @@ pub struct StepReport {
     pub slip_nodes: usize,
 }
 
-/// Contact state at a Γ3 DOF.
+/// Contact state at a Γ3 node.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct ContactNode {
     pub node: usize,
-    /// Tangential velocity w_τ.
+    /// Tangential velocity w_τ: in 2D its signed component along the node's tangent, in 3D
+    /// its length |w_τ|.
     pub slip_velocity: f64,
-    /// Friction traction density: the discrete friction force divided by ω_i.
+    /// Friction traction density (the discrete friction force divided by ω_i): in 2D signed
+    /// along the tangent, in 3D its length.
     pub friction_traction: f64,
     /// The bound μ(|w_τ|) the traction is compared with.
     pub bound: f64,
     pub slipping: bool,
+    /// 3D only: w_τ and the friction traction density as Cartesian vectors.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tangential_velocity: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub traction: Option<[f64; 3]>,
+}
+
+/// Per-element stresses of a stored step, symmetric: (σ_xx, σ_yy, σ_xy) in 2D and
+/// (σ_xx, σ_yy, σ_zz, σ_xy, σ_yz, σ_xz) in 3D (the order of VTK's symmetric tensors).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[serde(untagged)]
+pub enum Stress {
+    Plane(Vec<[f64; 3]>),
+    Solid(Vec<[f64; 6]>),
+}
+
+impl FromIterator<[f64; 3]> for Stress {
+    fn from_iter<I: IntoIterator<Item = [f64; 3]>>(iter: I) -> Self {
+        Stress::Plane(iter.into_iter().collect())
+    }
+}
+
+impl Stress {
+    /// Every component of every element, in storage order.
+    pub fn values(&self) -> Box<dyn Iterator<Item = f64> + '_> {
+        match self {
+            Stress::Plane(s) => Box::new(s.iter().flatten().copied()),
+            Stress::Solid(s) => Box::new(s.iter().flatten().copied()),
+        }
+    }
+
+    /// The 6 components (xx, yy, zz, xy, yz, xz) of element e (zero out-of-plane in 2D).
+    pub fn six(&self, e: usize) -> [f64; 6] {
+        match self {
+            Stress::Plane(s) => [s[e][0], s[e][1], 0.0, s[e][2], 0.0, 0.0],
+            Stress::Solid(s) => s[e],
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        match self {
+            Stress::Plane(s) => s.len(),
+            Stress::Solid(s) => s.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
 }
 
 /// The fields of one stored step (only the requested ones are `Some`).
@@ -88,9 +139,9 @@ pub struct StepFields {
     pub w: Option<Vec<f64>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub zeta: Option<Vec<f64>>,
-    /// Per triangle (σ_xx, σ_yy, σ_xy).
+    /// Per element, see [`Stress`].
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub sigma: Option<Vec<[f64; 3]>>,
+    pub sigma: Option<Stress>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub von_mises: Option<Vec<f64>>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -121,26 +172,26 @@ struct DamagePart {
 
 /// What the two sub-problems of step n read, borrowed from the [`Simulation`]: the data, the
 /// discretisation, and the state at t_{n−1} with its per-element ε(u_{n−1}) and B_{n−1}.
-struct StepInput<'a> {
+struct StepInput<'a, const D: usize> {
     n: usize,
     k: f64,
     t: f64,
     problem: &'a Problem,
-    mesh: &'a Mesh,
-    geo: &'a Geometry,
-    dofs: &'a DofMap,
+    mesh: &'a Mesh<D>,
+    geo: &'a Geometry<D>,
+    dofs: &'a DofMap<D>,
     settings: &'a SolverSettings,
     mass: &'a Csr,
     zeta_prev: &'a [f64],
-    eps: &'a [Tensor2<f64>],
-    b: &'a [Tensor2<f64>],
+    eps: &'a [Tensor<D>],
+    b: &'a [Tensor<D>],
 }
 
 impl VelocityPart {
     /// The velocity step (3.13): w_n is the stationary point over V^h of
     /// E(w) = ½ (A ε(w), ε(w)) + (B_{n−1}, ε(w)) − (f_n, w) + Σ_i ω_i j(w_τ(x_i)),
     /// its minimiser when j is convex (unique under the smallness condition (2.31)).
-    fn step(&mut self, s: &StepInput) -> Result<SolverReport, SolveError> {
+    fn step<const D: usize>(&mut self, s: &StepInput<D>) -> Result<SolverReport, SolveError> {
         self.assemble_load(s)?;
         s.dofs.to_free(&self.load, &mut self.load_free);
         self.solver
@@ -150,7 +201,7 @@ impl VelocityPart {
     /// The velocity load, the linear part of (3.13): (f_n, ψ)_V − (B_{n−1}, ε(ψ))_Q for every
     /// nodal basis function ψ, with f_n of (2.23) from the body force f0 and the tractions f2
     /// at t_n. A load that is not finite is reported at the formula responsible.
-    fn assemble_load(&mut self, s: &StepInput) -> Result<(), SolveError> {
+    fn assemble_load<const D: usize>(&mut self, s: &StepInput<D>) -> Result<(), SolveError> {
         let load = &mut self.load;
         load.iter_mut().for_each(|v| *v = 0.0);
         loads::add_body_force(s.mesh, s.geo, &s.problem.body_force, s.t, load);
@@ -166,14 +217,14 @@ impl VelocityPart {
 impl DamagePart {
     /// The damage step (3.10): ζ_n minimises ½ ζᵀ (M/k + κK) ζ − gᵀζ subject to
     /// 0 ≤ ζ_i ≤ 1 at every node, g from [`DamagePart::assemble_rhs`].
-    fn step(&mut self, s: &StepInput) -> Result<SolverReport, SolveError> {
+    fn step<const D: usize>(&mut self, s: &StepInput<D>) -> Result<SolverReport, SolveError> {
         self.assemble_rhs(s);
         self.solver.solve(&self.g, &mut self.next, s.settings, s.n)
     }
 
     /// g = M ζ_{n−1}/k + F_{n−1} with (F_{n−1})_i = ∫_Ω φ(ε(u_{n−1}), ζ_{n−1}) ψ_i dx: the
     /// backward difference (3.1) of ζ and the source of (3.10), both at step n−1.
-    fn assemble_rhs(&mut self, s: &StepInput) {
+    fn assemble_rhs<const D: usize>(&mut self, s: &StepInput<D>) {
         let source = s
             .problem
             .damage
@@ -198,10 +249,10 @@ impl DamagePart {
 /// not on the time step: mesh, geometry, DOF numbering, the factored velocity operator, the
 /// smallness estimate and the mass matrix. Cloning shares the velocity factor.
 #[derive(Clone)]
-pub struct Prepared {
-    mesh: Mesh,
-    geo: Geometry,
-    dofs: DofMap,
+pub struct Prepared<const D: usize = 2> {
+    mesh: Mesh<D>,
+    geo: Geometry<D>,
+    dofs: DofMap<D>,
     velocity: VelocityStep,
     smallness: SmallnessReport,
     mass: Csr,
@@ -209,10 +260,10 @@ pub struct Prepared {
     pub seconds: f64,
 }
 
-impl Prepared {
+impl<const D: usize> Prepared<D> {
     /// Meshes, assembles and factors the velocity operator; estimates the smallness
     /// condition (2.31).
-    pub fn new(problem: &Problem) -> Result<Prepared, SolveError> {
+    pub fn new(problem: &Problem) -> Result<Prepared<D>, SolveError> {
         let start = Instant::now();
         let mesh = problem.mesh().map_err(|e| SolveError::Data {
             pointer: format!("/boundary/{}", e.part()),
@@ -237,12 +288,12 @@ impl Prepared {
     }
 }
 
-/// One job's assembled operators, factorisations and current state.
-pub struct Simulation {
+/// One job's assembled operators, factorisations and current state, in dimension D.
+pub struct Simulation<const D: usize = 2> {
     pub problem: Problem,
-    pub mesh: Mesh,
-    pub geo: Geometry,
-    pub dofs: DofMap,
+    pub mesh: Mesh<D>,
+    pub geo: Geometry<D>,
+    pub dofs: DofMap<D>,
     pub settings: SolverSettings,
     pub smallness: SmallnessReport,
     pub state: State,
@@ -252,14 +303,14 @@ pub struct Simulation {
     velocity: VelocityPart,
     damage: Option<DamagePart>,
     /// Per-element ε(u_{n−1}) and B_{n−1} of the current step.
-    eps: Vec<Tensor2<f64>>,
-    b: Vec<Tensor2<f64>>,
+    eps: Vec<Tensor<D>>,
+    b: Vec<Tensor<D>>,
     pub setup_seconds: f64,
 }
 
-impl Simulation {
+impl<const D: usize> Simulation<D> {
     /// Meshes, assembles and factors everything once; checks the smallness condition.
-    pub fn new(problem: Problem, settings: SolverSettings) -> Result<Simulation, SolveError> {
+    pub fn new(problem: Problem, settings: SolverSettings) -> Result<Simulation<D>, SolveError> {
         let prepared = Prepared::new(&problem)?;
         Simulation::from_prepared(problem, settings, prepared)
     }
@@ -270,8 +321,8 @@ impl Simulation {
     pub fn from_prepared(
         problem: Problem,
         settings: SolverSettings,
-        prepared: Prepared,
-    ) -> Result<Simulation, SolveError> {
+        prepared: Prepared<D>,
+    ) -> Result<Simulation<D>, SolveError> {
         let start = Instant::now();
         let Prepared {
             mesh,
@@ -331,17 +382,17 @@ impl Simulation {
                 zeta,
                 ..State::default()
             },
-            w: vec![0.0; 2 * nn],
+            w: vec![0.0; D * nn],
             mass,
             velocity: VelocityPart {
                 solver: velocity,
-                load: vec![0.0; 2 * nn],
+                load: vec![0.0; D * nn],
                 load_free: vec![0.0; n_free],
                 w_free: vec![0.0; n_free],
             },
             damage,
-            eps: vec![Tensor2::zeros(); nt],
-            b: vec![Tensor2::zeros(); nt],
+            eps: vec![Tensor::zeros(); nt],
+            b: vec![Tensor::zeros(); nt],
             setup_seconds: prepared_seconds + start.elapsed().as_secs_f64(),
             problem,
             mesh,
@@ -500,8 +551,8 @@ impl Simulation {
                 .velocity
                 .solver
                 .contact_velocity()
-                .iter()
-                .filter(|x| **x != 0.0)
+                .chunks(D - 1)
+                .filter(|x| x.iter().any(|v| *v != 0.0))
                 .count(),
         };
         if !(report.w_v.is_finite() && report.u_v.is_finite() && report.zeta_l2.is_finite()) {
@@ -515,7 +566,7 @@ impl Simulation {
         let sel = self.problem.output.fields;
         let n = self.state.step;
         let need_sigma = sel.sigma || sel.von_mises;
-        let sigma: Vec<Tensor2<f64>> = if need_sigma {
+        let sigma: Vec<Tensor<D>> = if need_sigma {
             (0..self.mesh.n_cells())
                 .map(|e| {
                     viscous_stress(
@@ -540,20 +591,45 @@ impl Simulation {
         }
     }
 
-    /// Stick/slip state of every Γ3 DOF after the last step.
+    /// Stick/slip state of every Γ3 node after the last step.
     pub fn contact_state(&self) -> Vec<ContactNode> {
         let x = self.velocity.solver.contact_velocity();
         let force = self.velocity.solver.contact_force();
+        let nd = D - 1;
         self.dofs
             .contact
-            .iter()
+            .chunks(nd)
             .enumerate()
-            .map(|(i, c)| ContactNode {
-                node: c.node,
-                slip_velocity: x[i],
-                friction_traction: force[i] / c.weight,
-                bound: self.problem.friction.mu(x[i].abs()),
-                slipping: x[i] != 0.0,
+            .map(|(i, c)| {
+                let (xi, fi) = (&x[nd * i..nd * (i + 1)], &force[nd * i..nd * (i + 1)]);
+                let weight = c[0].weight;
+                let speed = xi.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let mut node = ContactNode {
+                    node: c[0].node,
+                    slip_velocity: xi[0],
+                    friction_traction: fi[0] / weight,
+                    bound: self.problem.friction.mu(speed),
+                    slipping: xi.iter().any(|v| *v != 0.0),
+                    tangential_velocity: None,
+                    traction: None,
+                };
+                if D == 3 {
+                    // Cartesian vectors from the tangent directions of the node's DOFs.
+                    let cartesian = |v: &[f64]| -> [f64; 3] {
+                        let mut out = [0.0; 3];
+                        for (cd, &vi) in c.iter().zip(v) {
+                            let t = self.dofs.direction(cd);
+                            (0..D).for_each(|k| out[k] += vi * t[k]);
+                        }
+                        out
+                    };
+                    let f: Vec<f64> = fi.iter().map(|v| v / weight).collect();
+                    node.slip_velocity = speed;
+                    node.friction_traction = f.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    node.tangential_velocity = Some(cartesian(xi));
+                    node.traction = Some(cartesian(&f));
+                }
+                node
             })
             .collect()
     }
@@ -586,14 +662,17 @@ impl Simulation {
 /// B_0, the history stress the first step reads ((3.8) with w_0 = 0), with its von Mises
 /// stress. There is no contact state before the first step: `contact` is `None` even when
 /// requested. Needs no factorisation: cheap enough to derive on request.
-pub fn initial_fields(problem: &Problem, mesh: &Mesh) -> Result<StepFields, SolveError> {
+pub fn initial_fields<const D: usize>(
+    problem: &Problem,
+    mesh: &Mesh<D>,
+) -> Result<StepFields, SolveError> {
     let (u, zeta) = initial_values(problem, mesh);
     check_initial(problem, mesh, &u, &zeta)?;
     let sel = problem.output.fields;
     let (sigma, von_mises) = if sel.sigma || sel.von_mises {
         let nt = mesh.n_cells();
-        let mut eps = vec![Tensor2::zeros(); nt];
-        let mut b = vec![Tensor2::zeros(); nt];
+        let mut eps = vec![Tensor::zeros(); nt];
+        let mut b = vec![Tensor::zeros(); nt];
         history_stress(
             problem,
             mesh,
@@ -619,59 +698,79 @@ pub fn initial_fields(problem: &Problem, mesh: &Mesh) -> Result<StepFields, Solv
     })
 }
 
+/// [`initial_fields`] on a mesh of either dimension.
+pub fn initial_fields_of(problem: &Problem, mesh: &AnyMesh) -> Result<StepFields, SolveError> {
+    match mesh {
+        AnyMesh::Plane(m) => initial_fields(problem, m),
+        AnyMesh::Solid(m) => initial_fields(problem, m),
+    }
+}
+
 /// u_0 (interleaved per node) and ζ_0 (per node; ≡ 1 without damage): the nodal
 /// interpolants of the scene's `initial.u0` and `damage.zeta0` at t = 0, (3.11).
-fn initial_values(problem: &Problem, mesh: &Mesh) -> (Vec<f64>, Vec<f64>) {
+fn initial_values<const D: usize>(problem: &Problem, mesh: &Mesh<D>) -> (Vec<f64>, Vec<f64>) {
     let zeta: Vec<f64> = match &problem.damage {
-        Some(d) => mesh
-            .nodes
-            .iter()
-            .map(|p| d.zeta0.eval(p[0], p[1], 0.0))
-            .collect(),
+        Some(d) => mesh.nodes.iter().map(|p| d.zeta0.at(p, 0.0)).collect(),
         None => vec![1.0; mesh.n_nodes()],
     };
     let u: Vec<f64> = mesh
         .nodes
         .iter()
-        .flat_map(|p| problem.u0.eval(p[0], p[1], 0.0))
+        .flat_map(|p| problem.u0.at(p, 0.0))
         .collect();
     (u, zeta)
 }
 
 /// ε(u)|_T and B(ε(u), ζ̄)|_T on every element, ζ̄ the mean of ζ at the element's vertices
 /// (the P0 projection of (3.8) for the paper's B (4.1)).
-fn history_stress(
+fn history_stress<const D: usize>(
     problem: &Problem,
-    mesh: &Mesh,
-    geo: &Geometry,
+    mesh: &Mesh<D>,
+    geo: &Geometry<D>,
     u: &[f64],
     zeta: &[f64],
-    eps: &mut [Tensor2<f64>],
-    b: &mut [Tensor2<f64>],
+    eps: &mut [Tensor<D>],
+    b: &mut [Tensor<D>],
 ) {
     for (e, eps) in eps.iter_mut().enumerate() {
         *eps = geo.strain(mesh, e, u);
     }
     let elasticity = problem.material.elasticity;
-    for (e, tri) in mesh.triangles().iter().enumerate() {
-        let zbar = (zeta[tri[0]] + zeta[tri[1]] + zeta[tri[2]]) / 3.0;
+    for (e, cell) in mesh.cells().enumerate() {
+        let zbar = cell.iter().map(|&n| zeta[n]).sum::<f64>() / (D + 1) as f64;
         b[e] = elastic_stress(&elasticity, &eps[e], zbar);
     }
 }
 
-/// The requested `sigma` (σ_xx, σ_yy, σ_xy per element) and `von_mises` of per-element
-/// stresses.
-fn stress_fields(
+/// The requested `sigma` ([`Stress`]) and `von_mises` of per-element stresses.
+fn stress_fields<const D: usize>(
     problem: &Problem,
-    sigma: &[Tensor2<f64>],
-) -> (Option<Vec<[f64; 3]>>, Option<Vec<f64>>) {
+    sigma: &[Tensor<D>],
+) -> (Option<Stress>, Option<Vec<f64>>) {
     let sel = problem.output.fields;
     (
-        sel.sigma.then(|| {
-            sigma
-                .iter()
-                .map(|s| [s[(0, 0)], s[(1, 1)], s[(0, 1)]])
-                .collect()
+        sel.sigma.then(|| match D {
+            2 => Stress::Plane(
+                sigma
+                    .iter()
+                    .map(|s| [s[(0, 0)], s[(1, 1)], s[(0, 1)]])
+                    .collect(),
+            ),
+            _ => Stress::Solid(
+                sigma
+                    .iter()
+                    .map(|s| {
+                        [
+                            s[(0, 0)],
+                            s[(1, 1)],
+                            s[(2, 2)],
+                            s[(0, 1)],
+                            s[(1, 2)],
+                            s[(0, 2)],
+                        ]
+                    })
+                    .collect(),
+            ),
         }),
         sel.von_mises.then(|| sigma.iter().map(von_mises).collect()),
     )
@@ -688,24 +787,23 @@ fn formula_text(f: &crate::problem::ScalarField) -> String {
 }
 
 /// u0 finite and ζ0 in [0, 1] at every node.
-fn check_initial(
+fn check_initial<const D: usize>(
     problem: &Problem,
-    mesh: &Mesh,
+    mesh: &Mesh<D>,
     u: &[f64],
     zeta: &[f64],
 ) -> Result<(), SolveError> {
     for (i, p) in mesh.nodes.iter().enumerate() {
-        for c in 0..2 {
-            let v = u[2 * i + c];
+        for c in 0..D {
+            let v = u[D * i + c];
             if !v.is_finite() {
                 return Err(SolveError::Data {
                     pointer: format!("/initial/u0/{c}"),
                     message: format!(
-                        "{} evaluates to {v} at the node (x, y) = ({}, {}); the initial \
-                         displacement must be finite at every node",
+                        "{} evaluates to {v} at the node {}; the initial displacement must \
+                         be finite at every node",
                         formula_text(&problem.u0.0[c]),
-                        p[0],
-                        p[1]
+                        at_point(p)
                     ),
                 });
             }
@@ -716,11 +814,10 @@ fn check_initial(
                 return Err(SolveError::Data {
                     pointer: "/damage/zeta0".into(),
                     message: format!(
-                        "{} evaluates to {z} at the node (x, y) = ({}, {}); the initial damage \
-                         must be in [0, 1] (1 = intact) at every node",
+                        "{} evaluates to {z} at the node {}; the initial damage must be in \
+                         [0, 1] (1 = intact) at every node",
                         formula_text(&d.zeta0),
-                        p[0],
-                        p[1]
+                        at_point(p)
                     ),
                 });
             }
@@ -730,7 +827,7 @@ fn check_initial(
 }
 
 /// The error for a non-finite load vector at step n: the field and point responsible.
-fn load_fault(problem: &Problem, mesh: &Mesh, t: f64, n: usize) -> SolveError {
+fn load_fault<const D: usize>(problem: &Problem, mesh: &Mesh<D>, t: f64, n: usize) -> SolveError {
     use crate::problem::BoundaryKind;
     let Some(f) = loads::find_non_finite(mesh, &problem.body_force, &problem.boundary, t) else {
         // Finite values whose integrals overflow.
@@ -752,12 +849,24 @@ fn load_fault(problem: &Problem, mesh: &Mesh, t: f64, n: usize) -> SolveError {
     SolveError::Data {
         pointer,
         message: format!(
-            "{} evaluates to {} at (x, y, t) = ({}, {}, {t}), a quadrature point of time step \
-             {n}; loads must be finite on the whole domain and time interval",
+            "{} evaluates to {} at {}, a quadrature point of time step {n}; loads must be \
+             finite on the whole domain and time interval",
             formula_text(field),
             f.value,
-            f.at[0],
-            f.at[1]
+            match D {
+                2 => format!("(x, y, t) = ({}, {}, {t})", f.at[0], f.at[1]),
+                _ => format!(
+                    "(x, y, z, t) = ({}, {}, {}, {t})",
+                    f.at[0], f.at[1], f.at[2]
+                ),
+            }
         ),
     }
+}
+
+/// "(x, y) = (…, …)" or "(x, y, z) = (…, …, …)" for messages.
+fn at_point<const D: usize>(p: &[f64; D]) -> String {
+    let names = ["x", "y", "z"][..D].join(", ");
+    let values: Vec<String> = p.iter().map(|v| v.to_string()).collect();
+    format!("({names}) = ({})", values.join(", "))
 }

@@ -10,8 +10,12 @@
 //! node sticks (|b_i| ≤ ω_i μ(0), checked exactly) then x = 0 and w_I = y: done. Otherwise
 //! the Schur complement is formed (once, lazily, by blocked solves), the reduced problem is
 //! solved, and one more solve recovers w_I.
+//!
+//! Each Γ3 node has d − 1 consecutive tangential DOFs: one in 2D (the reduced problem of
+//! [`super::friction_reduced`]), two in 3D (the isotropic, group-sparse one of
+//! [`super::friction_isotropic`], with the Euclidean norm of the node's 2-vector).
 
-use super::friction_reduced::{self, kkt_violation, Reduced};
+use super::{friction_isotropic, friction_reduced};
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::fem::DofMap;
 use crate::linalg::{Cholesky, Csr};
@@ -34,6 +38,9 @@ pub struct VelocityStep {
     k_ii: Cholesky,
     /// Contact rows, interior columns.
     k_ci: Csr,
+    /// Tangential DOFs per Γ3 node: d − 1.
+    block: usize,
+    /// ω_i per contact DOF (repeated over a node's DOFs).
     weights: Vec<f64>,
     law: FrictionLaw,
     schur: Option<DMatrix<f64>>,
@@ -47,7 +54,11 @@ pub struct VelocityStep {
 
 impl VelocityStep {
     /// Factors K_II of the free-DOF operator `k` (numbered as in `dofs`).
-    pub fn new(k: Csr, dofs: &DofMap, law: FrictionLaw) -> Result<Self, SolveError> {
+    pub fn new<const D: usize>(
+        k: Csr,
+        dofs: &DofMap<D>,
+        law: FrictionLaw,
+    ) -> Result<Self, SolveError> {
         let n_i = dofs.n_interior;
         let n = dofs.n_free();
         let k_ii =
@@ -64,6 +75,7 @@ impl VelocityStep {
             n_i,
             k_ii,
             k_ci,
+            block: D - 1,
             weights: dofs.contact.iter().map(|c| c.weight).collect(),
             law,
             schur: None,
@@ -137,7 +149,13 @@ impl VelocityStep {
             self.k_ci.mul_vec(&self.y, &mut kci_y);
             b.iter_mut().zip(&kci_y).for_each(|(b, v)| *b -= v);
             let mu0 = self.law.mu(0.0);
-            let all_stick = b.iter().zip(&self.weights).all(|(b, w)| b.abs() <= w * mu0);
+            let all_stick = match self.block {
+                1 => b.iter().zip(&self.weights).all(|(b, w)| b.abs() <= w * mu0),
+                _ => b
+                    .chunks(self.block)
+                    .zip(self.weights.chunks(self.block))
+                    .all(|(b, w)| b.iter().map(|v| v * v).sum::<f64>().sqrt() <= w[0] * mu0),
+            };
             if all_stick {
                 self.x.iter_mut().for_each(|v| *v = 0.0);
                 w[..n_i].copy_from_slice(&self.y);
@@ -152,15 +170,34 @@ impl VelocityStep {
                     tolerance: 0.5 * settings.tolerance,
                     ..*settings
                 };
+                let block = self.block;
                 let s = self.schur();
-                let p = Reduced {
-                    s,
-                    b: &b,
-                    weights: &weights,
-                    law: &law,
-                    scale: Some(scale),
+                let rep = match block {
+                    1 => friction_reduced::solve(
+                        &friction_reduced::Reduced {
+                            s,
+                            b: &b,
+                            weights: &weights,
+                            law: &law,
+                            scale: Some(scale),
+                        },
+                        &mut x,
+                        &inner,
+                        step,
+                    ),
+                    _ => friction_isotropic::solve(
+                        &friction_isotropic::Reduced {
+                            s,
+                            b: &b,
+                            weights: &node_weights(&weights, block),
+                            law: &law,
+                            scale: Some(scale),
+                        },
+                        &mut x,
+                        &inner,
+                        step,
+                    ),
                 };
-                let rep = friction_reduced::solve(&p, &mut x, &inner, step);
                 self.weights = weights;
                 iterations = rep?.iterations;
                 // w_I = K_II⁻¹ (f_I − K_IC x).
@@ -250,12 +287,25 @@ impl VelocityStep {
             *r -= f;
         }
         let interior = self.r[..n_i].iter().fold(0.0f64, |s, v| s.max(v.abs()));
-        let contact = kkt_violation(&self.r[n_i..], &self.x, &self.weights, &self.law);
+        let contact = match self.block {
+            1 => friction_reduced::kkt_violation(&self.r[n_i..], &self.x, &self.weights, &self.law),
+            b => friction_isotropic::kkt_violation(
+                &self.r[n_i..],
+                &self.x,
+                &node_weights(&self.weights, b),
+                &self.law,
+            ),
+        };
         for (q, r) in self.reaction.iter_mut().zip(&self.r[n_i..]) {
             *q = -r;
         }
         interior.max(contact)
     }
+}
+
+/// ω_i per node from ω per contact DOF (`block` DOFs per node).
+fn node_weights(weights: &[f64], block: usize) -> Vec<f64> {
+    weights.iter().step_by(block).copied().collect()
 }
 
 /// S = K_CC − K_CI K_II⁻¹ K_IC by blocked solves with the K_II factor.

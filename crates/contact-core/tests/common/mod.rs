@@ -35,7 +35,7 @@ pub fn problem(preset: &str, nh: usize, nk: usize, edits: &[(&str, Value)]) -> P
 
 /// Runs to the end, calling `check` after every step.
 pub fn run_checked(p: Problem, mut check: impl FnMut(&Simulation, &StepReport)) -> Simulation {
-    let mut sim = Simulation::new(p, SolverSettings::default()).expect("set-up");
+    let mut sim = Simulation::<2>::new(p, SolverSettings::default()).expect("set-up");
     while !sim.finished() {
         let r = sim.step().expect("step");
         check(&sim, &r);

@@ -17,9 +17,9 @@
 //! | `n` | `u64` |
 //! | `t` | `f64` |
 //! | `u`, `w`, `zeta` | each: presence flag `u8` (0 absent, 1 present); if present `u64` count, then count × `f64` |
-//! | `sigma` | presence flag; if present `u64` triangle count, then per triangle `f64` σ_xx, σ_yy, σ_xy |
+//! | `sigma` | flag `u8`: 0 absent; 1 (2D): `u64` triangle count, then per triangle `f64` σ_xx, σ_yy, σ_xy; 2 (3D): `u64` tetrahedron count, then per tetrahedron `f64` σ_xx, σ_yy, σ_zz, σ_xy, σ_yz, σ_xz |
 //! | `von_mises` | presence flag; if present `u64` count, then count × `f64` |
-//! | `contact` | presence flag; if present `u64` count, then per node: `u64` node, `f64` slip velocity, `f64` friction traction, `f64` bound, `u8` slipping (0 or 1) |
+//! | `contact` | flag `u8`: 0 absent; 1 (2D) or 2 (3D): `u64` count, then per node: `u64` node, `f64` slip velocity, `f64` friction traction, `f64` bound, `u8` slipping (0 or 1), and in 3D 6 × `f64`: the tangential velocity and the traction as Cartesian vectors |
 //! | checksum | the first 8 bytes of the SHA-256 of every byte before it |
 //!
 //! # Checkpoint format (`CSSTAT`, version 1)
@@ -34,7 +34,7 @@
 //! them allocate more than the input's own size. Flags must be exactly 0 or 1, no bytes may
 //! follow the checksum, and the checksum must match.
 
-use crate::solve::stepper::{ContactNode, State, StepFields};
+use crate::solve::stepper::{ContactNode, State, StepFields, Stress};
 use sha2::{Digest, Sha256};
 
 /// Magic bytes that open an encoded [`StepFields`].
@@ -45,8 +45,10 @@ pub const STATE_MAGIC: &[u8; 6] = b"CSSTAT";
 pub const FORMAT_VERSION: u16 = 1;
 
 const CHECKSUM_LEN: usize = 8;
-/// Bytes of one contact-node record: node, three `f64`s and the slipping flag.
+/// Bytes of one contact-node record: node, three `f64`s and the slipping flag (2D); and 6
+/// `f64`s more in 3D.
 const CONTACT_RECORD_LEN: usize = 8 + 3 * 8 + 1;
+const CONTACT_RECORD_LEN_3D: usize = CONTACT_RECORD_LEN + 6 * 8;
 
 /// Why bytes could not be decoded.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -71,7 +73,7 @@ pub enum DecodeError {
         element_size: usize,
         available: usize,
     },
-    #[error("invalid {what} flag {value} (expected 0 or 1)")]
+    #[error("invalid {what} flag {value} (expected 0 or 1, or 2 for a dimension flag)")]
     BadFlag { what: &'static str, value: u8 },
     #[error("{what} value {value} does not fit this platform's usize")]
     ValueOutOfRange { what: &'static str, value: u64 },
@@ -87,11 +89,20 @@ pub fn encode_step(f: &StepFields) -> Vec<u8> {
         .iter()
         .map(|a| a.as_ref().map_or(0, |v| 8 + 8 * v.len()))
         .sum::<usize>();
-    let sigma = f.sigma.as_ref().map_or(0, |s| 8 + 24 * s.len());
-    let contact = f
+    let sigma = f.sigma.as_ref().map_or(0, |s| match s {
+        Stress::Plane(s) => 8 + 24 * s.len(),
+        Stress::Solid(s) => 8 + 48 * s.len(),
+    });
+    let solid_contact = f
         .contact
         .as_ref()
-        .map_or(0, |c| 8 + CONTACT_RECORD_LEN * c.len());
+        .is_some_and(|c| c.iter().any(|n| n.tangential_velocity.is_some()));
+    let record = if solid_contact {
+        CONTACT_RECORD_LEN_3D
+    } else {
+        CONTACT_RECORD_LEN
+    };
+    let contact = f.contact.as_ref().map_or(0, |c| 8 + record * c.len());
     let mut w = Writer::with_capacity(6 + 2 + 16 + 6 + arrays + sigma + contact + CHECKSUM_LEN);
     w.bytes(STEP_MAGIC);
     w.u16(FORMAT_VERSION);
@@ -102,8 +113,15 @@ pub fn encode_step(f: &StepFields) -> Vec<u8> {
     w.opt_f64s(f.zeta.as_deref());
     match &f.sigma {
         None => w.u8(0),
-        Some(s) => {
+        Some(Stress::Plane(s)) => {
             w.u8(1);
+            w.u64(s.len() as u64);
+            for v in s.iter().flatten() {
+                w.f64(*v);
+            }
+        }
+        Some(Stress::Solid(s)) => {
+            w.u8(2);
             w.u64(s.len() as u64);
             for v in s.iter().flatten() {
                 w.f64(*v);
@@ -114,7 +132,7 @@ pub fn encode_step(f: &StepFields) -> Vec<u8> {
     match &f.contact {
         None => w.u8(0),
         Some(c) => {
-            w.u8(1);
+            w.u8(if solid_contact { 2 } else { 1 });
             w.u64(c.len() as u64);
             for node in c {
                 w.u64(node.node as u64);
@@ -122,6 +140,15 @@ pub fn encode_step(f: &StepFields) -> Vec<u8> {
                 w.f64(node.friction_traction);
                 w.f64(node.bound);
                 w.u8(u8::from(node.slipping));
+                if solid_contact {
+                    let zero = [0.0; 3];
+                    for v in node.tangential_velocity.unwrap_or(zero) {
+                        w.f64(v);
+                    }
+                    for v in node.traction.unwrap_or(zero) {
+                        w.f64(v);
+                    }
+                }
             }
         }
     }
@@ -137,32 +164,63 @@ pub fn decode_step(bytes: &[u8]) -> Result<StepFields, DecodeError> {
     let u = r.opt_f64s("u")?;
     let w = r.opt_f64s("w")?;
     let zeta = r.opt_f64s("zeta")?;
-    let sigma = if r.flag("sigma presence")? {
-        let count = r.count("sigma", 24)?;
-        let mut s = Vec::with_capacity(count);
-        for _ in 0..count {
-            s.push([r.f64("sigma")?, r.f64("sigma")?, r.f64("sigma")?]);
+    let sigma = match r.kind("sigma presence")? {
+        0 => None,
+        1 => {
+            let count = r.count("sigma", 24)?;
+            let mut s = Vec::with_capacity(count);
+            for _ in 0..count {
+                s.push([r.f64("sigma")?, r.f64("sigma")?, r.f64("sigma")?]);
+            }
+            Some(Stress::Plane(s))
         }
-        Some(s)
-    } else {
-        None
+        _ => {
+            let count = r.count("sigma", 48)?;
+            let mut s = Vec::with_capacity(count);
+            for _ in 0..count {
+                let mut v = [0.0; 6];
+                for x in &mut v {
+                    *x = r.f64("sigma")?;
+                }
+                s.push(v);
+            }
+            Some(Stress::Solid(s))
+        }
     };
     let von_mises = r.opt_f64s("von_mises")?;
-    let contact = if r.flag("contact presence")? {
-        let count = r.count("contact", CONTACT_RECORD_LEN)?;
-        let mut c = Vec::with_capacity(count);
-        for _ in 0..count {
-            c.push(ContactNode {
-                node: r.usize("contact node")?,
-                slip_velocity: r.f64("contact slip velocity")?,
-                friction_traction: r.f64("contact friction traction")?,
-                bound: r.f64("contact bound")?,
-                slipping: r.flag("contact slipping")?,
-            });
+    let contact = match r.kind("contact presence")? {
+        0 => None,
+        kind => {
+            let solid = kind == 2;
+            let record = if solid {
+                CONTACT_RECORD_LEN_3D
+            } else {
+                CONTACT_RECORD_LEN
+            };
+            let count = r.count("contact", record)?;
+            let mut c = Vec::with_capacity(count);
+            for _ in 0..count {
+                let mut node = ContactNode {
+                    node: r.usize("contact node")?,
+                    slip_velocity: r.f64("contact slip velocity")?,
+                    friction_traction: r.f64("contact friction traction")?,
+                    bound: r.f64("contact bound")?,
+                    slipping: r.flag("contact slipping")?,
+                    tangential_velocity: None,
+                    traction: None,
+                };
+                if solid {
+                    let mut v = [0.0; 6];
+                    for x in &mut v {
+                        *x = r.f64("contact vectors")?;
+                    }
+                    node.tangential_velocity = Some([v[0], v[1], v[2]]);
+                    node.traction = Some([v[3], v[4], v[5]]);
+                }
+                c.push(node);
+            }
+            Some(c)
         }
-        Some(c)
-    } else {
-        None
     };
     r.close()?;
     Ok(StepFields {
@@ -361,6 +419,14 @@ impl<'a> Reader<'a> {
 
     fn f64(&mut self, what: &'static str) -> Result<f64, DecodeError> {
         Ok(f64::from_bits(self.u64(what)?))
+    }
+
+    /// A presence flag that also tells the dimension: 0 absent, 1 (2D) or 2 (3D).
+    fn kind(&mut self, what: &'static str) -> Result<u8, DecodeError> {
+        match self.array::<1>(what)?[0] {
+            value @ 0..=2 => Ok(value),
+            value => Err(DecodeError::BadFlag { what, value }),
+        }
     }
 
     fn flag(&mut self, what: &'static str) -> Result<bool, DecodeError> {

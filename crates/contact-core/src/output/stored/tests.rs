@@ -51,6 +51,8 @@ fn full_fields(rng: &mut TestRng, nodes: usize, triangles: usize) -> StepFields 
                     friction_traction: rng.f64(),
                     bound: rng.f64(),
                     slipping: i % 2 == 0,
+                    tangential_velocity: None,
+                    traction: None,
                 })
                 .collect(),
         ),
@@ -86,7 +88,7 @@ fn bits(f: &StepFields) -> Vec<u64> {
         None => out.push(u64::MAX),
         Some(s) => {
             out.push(s.len() as u64);
-            out.extend(s.iter().flatten().map(|x| x.to_bits()));
+            out.extend(s.values().map(|x| x.to_bits()));
         }
     }
     match &f.contact {
@@ -373,6 +375,8 @@ fn arb_fields() -> impl Strategy<Value = StepFields> {
                     friction_traction,
                     bound,
                     slipping,
+                    tangential_velocity: None,
+                    traction: None,
                 },
             ),
         0..8,
@@ -391,7 +395,7 @@ fn arb_fields() -> impl Strategy<Value = StepFields> {
                 u,
                 w,
                 zeta,
-                sigma,
+                sigma: sigma.map(Stress::Plane),
                 von_mises,
                 contact,
             },

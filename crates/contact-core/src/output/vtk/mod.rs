@@ -8,12 +8,15 @@
 //! keeps every `f64` bit-exact and takes about half the space of full-precision ASCII.
 //!
 //! What one file holds:
-//! - `Points`: the mesh nodes as `Float64` with 3 components (z = 0);
-//! - `Cells`: `connectivity` and `offsets` (`Int64`), `types` (`UInt8`, all 5 = VTK_TRIANGLE);
-//! - `PointData`: `u` and `w` (3 components, z = 0) and `zeta`, each when present;
+//! - `Points`: the mesh nodes as `Float64` with 3 components (z = 0 in 2D);
+//! - `Cells`: `connectivity` and `offsets` (`Int64`), `types` (`UInt8`, all 5 = VTK_TRIANGLE
+//!   in 2D, all 10 = VTK_TETRA in 3D);
+//! - `PointData`: `u` and `w` (3 components, z = 0 in 2D) and `zeta`, each when present, and
+//!   with the contact state `contact_state` (`UInt8`: 0 off Γ3, 1 stick, 2 slip) and
+//!   `slip_velocity` (|w_τ|, 0 off Γ3);
 //! - `CellData`: `sigma` and `von_mises`, each when present. σ is a symmetric tensor of 6
 //!   components in VTK's order for symmetric tensors, xx, yy, zz, xy, yz, xz (the order
-//!   `vtkMath::TensorFromSymmetricTensor` expands), with σ_zz = σ_yz = σ_xz = 0: the plane
+//!   `vtkMath::TensorFromSymmetricTensor` expands); in 2D σ_zz = σ_yz = σ_xz = 0: the plane
 //!   model's constitutive laws (4.1) act on 2 × 2 tensors, so it has no σ_zz. `CellData`
 //!   carries `Tensors="sigma"`, which makes it the cells' active tensors for VTK's XML
 //!   readers (VTK 9 accepts 6-component tensors), so ParaView's tensor filters find it;
@@ -23,16 +26,18 @@
 //! The document is streamed array by array through a buffered writer, with each array's
 //! base64 encoded on the fly, so memory does not grow with the size of the mesh.
 //! All input is validated before the first byte is written: a field whose length does not
-//! match the mesh, or a triangle with an out-of-range node, is an `InvalidInput` error.
+//! match the mesh, or a cell with an out-of-range node, is an `InvalidInput` error.
 
+use crate::mesh::AnyMesh;
 use crate::solve::stepper::StepFields;
 use base64::engine::general_purpose::STANDARD;
 use base64::write::EncoderWriter;
 use std::borrow::Cow;
 use std::io::{self, BufWriter, Write};
 
-/// VTK cell type of a linear triangle.
+/// VTK cell types of a linear triangle and a linear tetrahedron.
 const VTK_TRIANGLE: u8 = 5;
+const VTK_TETRA: u8 = 10;
 /// Component names of a symmetric tensor, in the order VTK reads 6-component tensors.
 const SYM_TENSOR: [&str; 6] = ["xx", "yy", "zz", "xy", "yz", "xz"];
 /// Raw bytes gathered before they are handed to the base64 encoder.
@@ -40,20 +45,20 @@ const CHUNK_BYTES: usize = 48 * 1024;
 
 /// Writes one step as a VTK XML UnstructuredGrid (`.vtu`) document (see the module docs).
 ///
-/// `nodes` and `triangles` are the mesh; `u` and `w` in `fields` are interleaved (x, y) per
-/// node, `zeta` is per node, `sigma` ((σ_xx, σ_yy, σ_xy), written as the 6 components of a
-/// symmetric tensor) and `von_mises` are per triangle. The contact state is not written.
-/// Errors with `InvalidInput`, before writing anything, when a field's length does not match
-/// the mesh or a triangle refers to a missing node.
-pub fn write_vtu<W: Write>(
+/// `nodes` and `cells` (D + 1 node indices per simplex, flat) are the mesh; `u` and `w` in
+/// `fields` are interleaved (D components per node), `zeta` is per node, `sigma` (written as
+/// the 6 components of a symmetric tensor) and `von_mises` are per cell, the contact state
+/// per Γ3 node. Errors with `InvalidInput`, before writing anything, when a field's length
+/// does not match the mesh or a cell refers to a missing node.
+pub fn write_vtu<W: Write, const D: usize>(
     out: W,
-    nodes: &[[f64; 2]],
-    triangles: &[[usize; 3]],
+    nodes: &[[f64; D]],
+    cells: &[usize],
     fields: &StepFields,
 ) -> io::Result<()> {
-    validate(nodes, triangles, fields)?;
+    validate(nodes, cells, fields)?;
     let np = nodes.len();
-    let nc = triangles.len();
+    let nc = cells.len() / (D + 1);
     let mut out = BufWriter::with_capacity(64 * 1024, out);
     let o = &mut out;
 
@@ -72,17 +77,30 @@ pub fn write_vtu<W: Write>(
         "    <Piece NumberOfPoints=\"{np}\" NumberOfCells=\"{nc}\">"
     )?;
 
-    let has_point_data = fields.u.is_some() || fields.w.is_some() || fields.zeta.is_some();
+    let has_point_data = fields.u.is_some()
+        || fields.w.is_some()
+        || fields.zeta.is_some()
+        || fields.contact.is_some();
     if has_point_data {
         o.write_all(b"      <PointData>\n")?;
         for (name, v) in [("u", &fields.u), ("w", &fields.w)] {
             if let Some(v) = v {
-                let values = v.chunks_exact(2).flat_map(|c| [c[0], c[1], 0.0]);
+                let values = v.chunks_exact(D).flat_map(xyz);
                 data_array(o, 8, name, &["x", "y", "z"], None, 3 * np, values)?;
             }
         }
         if let Some(z) = &fields.zeta {
             data_array(o, 8, "zeta", &[], None, np, z.iter().copied())?;
+        }
+        if let Some(contact) = &fields.contact {
+            let mut state = vec![0u8; np];
+            let mut slip = vec![0.0f64; np];
+            for c in contact {
+                state[c.node] = if c.slipping { 2 } else { 1 };
+                slip[c.node] = c.slip_velocity.abs();
+            }
+            data_array(o, 8, "contact_state", &[], None, np, state)?;
+            data_array(o, 8, "slip_velocity", &[], None, np, slip)?;
         }
         o.write_all(b"      </PointData>\n")?;
     }
@@ -93,8 +111,7 @@ pub fn write_vtu<W: Write>(
             o.write_all(b"      <CellData>\n")?;
         }
         if let Some(s) = &fields.sigma {
-            // (xx, yy, xy) → (xx, yy, zz, xy, yz, xz).
-            let values = s.iter().flat_map(|s| [s[0], s[1], 0.0, s[2], 0.0, 0.0]);
+            let values = (0..nc).flat_map(|e| s.six(e));
             data_array(o, 8, "sigma", &SYM_TENSOR, None, 6 * nc, values)?;
         }
         if let Some(vm) = &fields.von_mises {
@@ -104,17 +121,18 @@ pub fn write_vtu<W: Write>(
     }
 
     o.write_all(b"      <Points>\n")?;
-    let points = nodes.iter().flat_map(|p| [p[0], p[1], 0.0]);
+    let points = nodes.iter().flat_map(|p| xyz(p));
     data_array(o, 8, "Points", &["x", "y", "z"], None, 3 * np, points)?;
     o.write_all(b"      </Points>\n")?;
 
     o.write_all(b"      <Cells>\n")?;
     // `validate` checked that every index and offset fits in an i64.
-    let connectivity = triangles.iter().flatten().map(|&i| i as i64);
-    data_array(o, 8, "connectivity", &[], None, 3 * nc, connectivity)?;
-    let offsets = (1..=nc).map(|c| 3 * c as i64);
+    let connectivity = cells.iter().map(|&i| i as i64);
+    data_array(o, 8, "connectivity", &[], None, (D + 1) * nc, connectivity)?;
+    let offsets = (1..=nc).map(|c| ((D + 1) * c) as i64);
     data_array(o, 8, "offsets", &[], None, nc, offsets)?;
-    let types = std::iter::repeat_n(VTK_TRIANGLE, nc);
+    let kind = if D == 3 { VTK_TETRA } else { VTK_TRIANGLE };
+    let types = std::iter::repeat_n(kind, nc);
     data_array(o, 8, "types", &[], None, nc, types)?;
     o.write_all(b"      </Cells>\n")?;
 
@@ -122,6 +140,14 @@ pub fn write_vtu<W: Write>(
     o.write_all(b"  </UnstructuredGrid>\n")?;
     o.write_all(b"</VTKFile>\n")?;
     out.flush()
+}
+
+/// [`write_vtu`] of a mesh of either dimension.
+pub fn write_mesh_vtu<W: Write>(out: W, mesh: &AnyMesh, fields: &StepFields) -> io::Result<()> {
+    match mesh {
+        AnyMesh::Plane(m) => write_vtu(out, &m.nodes, m.cells_flat(), fields),
+        AnyMesh::Solid(m) => write_vtu(out, &m.nodes, m.cells_flat(), fields),
+    }
 }
 
 /// Writes a ParaView collection (`.pvd`) listing `(time, file)` entries, one data set per
@@ -156,19 +182,38 @@ fn to_i64(v: usize) -> io::Result<i64> {
     i64::try_from(v).map_err(|_| invalid(format!("{v} does not fit VTK's Int64")))
 }
 
+/// A point or vector of R^D as 3 components (z = 0 in 2D).
+fn xyz(v: &[f64]) -> [f64; 3] {
+    [v[0], v[1], if v.len() > 2 { v[2] } else { 0.0 }]
+}
+
 /// Checks that every field matches the mesh and every index fits the file's types.
-fn validate(nodes: &[[f64; 2]], triangles: &[[usize; 3]], f: &StepFields) -> io::Result<()> {
+fn validate<const D: usize>(nodes: &[[f64; D]], cells: &[usize], f: &StepFields) -> io::Result<()> {
     let np = nodes.len();
-    let nc = triangles.len();
-    to_i64(nc.saturating_mul(3))?;
+    let cell = if D == 3 { "tetrahedron" } else { "triangle" };
+    if !cells.len().is_multiple_of(D + 1) {
+        return Err(invalid(format!(
+            "{} cell indices are not whole {cell}s of {} nodes",
+            cells.len(),
+            D + 1
+        )));
+    }
+    let nc = cells.len() / (D + 1);
+    to_i64(cells.len())?;
     to_i64(f.n)?;
-    if let Some((e, t)) = triangles
-        .iter()
+    if let Some((e, t)) = cells
+        .chunks_exact(D + 1)
         .enumerate()
         .find(|(_, t)| t.iter().any(|&i| i >= np))
     {
         return Err(invalid(format!(
-            "triangle {e} {t:?} refers to a node beyond the mesh's {np} nodes"
+            "{cell} {e} {t:?} refers to a node beyond the mesh's {np} nodes"
+        )));
+    }
+    if let Some(c) = f.contact.iter().flatten().find(|c| c.node >= np) {
+        return Err(invalid(format!(
+            "contact node {} is beyond the mesh's {np} nodes",
+            c.node
         )));
     }
     let check = |name: &str, len: Option<usize>, expected: usize, per: &str| match len {
@@ -177,21 +222,31 @@ fn validate(nodes: &[[f64; 2]], triangles: &[[usize; 3]], f: &StepFields) -> io:
         ))),
         _ => Ok(()),
     };
-    let nodal2 = np.saturating_mul(2);
-    check("u", f.u.as_ref().map(Vec::len), nodal2, "x, y per node")?;
-    check("w", f.w.as_ref().map(Vec::len), nodal2, "x, y per node")?;
+    let nodal = np.saturating_mul(D);
+    let per_node = if D == 3 {
+        "x, y, z per node"
+    } else {
+        "x, y per node"
+    };
+    let per_cell = format!("one per {cell}");
+    check("u", f.u.as_ref().map(Vec::len), nodal, per_node)?;
+    check("w", f.w.as_ref().map(Vec::len), nodal, per_node)?;
     check("zeta", f.zeta.as_ref().map(Vec::len), np, "one per node")?;
-    check(
-        "sigma",
-        f.sigma.as_ref().map(Vec::len),
-        nc,
-        "one per triangle",
-    )?;
+    check("sigma", f.sigma.as_ref().map(|s| s.len()), nc, &per_cell)?;
+    if matches!(
+        (&f.sigma, D),
+        (Some(crate::solve::stepper::Stress::Solid(_)), 2)
+            | (Some(crate::solve::stepper::Stress::Plane(_)), 3)
+    ) {
+        return Err(invalid(format!(
+            "field sigma has the wrong dimension for {cell}s"
+        )));
+    }
     check(
         "von_mises",
         f.von_mises.as_ref().map(Vec::len),
         nc,
-        "one per triangle",
+        &per_cell,
     )?;
     Ok(())
 }

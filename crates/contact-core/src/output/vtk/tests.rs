@@ -4,7 +4,7 @@
 use super::*;
 use crate::mesh::Mesh;
 use crate::problem::MeshPattern;
-use crate::solve::stepper::ContactNode;
+use crate::solve::stepper::{ContactNode, Stress};
 use base64::Engine;
 use roxmltree::{Document, Node};
 
@@ -142,7 +142,10 @@ fn vec3(interleaved: &[f64]) -> Vec<f64> {
 }
 
 /// Plane (σ_xx, σ_yy, σ_xy) as VTK's symmetric tensor (xx, yy, zz, xy, yz, xz).
-fn sym6(plane: &[[f64; 3]]) -> Vec<f64> {
+fn sym6(plane: &Stress) -> Vec<f64> {
+    let Stress::Plane(plane) = plane else {
+        panic!("plane stresses expected")
+    };
     plane
         .iter()
         .flat_map(|s| [s[0], s[1], 0.0, s[2], 0.0, 0.0])
@@ -182,13 +185,15 @@ fn hand_built(mesh: &Mesh) -> StepFields {
             friction_traction: 0.1,
             bound: 0.2,
             slipping: true,
+            tangential_velocity: None,
+            traction: None,
         }]),
     }
 }
 
 fn render(mesh: &Mesh, f: &StepFields) -> String {
     let mut buf = Vec::new();
-    write_vtu(&mut buf, &mesh.nodes, mesh.triangles(), f).unwrap();
+    write_vtu(&mut buf, &mesh.nodes, mesh.cells_flat(), f).unwrap();
     String::from_utf8(buf).expect("UTF-8")
 }
 
@@ -248,11 +253,18 @@ fn vtu_of_all_fields_reads_back() {
     let piece = root.child("UnstructuredGrid").child("Piece");
 
     let pd = piece.child("PointData");
-    assert_eq!(pd.array_names(), ["u", "w", "zeta"]);
+    assert_eq!(
+        pd.array_names(),
+        ["u", "w", "zeta", "contact_state", "slip_velocity"]
+    );
     for (name, v) in [("u", &f.u), ("w", &f.w)] {
         assert_eq!(f64s(pd.array(name), np, 3), vec3(v.as_ref().unwrap()));
     }
     assert_eq!(&f64s(pd.array("zeta"), np, 1), f.zeta.as_ref().unwrap());
+    // Node 0 slips at 0.5; every other node is off Γ3.
+    let slip = f64s(pd.array("slip_velocity"), np, 1);
+    assert_eq!(slip[0], 0.5);
+    assert!(slip[1..].iter().all(|v| *v == 0.0));
 
     let cd = piece.child("CellData");
     assert_eq!(cd.array_names(), ["sigma", "von_mises"]);
@@ -337,7 +349,7 @@ fn vtu_sigma_is_the_symmetric_tensor_of_a_constant_strain_field() {
     doc["initial"]["u0"] = serde_json::json!([format!("{a}*x + {b}*y"), format!("{c}*x + {d}*y")]);
     doc["damage"]["zeta0"] = serde_json::json!(zeta0);
     let problem = crate::scene::validate(&doc).unwrap();
-    let sim = Simulation::new(problem.clone(), SolverSettings::default()).unwrap();
+    let sim = Simulation::<2>::new(problem.clone(), SolverSettings::default()).unwrap();
     let mesh = &sim.mesh;
     let f = initial_fields(&problem, mesh).unwrap();
     let (np, nc) = (mesh.nodes.len(), mesh.n_cells());
@@ -411,19 +423,21 @@ fn vtu_rejects_fields_that_do_not_match_the_mesh() {
     zeta.zeta.as_mut().unwrap().push(1.0);
     bad.push(zeta);
     let mut sigma = good.clone();
-    sigma.sigma.as_mut().unwrap().pop();
+    if let Some(Stress::Plane(s)) = sigma.sigma.as_mut() {
+        s.pop();
+    }
     bad.push(sigma);
     let mut vm = good.clone();
     vm.von_mises = Some(Vec::new());
     bad.push(vm);
     for f in &bad {
         let mut buf = Vec::new();
-        let err = write_vtu(&mut buf, &mesh.nodes, mesh.triangles(), f).unwrap_err();
+        let err = write_vtu(&mut buf, &mesh.nodes, mesh.cells_flat(), f).unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::InvalidInput, "{err}");
         assert!(buf.is_empty(), "nothing is written for invalid input");
     }
-    let mut triangles = mesh.triangles().to_vec();
-    triangles[3][1] = mesh.nodes.len();
+    let mut triangles = mesh.cells_flat().to_vec();
+    triangles[3 * 3 + 1] = mesh.nodes.len();
     let mut buf = Vec::new();
     let err = write_vtu(&mut buf, &mesh.nodes, &triangles, &good).unwrap_err();
     assert_eq!(err.kind(), io::ErrorKind::InvalidInput);

@@ -1,0 +1,340 @@
+//! Three dimensions (docs/numerics.md#meshes, #contact-frames): P1 tetrahedra converge at
+//! order 1 on a manufactured solution; a box scene and a copy of it rotated about an
+//! oblique axis (imported from gmsh, loads rotated) give the same norms with slip in an
+//! oblique direction on Γ3; every step of the box scenes keeps the invariants (residuals,
+//! 0 ≤ ζ ≤ 1, w · n_i = 0, the isotropic friction law); the VTU of a box has tetrahedra
+//! and 6-component stresses.
+
+use base64::Engine;
+use contact_core::expr::Expr;
+use contact_core::fem::loads::cell_rule;
+use contact_core::fem::{assembly, loads, DofMap, Geometry};
+use contact_core::linalg::{Cholesky, Csr};
+use contact_core::mesh::{AnyMesh, Mesh};
+use contact_core::output::vtk::write_vtu;
+use contact_core::problem::{Problem, ScalarField, VectorField};
+use contact_core::scene::{self, presets, MeshFiles};
+use contact_core::solve::invariants;
+use contact_core::solve::stepper::{Simulation, StepReport, Stress};
+use serde_json::{json, Value};
+
+const ETA: f64 = 1.0;
+const XI: f64 = 0.5;
+
+/// Solves (A ε(w_h), ε(v)) = (f, v) on the box with w_h = w* at the boundary nodes.
+fn solve(mesh: &Mesh<3>, f: &VectorField, exact: impl Fn([f64; 3]) -> [f64; 3]) -> Vec<f64> {
+    let geo = Geometry::new(mesh);
+    let all = DofMap::all_free(mesh);
+    let k = assembly::viscous_stiffness(mesh, &geo, &all, ETA, XI);
+    let n3 = 3 * mesh.n_nodes();
+    let mut rhs = vec![0.0; n3];
+    loads::add_body_force(mesh, &geo, f, 0.0, &mut rhs);
+    let mut boundary = vec![false; mesh.n_nodes()];
+    mesh.facets
+        .iter()
+        .flat_map(|f| f.nodes)
+        .for_each(|i| boundary[i] = true);
+    let mut w = vec![0.0; n3];
+    for (i, p) in mesh.nodes.iter().enumerate().filter(|(i, _)| boundary[*i]) {
+        w[3 * i..3 * i + 3].copy_from_slice(&exact(*p));
+    }
+    let mut index = vec![usize::MAX; n3];
+    let mut n = 0;
+    for (d, slot) in index.iter_mut().enumerate() {
+        if !boundary[d / 3] {
+            *slot = n;
+            n += 1;
+        }
+    }
+    let mut kw = vec![0.0; n3];
+    k.mul_vec(&w, &mut kw);
+    let mut b = vec![0.0; n];
+    let mut t = Vec::new();
+    for r in 0..n3 {
+        if index[r] == usize::MAX {
+            continue;
+        }
+        b[index[r]] = rhs[r] - kw[r];
+        for j in k.indptr[r]..k.indptr[r + 1] {
+            let c = k.indices[j];
+            if index[c] != usize::MAX {
+                t.push((index[r], index[c], k.values[j]));
+            }
+        }
+    }
+    let kii = Csr::from_triplets(n, n, t);
+    let mut chol = Cholesky::new(kii.lower_csc().as_ref()).unwrap();
+    chol.solve_in_place(&mut b);
+    for d in 0..n3 {
+        if index[d] != usize::MAX {
+            w[d] = b[index[d]];
+        }
+    }
+    w
+}
+
+/// ‖ε(w*) − ε(w_h)‖_L2 by the 4-point rule, ε(w*) = (xx, yy, zz, xy, yz, xz) pointwise.
+fn strain_error(mesh: &Mesh<3>, w: &[f64], eps: impl Fn([f64; 3]) -> [f64; 6]) -> f64 {
+    let geo = Geometry::new(mesh);
+    let mut sum = 0.0;
+    for (e, cell) in mesh.cells().enumerate() {
+        let h = geo.strain(mesh, e, w);
+        for (l, wq) in cell_rule(3) {
+            let p: [f64; 3] =
+                std::array::from_fn(|c| (0..4).map(|a| l[a] * mesh.nodes[cell[a]][c]).sum());
+            let x = eps(p);
+            let d = [
+                x[0] - h[(0, 0)],
+                x[1] - h[(1, 1)],
+                x[2] - h[(2, 2)],
+                x[3] - h[(0, 1)],
+                x[4] - h[(1, 2)],
+                x[5] - h[(0, 2)],
+            ];
+            let sq = d[0] * d[0]
+                + d[1] * d[1]
+                + d[2] * d[2]
+                + 2.0 * (d[3] * d[3] + d[4] * d[4] + d[5] * d[5]);
+            sum += wq * geo.measure[e] * sq;
+        }
+    }
+    sum.sqrt()
+}
+
+fn formula(s: &str) -> ScalarField {
+    ScalarField::Expr(Expr::parse(s).unwrap())
+}
+
+#[test]
+fn a_linear_velocity_is_reproduced_exactly_on_tetrahedra() {
+    let mesh = Mesh::cuboid(1.0, 1.0, 1.0, 3, 3, 3);
+    let g = [[0.1, 0.3, -0.2], [-0.2, 0.05, 0.4], [0.3, -0.1, 0.2]];
+    let exact = |p: [f64; 3]| -> [f64; 3] {
+        std::array::from_fn(|r| 0.1 * r as f64 + (0..3).map(|c| g[r][c] * p[c]).sum::<f64>())
+    };
+    let w = solve(&mesh, &VectorField::constant3([0.0; 3]), exact);
+    for (i, p) in mesh.nodes.iter().enumerate() {
+        let v = exact(*p);
+        for c in 0..3 {
+            assert!((w[3 * i + c] - v[c]).abs() < 1e-12);
+        }
+    }
+}
+
+#[test]
+fn manufactured_solution_converges_at_order_one_on_tetrahedra() {
+    // w* = (x²y, y²z, z²x); −div σ = −η Δw − (η + ξ) ∇ div w with Δw = 2(y, z, x) and
+    // ∇ div w = 2(y + z, x + z, x + y).
+    let (a, b) = (2.0 * ETA, 2.0 * (ETA + XI));
+    let f = VectorField([
+        formula(&format!("-{a}*y - {b}*(y + z)")),
+        formula(&format!("-{a}*z - {b}*(x + z)")),
+        formula(&format!("-{a}*x - {b}*(x + y)")),
+    ]);
+    let exact = |p: [f64; 3]| {
+        let (x, y, z) = (p[0], p[1], p[2]);
+        [x * x * y, y * y * z, z * z * x]
+    };
+    let eps = |p: [f64; 3]| {
+        let (x, y, z) = (p[0], p[1], p[2]);
+        [
+            2.0 * x * y,
+            2.0 * y * z,
+            2.0 * z * x,
+            0.5 * x * x,
+            0.5 * y * y,
+            0.5 * z * z,
+        ]
+    };
+    let errors: Vec<f64> = [2, 4, 8, 16]
+        .iter()
+        .map(|&n| {
+            let mesh = Mesh::cuboid(1.0, 1.0, 1.0, n, n, n);
+            strain_error(&mesh, &solve(&mesh, &f, exact), eps)
+        })
+        .collect();
+    let orders: Vec<f64> = errors.windows(2).map(|e| (e[0] / e[1]).log2()).collect();
+    eprintln!("errors {errors:?}, orders {orders:?}");
+    assert!(
+        orders[1..].iter().all(|&o| (0.9..1.2).contains(&o)),
+        "orders {orders:?}"
+    );
+}
+
+/// The rotation and translation of `tests/meshes/box-rotated.msh` (x_file = R x_box + t;
+/// generate_box_rotated.py), with its 17 significant digits.
+#[allow(clippy::excessive_precision)]
+const R: [[f64; 3]; 3] = [
+    [
+        0.78163917390702509,
+        -0.48292928421421222,
+        0.39473979817379978,
+    ],
+    [
+        0.55011723070435836,
+        0.83203013377463464,
+        -0.071392499417875857,
+    ],
+    [
+        -0.29395787843858057,
+        0.27295633888831428,
+        0.91601506688731726,
+    ],
+];
+
+fn rotate(v: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|r| (0..3).map(|c| R[r][c] * v[c]).sum())
+}
+
+/// The rotated box file, by name.
+struct RotatedBox;
+
+impl MeshFiles for RotatedBox {
+    fn load(&self, name: &str) -> Result<AnyMesh, String> {
+        assert_eq!(name, "box-rotated.msh");
+        let bytes = std::fs::read(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/meshes/box-rotated.msh"),
+        )
+        .unwrap();
+        contact_core::mesh::import::import_any(&bytes).map_err(|e| e.to_string())
+    }
+}
+
+/// box-exp3 at h = 1/4, k = 1/8, with a friction bound g = 2 under which part of Γ3 slips.
+fn box_slipping() -> Value {
+    let mut doc = presets::get("box-exp3").unwrap();
+    doc["mesh"]["h"] = json!("1/4");
+    doc["friction"] = json!({"law": "tresca", "g": 2});
+    doc
+}
+
+fn reports<const D: usize>(p: Problem) -> (Vec<StepReport>, Simulation<D>) {
+    let mut out = Vec::new();
+    let mut sim = Simulation::<D>::new(p, Default::default()).unwrap();
+    while !sim.finished() {
+        let r = sim.step().unwrap();
+        invariants::check_step(&sim, &r).unwrap_or_else(|e| panic!("{e}"));
+        out.push(r);
+    }
+    (out, sim)
+}
+
+#[test]
+fn a_rotated_box_gives_the_same_norms_and_slips_obliquely() {
+    let f2 = [-1.0, 0.0, -1.0];
+    let (straight, _) = reports::<3>(scene::validate(&box_slipping()).unwrap());
+    let mut doc = box_slipping();
+    let g = rotate(f2);
+    doc["domain"] = json!({"mesh": "box-rotated.msh"});
+    doc["mesh"] = json!({"refine": 0});
+    doc["boundary"] = json!([
+        {"type": "clamped", "group": "clamped"},
+        {"type": "contact", "group": "contact"},
+        {"type": "traction", "group": "load", "f2": g},
+    ]);
+    let p = scene::validate_with(&doc, &RotatedBox).unwrap();
+    let (rotated, sim) = reports::<3>(p);
+    assert!(
+        sim.dofs.frames.len() * 2 == sim.dofs.n_contact(),
+        "every Γ3 node of the rotated box has a rotated frame"
+    );
+    assert!(straight.iter().any(|r| r.slip_nodes > 0), "Γ3 slips");
+    for (a, b) in straight.iter().zip(&rotated) {
+        assert_eq!(a.slip_nodes, b.slip_nodes, "step {}", a.n);
+        for (x, y, what) in [
+            (a.w_v, b.w_v, "|w|_V"),
+            (a.u_v, b.u_v, "|u|_V"),
+            (a.zeta_l2, b.zeta_l2, "|ζ|_Z0"),
+            (a.zeta_min, b.zeta_min, "min ζ"),
+        ] {
+            assert!(
+                (x - y).abs() <= 1e-9 * x.abs().max(1e-300),
+                "{what} at step {}: {x} vs {y}",
+                a.n
+            );
+        }
+    }
+    // The slip direction in space is oblique: not along a coordinate axis.
+    let slipping: Vec<[f64; 3]> = sim
+        .contact_state()
+        .iter()
+        .filter(|c| c.slipping)
+        .map(|c| c.tangential_velocity.unwrap())
+        .collect();
+    assert!(!slipping.is_empty());
+    for v in &slipping {
+        let n = v.iter().map(|a| a * a).sum::<f64>().sqrt();
+        let largest = v.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+        assert!(largest < 0.99 * n, "oblique slip {v:?}");
+    }
+}
+
+#[test]
+fn box_scenes_keep_the_invariants_with_stick_and_slip() {
+    for g in [20.0, 2.0, 0.0] {
+        let mut doc = box_slipping();
+        doc["friction"] = json!({"law": "tresca", "g": g});
+        let (steps, sim) = reports::<3>(scene::validate(&doc).unwrap());
+        let nodes = sim.dofs.n_contact() / 2;
+        let slip = steps.last().unwrap().slip_nodes;
+        match g {
+            0.0 => assert_eq!(slip, nodes, "frictionless: every Γ3 node slips"),
+            20.0 => assert_eq!(slip, 0, "g = 20 holds Γ3"),
+            _ => assert!(slip > 0 && slip < nodes, "g = {g}: {slip} of {nodes} slip"),
+        }
+    }
+    // A slip-weakening law within (2.31) as well.
+    let mut doc = box_slipping();
+    doc["friction"] = json!({"law": "slip_weakening", "mu0": 0.6, "mu1": 0.4, "alpha": 0.5});
+    doc["smallness"] = json!("warn");
+    let (steps, _) = reports::<3>(scene::validate(&doc).unwrap());
+    assert!(steps.iter().any(|r| r.slip_nodes > 0));
+}
+
+#[test]
+fn the_vtu_of_a_box_holds_tetrahedra_and_symmetric_tensors() {
+    let mut doc = box_slipping();
+    doc["time"]["k"] = json!("1/2");
+    let (_, sim) = reports::<3>(scene::validate(&doc).unwrap());
+    let f = sim.fields();
+    let Some(Stress::Solid(sigma)) = &f.sigma else {
+        panic!("3D stresses have 6 components")
+    };
+    assert_eq!(sigma.len(), sim.mesh.n_cells());
+    let mut buf = Vec::new();
+    write_vtu(&mut buf, &sim.mesh.nodes, sim.mesh.cells_flat(), &f).unwrap();
+    let text = String::from_utf8(buf).unwrap();
+    let doc = roxmltree::Document::parse(&text).unwrap();
+    let piece = doc.descendants().find(|n| n.has_tag_name("Piece")).unwrap();
+    assert_eq!(
+        piece.attribute("NumberOfCells").unwrap(),
+        sim.mesh.n_cells().to_string()
+    );
+    let names: Vec<&str> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("DataArray"))
+        .filter_map(|n| n.attribute("Name"))
+        .collect();
+    for name in [
+        "u",
+        "w",
+        "zeta",
+        "contact_state",
+        "slip_velocity",
+        "sigma",
+        "von_mises",
+    ] {
+        assert!(names.contains(&name), "{name} in {names:?}");
+    }
+    // The cell types decode to VTK_TETRA (10) everywhere.
+    let types = doc
+        .descendants()
+        .find(|n| n.attribute("Name") == Some("types"))
+        .unwrap();
+    let b64 = types.text().unwrap().trim();
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(b64)
+        .unwrap();
+    assert_eq!(bytes.len(), 8 + sim.mesh.n_cells());
+    assert!(bytes[8..].iter().all(|&t| t == 10));
+}
