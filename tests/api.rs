@@ -799,7 +799,8 @@ fn router_routes() -> std::collections::BTreeMap<String, std::collections::BTree
                 })
                 .map(String::from)
                 .collect();
-            (path.to_string(), methods)
+            // A catch-all `{*file}` is the path parameter `{file}` of the document.
+            (path.replace("{*", "{"), methods)
         })
         .collect()
 }

@@ -71,6 +71,21 @@ fn client_files_are_served_with_types_and_etags() {
         ("viewer.js", "text/javascript; charset=utf-8"),
         ("style.css", "text/css; charset=utf-8"),
         ("index.html", "text/html; charset=utf-8"),
+        ("viewer3d.js", "text/javascript; charset=utf-8"),
+        // The vendored three.js (the page's import map names these paths).
+        (
+            "vendor/three/build/three.module.js",
+            "text/javascript; charset=utf-8",
+        ),
+        (
+            "vendor/three/build/three.core.js",
+            "text/javascript; charset=utf-8",
+        ),
+        (
+            "vendor/three/examples/jsm/controls/OrbitControls.js",
+            "text/javascript; charset=utf-8",
+        ),
+        ("vendor/three/LICENSE", "text/plain; charset=utf-8"),
     ] {
         let r = get(a, &format!("/client/{file}"), &[]);
         assert_eq!(r.status, 200, "{file}");
@@ -79,18 +94,36 @@ fn client_files_are_served_with_types_and_etags() {
         let on_disk = std::fs::read(root().join("api/client").join(file)).unwrap();
         assert_eq!(r.body, on_disk, "{file} is served as it is in api/client/");
     }
-    // Every module the page imports is served (a missing entry in client.rs would be a 404
-    // only a browser would notice).
-    for entry in std::fs::read_dir(root().join("api/client")).unwrap() {
-        let name = entry.unwrap().file_name().to_string_lossy().into_owned();
+    // Every module the page imports is served, vendored ones in subdirectories too (a
+    // missing entry in client.rs would be a 404 only a browser would notice).
+    let mut files = Vec::new();
+    client_files(&root().join("api/client"), "", &mut files);
+    assert!(files.len() > 10, "{files:?}");
+    for name in &files {
         assert_eq!(
             get(a, &format!("/client/{name}"), &[]).status,
             200,
             "{name}"
         );
     }
+    // The import map of the page points at served files.
+    for path in [
+        "/client/vendor/three/build/three.module.js",
+        "/client/vendor/three/examples/jsm/",
+    ] {
+        assert!(html.contains(path), "index.html's import map names {path}");
+    }
 
-    for bad in ["/client/nope.js", "/client/..%2Fapp.rs", "/client/"] {
+    for bad in [
+        "/client/nope.js",
+        "/client/..%2Fapp.rs",
+        "/client/",
+        "/client/vendor",
+        "/client/vendor/three",
+        "/client/vendor/three/../../app.js",
+        "/client/vendor/three/build/../LICENSE",
+        "/client/vendor%2Fthree%2FLICENSE/x",
+    ] {
         let r = get(a, bad, &[]);
         assert_eq!(r.status, 404, "{bad}");
         assert_eq!(
@@ -101,6 +134,19 @@ fn client_files_are_served_with_types_and_etags() {
     }
     srv.stop();
     let _ = std::fs::remove_dir_all(dir);
+}
+
+/// The files under `dir` (recursively), as `prefix`-relative paths with `/` separators.
+fn client_files(dir: &std::path::Path, prefix: &str, out: &mut Vec<String>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let entry = entry.unwrap();
+        let name = format!("{prefix}{}", entry.file_name().to_string_lossy());
+        if entry.file_type().unwrap().is_dir() {
+            client_files(&entry.path(), &format!("{name}/"), out);
+        } else {
+            out.push(name);
+        }
+    }
 }
 
 /// Why the browser test cannot run here, if it cannot.

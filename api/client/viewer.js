@@ -9,6 +9,10 @@
 //   GET /jobs/{id}/result.pvd -> which steps are stored (see api.storedSteps).
 // The mesh is fetched once (with the first step); later steps are fetched without it and
 // kept in a small cache, so scrubbing back and forth does not refetch.
+//
+// A 3D job (its mesh has "dim": 3: tetrahedra, boundary_faces) is drawn by viewer3d.js
+// (three.js, loaded only then) in place of the canvas; everything around the picture is the
+// same, with u, w of three components per node and von Mises per tetrahedron.
 
 import * as api from './api.js';
 import { el, fmt, fmtStep, fmtSeconds } from './util.js';
@@ -54,6 +58,19 @@ export class SimulationView {
     if (this.job !== job) return; // another job was opened meanwhile
     this.mesh = first.mesh;
     delete first.mesh;
+    this.dim = this.mesh.dim === 3 ? 3 : 2;
+    if (this.dim === 3) {
+      try {
+        const { View3D } = await import('./viewer3d.js');
+        if (this.job !== job) return;
+        this.d3 = new View3D(this.mesh);
+      } catch (e) {
+        if (this.job !== job) return;
+        this.root.dataset.state = 'error';
+        this.root.replaceChildren(el('p', { class: 'error' }, `Cannot load the 3D viewer: ${e.message}`));
+        return;
+      }
+    }
     this.kinds = partKinds(this.mesh);
     this.bbox = boundingBox(this.mesh.nodes);
     this.view = { zoom: 1, panX: 0, panY: 0 };
@@ -72,6 +89,8 @@ export class SimulationView {
     this.stop();
     this.token++;
     this.job = null;
+    this.d3?.dispose();
+    this.d3 = null;
     this.resizeObserver?.disconnect();
     cancelAnimationFrame(this.pending);
     this.frame = null;
@@ -86,9 +105,11 @@ export class SimulationView {
     const f = this.current;
     // Offer only the fields this run stored (a scene's output.fields selects them).
     this.quantity = el('select', { id: 'quantity', onchange: () => this.onRangeInputs(true) },
-      Object.entries(QUANTITIES).map(([k, q]) => el('option', { value: k, disabled: !f[q.key] }, q.label)));
+      Object.entries(QUANTITIES).map(([k, q]) => el('option', { value: k, disabled: !f[q.key] }, this.label(q))));
     this.quantity.value = Object.keys(QUANTITIES).find((k) => f[QUANTITIES[k].key]) || 'zeta';
-    this.factor = el('input', { id: 'factor', type: 'number', min: '0', step: 'any', value: '1', inputmode: 'decimal', oninput: () => this.draw() });
+    // In 3D the body starts deformed visibly (largest displacement 10% of its size).
+    const start = this.d3 ? this.suggestedFactor() ?? 1 : 1;
+    this.factor = el('input', { id: 'factor', type: 'number', min: '0', step: 'any', value: String(start), inputmode: 'decimal', oninput: () => this.draw() });
     this.edges = el('input', { id: 'show-edges', type: 'checkbox', onchange: () => this.draw() });
     this.rangeMode = el('select', { id: 'range-mode', onchange: () => this.onRangeInputs(false) },
       el('option', { value: 'step' }, 'this step'),
@@ -100,7 +121,10 @@ export class SimulationView {
     const viewButtons = el('span', { class: 'view-buttons', role: 'group', 'aria-label': 'view' },
       el('button', { id: 'zoom-out', type: 'button', class: 'small', title: 'zoom out', 'aria-label': 'zoom out', onclick: () => this.zoomBy(1 / 1.5) }, '−'),
       el('button', { id: 'zoom-in', type: 'button', class: 'small', title: 'zoom in', 'aria-label': 'zoom in', onclick: () => this.zoomBy(1.5) }, '+'),
-      el('button', { id: 'view-reset', type: 'button', class: 'small', title: 'show the whole body', onclick: () => this.resetView() }, 'Reset view'));
+      el('button', { id: 'view-reset', type: 'button', class: 'small', title: this.d3 ? 'show the whole body from the initial direction (Home on the picture)' : 'show the whole body', onclick: () => this.resetView() }, 'Reset view'));
+    // 3D only: faces coloured by the kind of their boundary part; the slip direction.
+    this.partsBox = el('input', { id: 'show-parts', type: 'checkbox', onchange: () => this.draw() });
+    this.arrowsBox = el('input', { id: 'show-arrows', type: 'checkbox', checked: true, onchange: () => this.draw() });
     this.cbLo = el('span', { class: 'cb-lo' });
     this.cbHi = el('span', { class: 'cb-hi' });
     this.cbLabel = el('span', { class: 'cb-label' });
@@ -113,11 +137,15 @@ export class SimulationView {
     this.stepLabel = el('span', { id: 'step-label', 'aria-live': 'off' });
     this.vtuLink = el('a', { id: 'dl-vtu', download: '' }, 'VTU (this step)');
     const plots = el('div', { class: 'plots', id: 'plots' });
+    const picture = this.d3 ? this.d3.element : el('div', { class: 'canvas-wrap' }, this.canvas, this.probeBox);
 
     const m = summary.mesh || {};
     const t = summary.time || {};
+    const cells = this.d3
+      ? `${this.mesh.nodes.length} nodes · ${this.mesh.tetrahedra?.length ?? m.tetrahedra ?? '?'} tetrahedra · ${this.mesh.boundary_faces.length} boundary triangles`
+      : `${m.nodes} nodes · ${m.triangles} triangles`;
     const info = el('p', { class: 'run-info' },
-      `${m.nodes} nodes · ${m.triangles} triangles · h = ${fmtStep(m.h)} · k = ${fmtStep(t.k)} · ${t.steps} steps · `,
+      `${cells} · h = ${fmtStep(m.h)} · k = ${fmtStep(t.k)} · ${t.steps} steps · `,
       `solved in ${fmtSeconds(summary.timing?.solve_s)} · ${summary.stats?.steps_with_slip ?? 0} steps with slip`);
     const warnings = (summary.warnings || []).map((w) => el('p', { class: 'warning' }, w));
     // The (2h, 2k) error bar, when the scene asked for one ("error_estimate": true).
@@ -148,15 +176,19 @@ export class SimulationView {
         el('label', {}, 'Range ', this.rangeMode),
         el('span', { class: 'range-inputs' }, this.lo, '–', this.hi),
         el('label', {}, this.edges, ' mesh lines'),
+        this.d3 ? el('label', {}, this.partsBox, ' faces by boundary part') : null,
+        this.d3 ? el('label', {}, this.arrowsBox, ' slip direction') : null,
         viewButtons),
-      el('div', { class: 'canvas-wrap' }, this.canvas, this.probeBox),
+      picture,
       el('div', { class: 'colorbar', id: 'colorbar' },
         this.cbLo, el('div', { class: 'bar', style: `background: ${cssGradient()}` }), this.cbHi, this.cbLabel),
       this.boundaryLegend(),
       el('div', { class: 'legend' },
         'Γ3 contact: ', el('span', { class: 'swatch', style: `background:${STICK}` }), ' stick ',
         el('span', { class: 'swatch', style: `background:${SLIP}` }), ' slip ', this.contactInfo,
-        el('span', { class: 'hint' }, ' · dashed: reference configuration')),
+        el('span', { class: 'hint' }, this.d3
+          ? ' · lines from slipping nodes: tangential velocity · grey: edges of the reference configuration · drag orbits, right drag pans, wheel zooms; on the focused picture the arrow keys orbit, Shift + arrows pan, + − zoom, Home resets'
+          : ' · dashed: reference configuration')),
       el('div', { class: 'time' }, this.playBtn, this.slider, this.stepLabel),
       plots,
     );
@@ -180,17 +212,28 @@ export class SimulationView {
       width = entry.contentRect.width;
       this.draw();
     });
-    this.resizeObserver.observe(this.canvas.parentElement);
-    this.bindPointer();
+    this.resizeObserver.observe(picture);
+    if (!this.d3) this.bindPointer();
+  }
+
+  /** A quantity's label; in 3D von Mises is per tetrahedron. */
+  label(q) {
+    return this.d3 ? q.label.replace('(per triangle)', '(per tetrahedron)') : q.label;
   }
 
   /** The boundary's colours, for the kinds this mesh has. */
   boundaryLegend() {
-    const present = new Set(this.mesh.boundary_edges.map(([, part]) => edgeKind(this.kinds, part)));
+    const present = this.d3
+      ? this.d3.kindsPresent()
+      : new Set(this.mesh.boundary_edges.map(([, part]) => edgeKind(this.kinds, part)));
     const order = ['clamped', 'traction', 'contact', 'free', 'other'].filter((k) => present.has(k));
+    // In 3D the kinds colour faces (with "faces by boundary part"): square swatches.
+    const swatch = (k) => (this.d3
+      ? el('span', { class: 'face-swatch', style: `background:${KINDS[k].colour}` })
+      : el('span', { class: 'line-swatch', style: `background:${KINDS[k].colour}; height:${KINDS[k].width}px` }));
+    // A space between the (unbreakable) entries lets the line wrap there.
     return el('div', { class: 'legend', id: 'boundary-legend' }, 'Boundary: ',
-      order.map((k) => el('span', { class: 'kind', dataset: { kind: k } },
-        el('span', { class: 'line-swatch', style: `background:${KINDS[k].colour}; height:${KINDS[k].width}px` }), ` ${KINDS[k].label} `)));
+      order.flatMap((k) => [el('span', { class: 'kind', dataset: { kind: k } }, swatch(k), ` ${KINDS[k].label}`), ' ']));
   }
 
   // ---- zoom, pan and the value under the pointer --------------------------------------
@@ -247,6 +290,7 @@ export class SimulationView {
 
   /** Zooms by `factor` about CSS point (x, y) of the canvas (default: its centre). */
   zoomBy(factor, x, y) {
+    if (this.d3) return this.d3.zoomBy(factor);
     const t = this.transform();
     if (!t) return;
     const zoom = Math.min(ZOOM_MAX, Math.max(ZOOM_MIN, this.view.zoom * factor));
@@ -277,6 +321,7 @@ export class SimulationView {
   }
 
   resetView() {
+    if (this.d3) return this.d3.resetView();
     this.view = { zoom: 1, panX: 0, panY: 0 };
     this.draw();
   }
@@ -357,6 +402,12 @@ export class SimulationView {
     const d = this.current;
     if (q.key === 'w') {
       if (!d.w) return null;
+      if (this.dim === 3) {
+        const n = d.w.length / 3;
+        const v = new Float64Array(n);
+        for (let i = 0; i < n; i++) v[i] = Math.hypot(d.w[3 * i], d.w[3 * i + 1], d.w[3 * i + 2]);
+        return { v, perCell: false };
+      }
       const n = d.w.length / 2;
       const v = new Float64Array(n);
       for (let i = 0; i < n; i++) v[i] = Math.hypot(d.w[2 * i], d.w[2 * i + 1]);
@@ -374,7 +425,7 @@ export class SimulationView {
   }
 
   draw() {
-    if (!this.canvas || !this.current || !this.mesh) return;
+    if ((!this.canvas && !this.d3) || !this.current || !this.mesh) return;
     const vals = this.values();
     let min = Infinity, max = -Infinity;
     if (vals) for (const x of vals.v) if (Number.isFinite(x)) { if (x < min) min = x; if (x > max) max = x; }
@@ -388,6 +439,42 @@ export class SimulationView {
         this.hi.value = String(Number(max.toPrecision(4)));
       }
     }
+    if (this.d3) this.draw3d(vals, range);
+    else this.draw2d(vals, range);
+    const q = QUANTITIES[this.quantity.value];
+    this.cbLo.textContent = fmt(range[0]);
+    this.cbHi.textContent = fmt(range[1]);
+    this.cbLabel.textContent = vals
+      ? `${this.label(q)}: min ${fmt(min)}, max ${fmt(max)}${max - min <= 1e-12 * Math.max(1, Math.abs(max)) ? ' (uniform)' : ''}`
+      : `${this.label(q)}: not stored`;
+    if (this.d3 && this.partsBox.checked) this.cbLabel.textContent += ' · the faces show their boundary part now';
+    const c = this.current.contact;
+    this.contactInfo.textContent = c ? `(${c.filter((x) => x.slipping).length} of ${c.length} nodes slip)` : '(contact state not stored)';
+  }
+
+  /** The 3D picture of the current step (viewer3d.js). */
+  draw3d(vals, range) {
+    const wrapW = this.d3.element.clientWidth || 600;
+    const factor = Number(this.factor.value);
+    const q = QUANTITIES[this.quantity.value];
+    this.d3.update({
+      width: wrapW,
+      height: Math.round(Math.min(Math.max(wrapW * 0.62, 240), window.innerHeight * 0.65)),
+      disp: this.current.u || null,
+      factor: Number.isFinite(factor) && factor >= 0 ? factor : 1,
+      values: vals ? vals.v : null,
+      perCell: vals ? vals.perCell : false,
+      range,
+      label: q.label.replace(/ \(per triangle\)$/, ''),
+      mode: this.partsBox.checked ? 'parts' : 'field',
+      contact: this.current.contact || null,
+      showEdges: this.edges.checked,
+      showArrows: this.arrowsBox.checked,
+    });
+  }
+
+  /** The 2D picture of the current step (render.js). */
+  draw2d(vals, range) {
     // Height follows the body's aspect ratio (its bounding box, with room for the
     // deformation), within the window.
     const wrapW = this.canvas.parentElement.clientWidth || 600;
@@ -418,29 +505,34 @@ export class SimulationView {
     cv.dataset.view = JSON.stringify({ s: fr.s, ox: fr.ox + cv.clientLeft, oy: fr.oy + cv.clientTop, zoom: this.view.zoom });
     this.canvas.style.touchAction = this.view.zoom > 1 ? 'none' : '';
     if (this.pointer) this.showProbe(this.pointer);
-    const q = QUANTITIES[this.quantity.value];
-    this.cbLo.textContent = fmt(range[0]);
-    this.cbHi.textContent = fmt(range[1]);
-    this.cbLabel.textContent = vals
-      ? `${q.label}: min ${fmt(min)}, max ${fmt(max)}${max - min <= 1e-12 * Math.max(1, Math.abs(max)) ? ' (uniform)' : ''}`
-      : `${q.label}: not stored`;
-    const c = this.current.contact;
-    this.contactInfo.textContent = c ? `(${c.filter((x) => x.slipping).length} of ${c.length} nodes slip)` : '(contact state not stored)';
   }
 
   /** A factor that makes the largest displacement 10% of the body's size (1 significant digit). */
   autoFactor() {
+    const f = this.suggestedFactor();
+    if (f === null) return;
+    this.factor.value = String(f);
+    this.draw();
+  }
+
+  /** autoFactor's factor for the current step; null without a displacement. */
+  suggestedFactor() {
     const u = this.current?.u;
-    if (!u) return;
+    if (!u) return null;
+    const d = this.dim;
     let umax = 0;
-    for (let i = 0; i < u.length; i += 2) umax = Math.max(umax, Math.hypot(u[i], u[i + 1]));
-    const [x0, y0, x1, y1] = this.bbox;
-    const size = Math.max(x1 - x0, y1 - y0);
-    if (!(umax > 0)) return;
+    for (let i = 0; i < u.length; i += d) umax = Math.max(umax, Math.hypot(u[i], u[i + 1], d === 3 ? u[i + 2] : 0));
+    let size;
+    if (d === 3) {
+      size = this.d3.size;
+    } else {
+      const [x0, y0, x1, y1] = this.bbox;
+      size = Math.max(x1 - x0, y1 - y0);
+    }
+    if (!(umax > 0)) return null;
     const f = (0.1 * size) / umax;
     const p = 10 ** Math.floor(Math.log10(f));
-    this.factor.value = String(Number((Math.round(f / p) * p).toPrecision(1)));
-    this.draw();
+    return Number((Math.round(f / p) * p).toPrecision(1));
   }
 
   async play() {

@@ -1,9 +1,12 @@
-//! The browser client: `GET /` (the page) and `GET /client/{file}` (its ES modules and CSS).
-//! The files live under `api/client/` and are embedded in the binary, so the service needs
-//! nothing beside itself. Each response carries a strong ETag (a hash of the file) with
-//! `Cache-Control: no-cache`: browsers revalidate and get a 304 while the file is unchanged,
-//! and a new build is picked up at once (the modules import each other by plain relative
-//! names, so no version can be put in their URLs without a build step).
+//! The browser client: `GET /` (the page) and `GET /client/{*file}` (its ES modules and CSS,
+//! and the vendored three.js under `vendor/three/`, imported by the 3D viewer through the
+//! page's import map). The files live under `api/client/` and are embedded in the binary, so
+//! the service needs nothing beside itself (no CDN). A file is found by its exact path in the
+//! fixed list below, never on the file system, so no request can name anything else. Each
+//! response carries a strong ETag (a hash of the file) with `Cache-Control: no-cache`:
+//! browsers revalidate and get a 304 while the file is unchanged, and a new build is picked
+//! up at once (the modules import each other by plain relative names, so no version can be
+//! put in their URLs without a build step).
 
 use crate::problem::Problem;
 use axum::extract::Path;
@@ -31,7 +34,10 @@ macro_rules! asset {
 
 const JS: &str = "text/javascript; charset=utf-8";
 
-/// Every file of `api/client/` (a test checks the directory and this list agree).
+/// Every file under `api/client/`, by its path there (a test checks the directory tree and
+/// this list agree). three.js 0.187.0 is vendored unmodified from its npm package: the two
+/// files of its ES module build (`three.module.js` imports `./three.core.js`; this release
+/// ships no minified build), the OrbitControls addon and the licence.
 const ASSETS: &[Asset] = &[
     asset!("index.html", "text/html; charset=utf-8"),
     asset!("style.css", "text/css; charset=utf-8"),
@@ -47,6 +53,11 @@ const ASSETS: &[Asset] = &[
     asset!("study.js", JS),
     asset!("meshes.js", JS),
     asset!("util.js", JS),
+    asset!("viewer3d.js", JS),
+    asset!("vendor/three/LICENSE", "text/plain; charset=utf-8"),
+    asset!("vendor/three/build/three.module.js", JS),
+    asset!("vendor/three/build/three.core.js", JS),
+    asset!("vendor/three/examples/jsm/controls/OrbitControls.js", JS),
 ];
 
 /// ETags of `ASSETS`, in order, computed once.
@@ -103,7 +114,8 @@ pub async fn index(headers: HeaderMap) -> Result<Response, Problem> {
     serve("index.html", &headers)
 }
 
-/// `GET /client/{file}`: a module, stylesheet or the page itself.
+/// `GET /client/{*file}`: a module, stylesheet or the page itself, or a vendored file
+/// (`vendor/three/...`).
 pub async fn file(Path(file): Path<String>, headers: HeaderMap) -> Result<Response, Problem> {
     serve(&file, &headers)
 }
@@ -112,14 +124,27 @@ pub async fn file(Path(file): Path<String>, headers: HeaderMap) -> Result<Respon
 mod tests {
     use super::ASSETS;
 
-    /// Every file under api/client/ is embedded (and nothing else is listed).
+    /// The files under `dir`, as paths relative to `root` with `/` separators.
+    fn files(root: &std::path::Path, dir: &std::path::Path, out: &mut Vec<String>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let path = e.unwrap().path();
+            if path.is_dir() {
+                files(root, &path, out);
+            } else {
+                let rel = path.strip_prefix(root).unwrap();
+                let parts: Vec<_> = rel.iter().map(|p| p.to_string_lossy()).collect();
+                out.push(parts.join("/"));
+            }
+        }
+    }
+
+    /// Every file under api/client/ (subdirectories too) is embedded, and nothing else is
+    /// listed.
     #[test]
     fn assets_match_the_directory() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("api/client");
-        let mut on_disk: Vec<String> = std::fs::read_dir(&dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
+        let mut on_disk = Vec::new();
+        files(&dir, &dir, &mut on_disk);
         on_disk.sort();
         let mut listed: Vec<String> = ASSETS.iter().map(|a| a.name.to_string()).collect();
         listed.sort();
@@ -132,11 +157,12 @@ mod tests {
     #[test]
     fn content_types_follow_extensions() {
         for a in ASSETS {
-            let ext = a.name.rsplit('.').next().unwrap();
-            let want = match ext {
+            let file = a.name.rsplit('/').next().unwrap();
+            let want = match file.rsplit('.').next().unwrap() {
                 "html" => "text/html",
                 "css" => "text/css",
                 "js" => "text/javascript",
+                "LICENSE" => "text/plain",
                 _ => panic!("unexpected client file {}", a.name),
             };
             assert!(a.content_type.starts_with(want), "{}", a.name);

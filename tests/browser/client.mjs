@@ -23,9 +23,18 @@
 // 6. Mesh upload: the summary and group form against a mocked POST /meshes (nested and
 //    top-level summaries, a refused file's detail, drag and drop), and, when the server under
 //    test has POST /meshes, the real upload of plate-with-hole.msh run as a scene.
+// 7. The 3D viewer (three.js, WebGL in SwiftShader) against a mocked 3D job: page.route
+//    answers the job, list, summary, stored steps and fields of a fake id with a Kuhn box
+//    (generated here) and synthetic fields; from the WebGL canvas's pixels: the body is
+//    drawn, the colouring is not uniform and changes from ζ to von Mises, dragging orbits and
+//    Reset view restores, the keys orbit, the factor and the time slider change the picture,
+//    Γ3's stick and slip nodes show; the screenshot has the body. Without WebGL a message
+//    replaces the picture and the rest works. The frame time at ~20k boundary triangles is
+//    measured.
 
 import { chromium } from 'playwright-core';
 import fs from 'node:fs';
+import zlib from 'node:zlib';
 import os from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -52,7 +61,8 @@ function check(cond, what) {
 }
 
 // Chromium as this machine needs it: headless, no sandbox (root), no GPU, and no background
-// connections (the network is closed; they would fail at every start).
+// connections (the network is closed; they would fail at every start). WebGL (the 3D view)
+// runs in SwiftShader, asked for explicitly: Chromium no longer falls back to it by itself.
 const userDataDir = fs.mkdtempSync(path.join(os.tmpdir(), 'contact-sim-chromium-'));
 const context = await chromium.launchPersistentContext(userDataDir, {
   executablePath,
@@ -61,6 +71,8 @@ const context = await chromium.launchPersistentContext(userDataDir, {
   args: [
     '--no-sandbox',
     '--disable-gpu',
+    '--use-angle=swiftshader',
+    '--enable-unsafe-swiftshader',
     '--disable-quic',
     '--no-first-run',
     '--disable-background-networking',
@@ -672,14 +684,503 @@ async function testMeshUpload() {
   await real.close();
 }
 
+// ---- 7. the 3D viewer against a mocked job ----------------------------------------------
+
+/**
+ * A box [0, L[0]] × [0, L[1]] × [0, L[2]] of n[0] × n[1] × n[2] cubes, each cut into the 6
+ * tetrahedra along the monotone paths from its vertex 000 to 111 (Kuhn), positively
+ * oriented; its boundary faces (outward, counter-clockwise seen from outside) with parts:
+ * x = 0 clamped (0), z = 0 contact (1), x = L[0] traction (2), the rest traction-free (null).
+ */
+function kuhnBox(n, L) {
+  const [nx, ny, nz] = n;
+  const id = (i, j, k) => i + (nx + 1) * (j + (ny + 1) * k);
+  const nodes = [];
+  for (let k = 0; k <= nz; k++) for (let j = 0; j <= ny; j++) for (let i = 0; i <= nx; i++) {
+    nodes.push([(L[0] * i) / nx, (L[1] * j) / ny, (L[2] * k) / nz]);
+  }
+  const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+  const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  const perms = [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]];
+  const tets = [];
+  for (let k = 0; k < nz; k++) for (let j = 0; j < ny; j++) for (let i = 0; i < nx; i++) {
+    for (const p of perms) {
+      const v = [i, j, k];
+      const path = [id(...v)];
+      for (const axis of p) {
+        v[axis]++;
+        path.push(id(...v));
+      }
+      const [a, b, c, d] = path;
+      const vol = dot(cross(sub(nodes[b], nodes[a]), sub(nodes[c], nodes[a])), sub(nodes[d], nodes[a]));
+      tets.push(vol > 0 ? [a, b, c, d] : [a, c, b, d]);
+    }
+  }
+  // Faces seen once are on the boundary; (a, b, c) is oriented away from the fourth vertex.
+  const seen = new Map();
+  tets.forEach((t, cell) => {
+    for (let f = 0; f < 4; f++) {
+      const face = t.filter((_, q) => q !== f);
+      const key = face.slice().sort((x, y) => x - y).join(',');
+      if (seen.has(key)) seen.set(key, null);
+      else seen.set(key, { face, opposite: t[f], cell });
+    }
+  });
+  const eps = 1e-9;
+  const boundary = [];
+  for (const e of seen.values()) {
+    if (!e) continue;
+    let [a, b, c] = e.face;
+    if (dot(cross(sub(nodes[b], nodes[a]), sub(nodes[c], nodes[a])), sub(nodes[e.opposite], nodes[a])) > 0) [b, c] = [c, b];
+    const on = (axis, value) => [a, b, c].every((q) => Math.abs(nodes[q][axis] - value) < eps);
+    const part = on(0, 0) ? 0 : on(2, 0) ? 1 : on(0, L[0]) ? 2 : null;
+    boundary.push([[a, b, c], part, e.cell]);
+  }
+  return { nodes, tets, boundary };
+}
+
+/**
+ * Answers every request of a fake 3D job `id` on `page` (job, list, summary, PVD, fields)
+ * with the box `box` and synthetic fields at steps 0..steps (t = n / steps): u bends the box
+ * (clamped at x = 0, down towards x = L), ζ decreases along x, von Mises is largest near the
+ * clamp, and the contact nodes (z = 0) slip where x > L/2.
+ */
+async function mockJob3d(page, id, box, L, steps = 4) {
+  const job = { id, status: 'succeeded', kind: 'simulation', scene: 'box-3d (mocked)', created_at: '2026-01-01T00:00:00Z', progress: { step: steps, steps, percent: 100 } };
+  const { nodes, tets, boundary } = box;
+  const mesh = {
+    dim: 3, nodes, tetrahedra: tets, boundary_faces: boundary,
+    parts: [{ type: 'clamped', group: 'x0' }, { type: 'contact', group: 'z0' }, { type: 'traction' }],
+  };
+  const fieldsAt = (n) => {
+    const t = n / steps;
+    const u = [], w = [], zeta = [];
+    for (const [x, , z] of nodes) {
+      const s = x / L[0];
+      // Bending: rotation of the cross sections, deflection down (x s²).
+      const ux = -0.04 * t * s * (z - L[2] / 2), uz = -0.05 * t * s * s * L[0];
+      u.push(ux, 0.004 * t * s, uz);
+      w.push(ux / (t || 1), 0.004 * s, uz / (t || 1));
+      zeta.push(1 - 0.6 * t * (1 - s));
+    }
+    const vm = tets.map((tet) => {
+      const c = [0, 1, 2].map((q) => tet.reduce((acc, v) => acc + nodes[v][q], 0) / 4);
+      return t * (3 * (1 - c[0] / L[0]) + Math.abs(c[2] - L[2] / 2));
+    });
+    const doc = { job: id, n, t, u, w, zeta, von_mises: vm };
+    if (n > 0) {
+      doc.contact = [];
+      nodes.forEach(([x, y, z], i) => {
+        if (z !== 0 || x === 0) return;
+        const slipping = x > L[0] / 2;
+        const v = slipping ? [0.2 * t * x, 0.05 * (y - L[1] / 2), 0] : [0, 0, 0];
+        doc.contact.push({
+          node: i, slip_velocity: Math.hypot(...v), friction_traction: 0.3, bound: 0.3, slipping,
+          tangential_velocity: v, traction: [slipping ? -0.3 : -0.1, 0, -1],
+        });
+      });
+    }
+    return doc;
+  };
+  const summary = {
+    mesh: { dim: 3, nodes: nodes.length, tetrahedra: tets.length, boundary_faces: boundary.length },
+    time: { k: 1 / steps, steps, t_end: 1 },
+    timing: { solve_s: 0.25 },
+    stats: { steps_with_slip: steps },
+    steps: Array.from({ length: steps + 1 }, (_, n) => ({ n, t: n / steps, w_V: 0.1 + n, u_V: n * 0.05, zeta_L2: 1 - 0.05 * n, zeta_min: 1 - 0.15 * n })),
+    warnings: [],
+  };
+  const pvd = `<?xml version="1.0"?><VTKFile type="Collection" version="0.1"><Collection>${
+    Array.from({ length: steps + 1 }, (_, n) => `<DataSet timestep="${n / steps}" file="/jobs/${id}/fields/${n}.vtu"/>`).join('')
+  }</Collection></VTKFile>`;
+  const json = (route, body) => route.fulfill({ status: 200, contentType: 'application/json', body: JSON.stringify(body) });
+  const requests = [];
+  await page.route((url) => url.pathname.startsWith(`/jobs/${id}`), (route) => {
+    const url = new URL(route.request().url());
+    const rest = url.pathname.slice(`/jobs/${id}`.length);
+    requests.push(rest + url.search);
+    if (rest === '') return json(route, job);
+    if (rest === '/summary') return json(route, summary);
+    if (rest === '/result.pvd') return route.fulfill({ status: 200, contentType: 'application/xml', body: pvd });
+    if (rest === '/fields') {
+      const q = url.searchParams;
+      const step = q.get('step') === 'last' ? steps : Number(q.get('step'));
+      const doc = fieldsAt(step);
+      const wanted = new Set((q.get('fields') || 'u,w,zeta,von_mises,contact').split(','));
+      for (const k of ['u', 'w', 'zeta', 'von_mises', 'contact']) if (!wanted.has(k)) delete doc[k];
+      if (q.get('mesh') === '1') doc.mesh = mesh;
+      return json(route, doc);
+    }
+    return route.fulfill({ status: 404, contentType: 'application/problem+json', body: JSON.stringify({ title: 'not found', status: 404 }) });
+  });
+  // The job list includes the fake job (the list's refresh would otherwise drop it).
+  await page.route((url) => url.pathname === '/jobs', async (route) => {
+    if (route.request().method() !== 'GET') return route.continue();
+    const r = await route.fetch();
+    const page1 = await r.json();
+    page1.jobs = [job, ...page1.jobs];
+    return json(route, page1);
+  });
+  return { requests, fieldsAt };
+}
+
+/**
+ * Pixel statistics of the 3D canvas (its drawing buffer, kept by preserveDrawingBuffer):
+ * drawn pixels (alpha > 0), in the middle ninth, a hash, and the colour-map entries: each
+ * drawn pixel is matched to the entry of nearest chromaticity (r, g, b over their sum; the
+ * head light scales a colour, which leaves its chromaticity), so a uniform field is one
+ * entry whatever the shading. Also the pixels of the stick and slip colours (points).
+ */
+function stats3d(page) {
+  return page.evaluate(async () => {
+    const { LUT } = await import('/client/colormap.js');
+    const { STICK, SLIP } = await import('/client/render.js');
+    const c = document.querySelector('#mesh-canvas-3d');
+    const t = document.createElement('canvas');
+    t.width = c.width;
+    t.height = c.height;
+    const ctx = t.getContext('2d');
+    ctx.drawImage(c, 0, 0);
+    const d = ctx.getImageData(0, 0, t.width, t.height).data;
+    const chroma = [];
+    for (let i = 0; i < 256; i++) {
+      const s = LUT[3 * i] + LUT[3 * i + 1] + LUT[3 * i + 2];
+      chroma.push([LUT[3 * i] / s, LUT[3 * i + 1] / s]);
+    }
+    const hex = (h) => [1, 3, 5].map((o) => parseInt(h.slice(o, o + 2), 16));
+    const near = (r, g, b, [R, G, B]) => Math.abs(r - R) + Math.abs(g - G) + Math.abs(b - B) < 8;
+    const stick = hex(STICK), slip = hex(SLIP);
+    const hist = new Array(256).fill(0);
+    const memo = new Map();
+    let drawn = 0, middle = 0, hash = 2166136261, stickPx = 0, slipPx = 0;
+    const W = t.width, H = t.height;
+    for (let p = 0, o = 0; o < d.length; p++, o += 4) {
+      hash = Math.imul(hash ^ (d[o] | (d[o + 1] << 8) | (d[o + 2] << 16) | (d[o + 3] << 24)), 16777619) >>> 0;
+      if (d[o + 3] === 0) continue;
+      drawn++;
+      const x = p % W, y = Math.floor(p / W);
+      if (x > W / 3 && x < (2 * W) / 3 && y > H / 3 && y < (2 * H) / 3) middle++;
+      const [r, g, b] = [d[o], d[o + 1], d[o + 2]];
+      if (near(r, g, b, stick)) stickPx++;
+      if (near(r, g, b, slip)) slipPx++;
+      const s = r + g + b;
+      if (d[o + 3] !== 255 || s < 30) continue; // edges blended with the background; dark lines
+      const key = (r << 16) | (g << 8) | b;
+      let best = memo.get(key);
+      if (best === undefined) {
+        let bd = Infinity;
+        for (let i = 0; i < 256; i++) {
+          const e = (r / s - chroma[i][0]) ** 2 + (g / s - chroma[i][1]) ** 2;
+          if (e < bd) { bd = e; best = i; }
+        }
+        if (bd >= 4e-4) best = -1; // not a colour of the map (a part's, a line's)
+        memo.set(key, best);
+      }
+      if (best >= 0) hist[best]++;
+    }
+    const field = hist.reduce((a, b) => a + b, 0);
+    let lo = 255, hi = 0, mean = 0;
+    hist.forEach((n, k) => {
+      if (n >= 0.002 * field) { lo = Math.min(lo, k); hi = Math.max(hi, k); }
+      mean += n * k;
+    });
+    mean /= field || 1;
+    let v = 0;
+    hist.forEach((n, k) => (v += n * (k - mean) ** 2));
+    return {
+      width: W, height: H, pixels: W * H, drawn, middle, middleArea: Math.round((W / 3) * (H / 3)), field,
+      distinct: hist.filter((n) => n >= 0.002 * field).length, indexMin: lo, indexMax: hi,
+      indexStd: Math.sqrt(v / (field || 1)), stickPx, slipPx, hash,
+      frame: Number(c.dataset.frame), camera: c.dataset.camera,
+    };
+  });
+}
+
+/** Waits until the 3D canvas has drawn a frame after `frame`. */
+async function frameAfter(page, frame) {
+  await page.waitForFunction((f) => Number(document.querySelector('#mesh-canvas-3d')?.dataset.frame || 0) > f, frame, { timeout: 10_000 });
+}
+
+/** Does `action` and waits for the 3D canvas's next frame; returns the picture's stats. */
+async function afterFrame(page, action) {
+  const f = Number(await page.getAttribute('#mesh-canvas-3d', 'data-frame'));
+  await action();
+  await frameAfter(page, f);
+  return stats3d(page);
+}
+
+/** Waits until the 3D camera is (`equal`) or is not `camera`. */
+async function cameraIs(page, camera, equal) {
+  await page.waitForFunction(([cam, eq]) => (document.querySelector('#mesh-canvas-3d').dataset.camera === cam) === eq, [camera, equal], { timeout: 5000 });
+}
+
+/** Whether two pictures are the same, pixel for pixel. */
+const same = (a, b) => a.hash === b.hash;
+
+/** The RGBA pixels of a PNG (8-bit RGB or RGBA, not interlaced: what Chromium writes). */
+function decodePng(buf) {
+  let pos = 8, width = 0, height = 0, type = 0;
+  const idat = [];
+  while (pos < buf.length) {
+    const len = buf.readUInt32BE(pos);
+    const kind = buf.toString('latin1', pos + 4, pos + 8);
+    const data = buf.subarray(pos + 8, pos + 8 + len);
+    if (kind === 'IHDR') {
+      width = data.readUInt32BE(0);
+      height = data.readUInt32BE(4);
+      if (data[8] !== 8 || data[12] !== 0) throw new Error('unexpected PNG format');
+      type = data[9];
+    } else if (kind === 'IDAT') idat.push(data);
+    pos += 12 + len;
+  }
+  const bpp = type === 6 ? 4 : type === 2 ? 3 : 0;
+  if (!bpp) throw new Error(`PNG colour type ${type}`);
+  const raw = zlib.inflateSync(Buffer.concat(idat));
+  const stride = width * bpp;
+  const out = Buffer.alloc(width * height * 4);
+  let prev = Buffer.alloc(stride);
+  for (let y = 0; y < height; y++) {
+    const f = raw[y * (stride + 1)];
+    const line = Buffer.from(raw.subarray(y * (stride + 1) + 1, (y + 1) * (stride + 1)));
+    for (let x = 0; x < stride; x++) {
+      const a = x >= bpp ? line[x - bpp] : 0, b = prev[x], c = x >= bpp ? prev[x - bpp] : 0;
+      const pa = Math.abs(b - c), pb = Math.abs(a - c), pc = Math.abs(a + b - 2 * c);
+      const pred = f === 1 ? a : f === 2 ? b : f === 3 ? (a + b) >> 1 : f === 4 ? (pa <= pb && pa <= pc ? a : pb <= pc ? b : c) : 0;
+      line[x] = (line[x] + pred) & 255;
+    }
+    for (let x = 0; x < width; x++) {
+      out.set([line[x * bpp], line[x * bpp + 1], line[x * bpp + 2], bpp === 4 ? line[x * bpp + 3] : 255], 4 * (y * width + x));
+    }
+    prev = line;
+  }
+  return { width, height, data: out };
+}
+
+async function testViewer3d() {
+  console.log('test 7: the 3D viewer against a mocked 3D job (Kuhn box, synthetic fields)');
+  const t0 = Date.now();
+  const id = '3d000000-0000-4000-8000-000000000001';
+  const L = [2, 1, 1];
+  const box = kuhnBox([8, 4, 4], L);
+  check(box.tets.length === 768 && box.boundary.length === 2 * (8 * 4 + 8 * 4 + 4 * 4) * 2,
+    `Kuhn box: ${box.nodes.length} nodes, ${box.tets.length} tetrahedra, ${box.boundary.length} boundary faces`);
+  let mock;
+  const page = await openPage(async (p) => {
+    mock = await mockJob3d(p, id, box, L);
+  }, `#job=${id}`);
+  await page.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 15_000 });
+  await frameAfter(page, 0);
+  check(mock.requests.some((r) => r.startsWith('/fields?') && r.includes('mesh=1')), 'the mesh comes with the first fields request');
+  check((await page.locator('#mesh-canvas').count()) === 0, 'no 2D canvas for a 3D job');
+  const renderer = await page.evaluate(() => {
+    const gl = document.createElement('canvas').getContext('webgl2');
+    const ext = gl?.getExtension('WEBGL_debug_renderer_info');
+    return ext ? gl.getParameter(ext.UNMASKED_RENDERER_WEBGL) : String(!!gl);
+  });
+  console.log(`  WebGL renderer: ${renderer}`);
+  const info = await page.textContent('.run-info');
+  check(info.includes(`${box.nodes.length} nodes · 768 tetrahedra · ${box.boundary.length} boundary triangles`), `run info: ${info.slice(0, 60)}…`);
+  check((await page.getAttribute('#viewer', 'data-step')) === '4', 'shows the last step');
+  const factor = Number(await page.inputValue('#factor'));
+  // Largest |u| of the last step: at x = 2, z = 0 or 1: |(∓0.02, 0.004, −0.1)| ≈ 0.102;
+  // 10% of the body's size (2) is 0.2, so the factor is about 2.
+  check(factor === 2, `the automatic factor makes the largest displacement 10% of the body (× ${factor})`);
+  const kinds = await page.$$eval('#boundary-legend .kind', (ks) => ks.map((k) => k.dataset.kind));
+  check(JSON.stringify(kinds) === JSON.stringify(['clamped', 'traction', 'contact', 'free']), `boundary legend: ${kinds.join(', ')}`);
+  const opts = await page.$$eval('#quantity option', (os) => os.map((o) => o.textContent));
+  check(opts.some((o) => o.includes('per tetrahedron')), `von Mises is per tetrahedron: ${opts.join(' / ')}`);
+
+  const zeta = await stats3d(page);
+  console.log('  3D canvas, ζ at step 4:', JSON.stringify({ ...zeta, camera: undefined }));
+  check(zeta.drawn > 0.12 * zeta.pixels, `the body covers ${(100 * zeta.drawn / zeta.pixels).toFixed(1)}% of the canvas (> 12%)`);
+  check(zeta.middle > 0.9 * zeta.middleArea, `the middle of the canvas is the body (${zeta.middle} of ${zeta.middleArea} pixels)`);
+  check(zeta.distinct >= 24 && zeta.indexMax - zeta.indexMin >= 128, `ζ colouring not uniform: ${zeta.distinct} colour-map entries, ${zeta.indexMin}..${zeta.indexMax}`);
+  check(zeta.slipPx > 20 && zeta.stickPx > 20, `Γ3 nodes drawn by state: ${zeta.slipPx} slip and ${zeta.stickPx} stick pixels (the view looks at the downward contact face)`);
+  const cb = await page.textContent('#colorbar');
+  check(/damage ζ: min 0\.4, max 1/.test(cb), `colour bar: ${cb.trim()}`);
+
+  // ζ → von Mises: another picture, also not uniform.
+  const vm = await afterFrame(page, () => page.selectOption('#quantity', 'von_mises'));
+  check(!same(vm, zeta) && vm.distinct >= 24 && Math.abs(vm.indexStd - zeta.indexStd) + Math.abs(vm.indexMin - zeta.indexMin) + Math.abs(vm.indexMax - zeta.indexMax) > 2,
+    `von Mises is drawn differently: ${vm.distinct} entries, ${vm.indexMin}..${vm.indexMax}, std ${vm.indexStd.toFixed(1)} (ζ: std ${zeta.indexStd.toFixed(1)})`);
+  check((await page.textContent('#colorbar')).includes('von Mises stress (per tetrahedron): min 0'), 'colour bar names von Mises per tetrahedron');
+  // Faces by boundary part: the colours of the legend.
+  const parts = await afterFrame(page, () => page.check('#show-parts'));
+  check(!same(parts, vm) && parts.field < 0.2 * vm.field, `faces coloured by boundary part: another picture (${parts.field} pixels of colour-map colours, ${vm.field} before)`);
+  await afterFrame(page, () => page.uncheck('#show-parts'));
+  const lines = await afterFrame(page, () => page.check('#show-edges'));
+  check(!same(lines, vm), 'mesh lines change the picture');
+  await afterFrame(page, () => page.uncheck('#show-edges'));
+  const noArrows = await afterFrame(page, () => page.uncheck('#show-arrows'));
+  check(!same(noArrows, vm) && noArrows.slipPx < vm.slipPx, `without the slip direction lines: fewer slip-coloured pixels (${noArrows.slipPx} < ${vm.slipPx})`);
+  const arrowsBack = await afterFrame(page, () => page.check('#show-arrows'));
+  check(same(arrowsBack, vm), 'lines back: the same picture');
+  const base = await afterFrame(page, () => page.selectOption('#quantity', 'zeta'));
+  check(same(base, zeta), 'back to ζ: the same picture as before');
+
+  // The value under the pointer, at the centre of the canvas (on the body).
+  const cbox = await page.locator('#mesh-canvas-3d').boundingBox();
+  const centre = [cbox.x + cbox.width / 2, cbox.y + cbox.height / 2];
+  await page.mouse.move(...centre);
+  await page.waitForSelector('#probe:not([hidden])', { timeout: 5000 });
+  const probe = await page.textContent('#probe');
+  const pv = Number(await page.getAttribute('#probe', 'data-value'));
+  check(/damage ζ = [\d.]+/.test(probe) && pv >= 0.4 - 1e-6 && pv <= 1 + 1e-6, `readout under the pointer: "${probe}"`);
+  // ζ = 1 − 0.6 t (1 − x/2) at t = 1: the value matches the point (x to 3 digits).
+  const px = Number(/at \(([-\d.e]+),/.exec(await page.textContent('#probe .probe-where'))?.[1]);
+  check(Math.abs(pv - (0.4 + 0.3 * px)) < 0.003, `the readout is ζ at the point under the pointer (x = ${px}: ${(0.4 + 0.3 * px).toFixed(4)})`);
+
+  // Orbit by dragging; Reset view restores the picture.
+  const orbited = await afterFrame(page, async () => {
+    await page.mouse.down();
+    await page.mouse.move(centre[0] + 120, centre[1] + 40, { steps: 5 });
+    await page.mouse.up();
+    await cameraIs(page, base.camera, false);
+  });
+  check(!same(orbited, base) && orbited.camera !== base.camera, 'dragging orbits the view (camera and picture change)');
+  const reset = await afterFrame(page, async () => {
+    await page.click('#view-reset');
+    await cameraIs(page, base.camera, true);
+  });
+  check(same(reset, base), 'Reset view restores the picture');
+
+  // Keyboard: the focused picture orbits with the arrow keys, zooms with +, Home resets.
+  await page.focus('#mesh-canvas-3d');
+  const keyed = await afterFrame(page, async () => {
+    await page.keyboard.press('ArrowLeft');
+    await page.keyboard.press('+');
+    await cameraIs(page, base.camera, false);
+  });
+  check(!same(keyed, base), 'ArrowLeft and + on the focused picture orbit and zoom');
+  const home = await afterFrame(page, async () => {
+    await page.keyboard.press('Home');
+    await cameraIs(page, base.camera, true);
+  });
+  check(same(home, base), 'Home on the picture resets the view');
+  const wheeled = await afterFrame(page, async () => {
+    await page.mouse.move(...centre);
+    await page.mouse.wheel(0, -300);
+    await cameraIs(page, base.camera, false);
+  });
+  check(!same(wheeled, base), 'the wheel zooms');
+  await afterFrame(page, async () => {
+    await page.click('#view-reset');
+    await cameraIs(page, base.camera, true);
+  });
+
+  // The deformation factor changes the picture (0: the reference box).
+  const flat = await afterFrame(page, () => page.fill('#factor', '0'));
+  check(!same(flat, base), 'factor 0 (the reference configuration) draws another picture');
+  const again = await afterFrame(page, () => page.fill('#factor', String(factor)));
+  check(same(again, base), `factor ${factor} again: the same picture`);
+
+  // The time slider: Home → step 0 (ζ0 = 1: one colour, no contact state).
+  await page.focus('#step-slider');
+  const s0 = await afterFrame(page, async () => {
+    await page.keyboard.press('Home');
+    await page.waitForSelector('#viewer[data-step="0"]', { timeout: 10_000 });
+  });
+  check(!same(s0, base), 'step 0 draws another picture');
+  check((await page.textContent('#colorbar')).includes('(uniform)') && s0.distinct <= 4 && s0.indexMax - s0.indexMin <= 4,
+    `ζ is uniform at step 0: ${s0.distinct} neighbouring colour-map entries (${s0.indexMin}..${s0.indexMax}; shading rounds the chromaticity)`);
+  check(s0.slipPx === 0, 'no slip at step 0 (no contact state stored)');
+  check((await page.textContent('.contact-info')).includes('not stored'), 'contact state not stored at step 0');
+  const s1 = await afterFrame(page, async () => {
+    await page.keyboard.press('ArrowRight');
+    await page.waitForSelector('#viewer[data-step="1"]', { timeout: 10_000 });
+  });
+  check((await page.textContent('#step-label')).includes('step 1 of 4') && !same(s1, s0), 'ArrowRight shows step 1, another picture');
+  const plotCount = await page.locator('#plots svg.plot path').count();
+  check(plotCount === 4, `${plotCount} norm plots drawn`);
+  const s4 = await afterFrame(page, async () => {
+    await page.keyboard.press('End');
+    await page.waitForSelector('#viewer[data-step="4"]', { timeout: 10_000 });
+  });
+  check(same(s4, base), 'End: step 4 again, the same picture');
+
+  // The screenshot shows the body: decoded, its canvas area is not background.
+  const shot = decodePng(await page.locator('#mesh-canvas-3d').screenshot());
+  let body = 0;
+  for (let o = 0; o < shot.data.length; o += 4) {
+    const [r, g, b] = shot.data.subarray(o, o + 3);
+    if (Math.abs(r - 0xfb) + Math.abs(g - 0xfb) + Math.abs(b - 0xfc) > 24) body++;
+  }
+  check(body > 0.12 * shot.width * shot.height, `the screenshot of the canvas shows the body (${(100 * body / (shot.width * shot.height)).toFixed(1)}% of ${shot.width}×${shot.height} px)`);
+  await page.screenshot({ path: path.join(outDir, 'client-3d-box.png'), fullPage: true });
+  await page.setViewportSize({ width: 390, height: 844 });
+  await page.waitForTimeout(300);
+  const overflow = await page.evaluate(() => document.documentElement.scrollWidth - window.innerWidth);
+  const wide = await page.evaluate(() => [...document.querySelectorAll('*')].filter((e) => e.getBoundingClientRect().right > window.innerWidth + 1).map((e) => `${e.tagName.toLowerCase()}${e.id ? `#${e.id}` : ''}.${e.className} "${e.textContent.slice(0, 40)}"`));
+  check(overflow <= 0, `no horizontal scrolling at 390 px (overflow ${overflow} px${wide.length ? `: ${wide.join(', ')}` : ''})`);
+  const narrow = await stats3d(page);
+  check(narrow.drawn > 0.12 * narrow.pixels && narrow.width < 800, `redrawn at the narrow width (${narrow.width}×${narrow.height} px)`);
+  await page.close();
+
+  // Without WebGL: a message instead of the picture; the slider and the plots still work.
+  const noGl = await openPage(async (p) => {
+    await mockJob3d(p, id, box, L);
+    await p.addInitScript(() => {
+      const get = HTMLCanvasElement.prototype.getContext;
+      HTMLCanvasElement.prototype.getContext = function (kind, ...rest) {
+        return /webgl/.test(kind) ? null : get.call(this, kind, ...rest);
+      };
+    });
+  }, `#job=${id}`);
+  await noGl.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 15_000 });
+  const msg = await noGl.textContent('#webgl-missing');
+  check(msg.includes('WebGL is not available') && (await noGl.isVisible('#webgl-missing')), `without WebGL: "${msg.slice(0, 60)}…"`);
+  await noGl.focus('#step-slider');
+  await noGl.keyboard.press('Home');
+  await noGl.waitForSelector('#viewer[data-step="0"]', { timeout: 10_000 });
+  check((await noGl.locator('#plots svg.plot path').count()) === 4, 'without WebGL the time slider and the plots work');
+  await noGl.screenshot({ path: path.join(outDir, 'client-3d-no-webgl.png'), fullPage: true });
+  await noGl.close();
+  console.log(`  section 7 (small box) took ${((Date.now() - t0) / 1000).toFixed(1)} s`);
+
+  // Frame time at ~20k boundary triangles: orbit with the keys, each frame waited for and
+  // read back (so the software rasteriser has finished it).
+  const t1 = Date.now();
+  const bigId = '3d000000-0000-4000-8000-000000000002';
+  const big = kuhnBox([70, 70, 2], [2, 2, 0.1]);
+  const bigPage = await openPage(async (p) => {
+    await mockJob3d(p, bigId, big, [2, 2, 0.1], 1);
+  }, `#job=${bigId}`);
+  await bigPage.waitForSelector(`#viewer[data-state="ready"][data-job="${bigId}"]`, { timeout: 30_000 });
+  await frameAfter(bigPage, 0);
+  const times = await bigPage.evaluate(async () => {
+    const c = document.querySelector('#mesh-canvas-3d');
+    const probe = document.createElement('canvas').getContext('2d');
+    const out = [];
+    for (let i = 0; i < 8; i++) {
+      const f = Number(c.dataset.frame);
+      const t = performance.now();
+      c.dispatchEvent(new KeyboardEvent('keydown', { key: 'ArrowLeft', bubbles: true }));
+      while (Number(c.dataset.frame) === f) await new Promise((r) => requestAnimationFrame(r));
+      probe.drawImage(c, 0, 0, 1, 1); // waits for the frame to be drawn
+      out.push(performance.now() - t);
+    }
+    return { out, size: [c.width, c.height] };
+  });
+  const median = (xs) => xs.slice().sort((a, b) => a - b)[Math.floor(xs.length / 2)];
+  console.log(`  ${big.boundary.length} boundary triangles (${big.tets.length} tetrahedra), ${times.size.join('×')} px: orbit frames ${times.out.map((x) => x.toFixed(0)).join(', ')} ms (median ${median(times.out).toFixed(0)} ms)`);
+  const bs = await stats3d(bigPage);
+  check(bs.drawn > 0.1 * bs.pixels, `the ${big.boundary.length}-triangle body is drawn`);
+  check(median(times.out) < 1000, `a frame at ${big.boundary.length} boundary triangles takes ${median(times.out).toFixed(0)} ms (< 1 s)`);
+  await bigPage.screenshot({ path: path.join(outDir, 'client-3d-20k.png'), fullPage: true });
+  await bigPage.close();
+  console.log(`  the 20k measurement took ${((Date.now() - t1) / 1000).toFixed(1)} s`);
+}
+
+// CLIENT_TESTS=5,7 runs only those sections (while working on one); all by default.
+const only = process.env.CLIENT_TESTS ? new Set(process.env.CLIENT_TESTS.split(',').map(Number)) : null;
+const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d];
+
 let failed = false;
 try {
-  await testSimulation();
-  await testInvalidScene();
-  await testLiveJob();
-  await testStudyView();
-  await testAnyMesh();
-  await testMeshUpload();
+  for (const [i, run] of sections.entries()) {
+    if (!only || only.has(i + 1)) await run();
+  }
   if (pageErrors.length) throw new Error(`uncaught errors in the page: ${pageErrors.join('; ')}`);
   console.log(`PASS (screenshots in ${outDir})`);
 } catch (e) {
