@@ -10,6 +10,9 @@ pub struct BenchArgs {
     /// Levels 1/h = 1/k to run.
     #[arg(long, value_delimiter = ',', default_value = "16,32,64,128")]
     pub levels: Vec<usize>,
+    /// The scene to run at each level (e.g. box-exp3 for the 3D figures).
+    #[arg(long, default_value = bench::DEFAULT_PRESET)]
+    pub preset: String,
     /// Repetitions per level (the fastest is reported).
     #[arg(long, default_value_t = 3)]
     pub repeat: usize,
@@ -32,7 +35,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
             Err(e) => fail(1, &e.to_string()),
         };
     }
-    match bench::run(&args.levels, repeat) {
+    match bench::run(&args.preset, &args.levels, repeat) {
         Ok(report) => {
             eprintln!("{}", report.table());
             println!("{}", pretty(&report));

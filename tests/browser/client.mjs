@@ -23,7 +23,9 @@
 // 6. Mesh upload: the summary and group form against a mocked POST /meshes (nested and
 //    top-level summaries, a refused file's detail, drag and drop), and, when the server under
 //    test has POST /meshes, the real upload of plate-with-hole.msh run as a scene.
-// 7. The 3D viewer (three.js, WebGL in SwiftShader) against a mocked 3D job: page.route
+// 7. The 3D viewer (three.js, WebGL in SwiftShader) against a mocked 3D job (page.route), and
+//    a real 3D job of the server (box-exp3): the body is drawn and coloured.
+// 7 (detail). The 3D viewer against a mocked 3D job: page.route
 //    answers the job, list, summary, stored steps and fields of a fake id with a Kuhn box
 //    (generated here) and synthetic fields; from the WebGL canvas's pixels: the body is
 //    drawn, the colouring is not uniform and changes from ζ to von Mises, dragging orbits and
@@ -1170,6 +1172,23 @@ async function testViewer3d() {
   await bigPage.screenshot({ path: path.join(outDir, 'client-3d-20k.png'), fullPage: true });
   await bigPage.close();
   console.log(`  the 20k measurement took ${((Date.now() - t1) / 1000).toFixed(1)} s`);
+
+  // A real 3D job of the server under test (box-exp3 at h = k = 1/4): the viewer draws its
+  // body from the real fields and colours ζ.
+  const real = await runJob(
+    { preset: 'box-exp3', overrides: { h: '1/4', k: '1/4' } },
+    'box-exp3 at h = k = 1/4 (a real 3D job)',
+  );
+  const realPage = await openPage(null, `#job=${real}`);
+  await realPage.waitForSelector(`#viewer[data-state="ready"][data-job="${real}"]`, { timeout: 15_000 });
+  await frameAfter(realPage, 0);
+  const realInfo = await realPage.textContent('.run-info');
+  check(/tetrahedra/.test(realInfo), `the real job is shown as tetrahedra: ${realInfo.slice(0, 70)}…`);
+  const rs = await stats3d(realPage);
+  check(rs.middle > 0.5 * rs.middleArea, `the real box is drawn in the middle of the canvas (${rs.middle} of ${rs.middleArea} pixels)`);
+  check(rs.field > 0.05 * rs.pixels, `the real box is coloured by the field (${rs.field} colour-map pixels)`);
+  await realPage.screenshot({ path: path.join(outDir, 'client-3d-real.png'), fullPage: true });
+  await realPage.close();
 }
 
 // CLIENT_TESTS=5,7 runs only those sections (while working on one); all by default.

@@ -9,7 +9,8 @@ fn main() {
         .split(',')
         .filter_map(|s| s.trim().parse().ok())
         .collect();
-    let report = contact_core::bench::run(&levels, 3).expect("benchmark run");
+    let report = contact_core::bench::run(contact_core::bench::DEFAULT_PRESET, &levels, 3)
+        .expect("benchmark run");
     println!("{}", report.table());
     println!("{}", serde_json::to_string_pretty(&report).expect("JSON"));
     // Tables 1 and 2 together, one shared reference (target: under 4 s on 2 cores).

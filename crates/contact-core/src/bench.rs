@@ -30,7 +30,7 @@ pub struct BenchLevel {
 
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchReport {
-    pub preset: &'static str,
+    pub preset: String,
     pub repeat: usize,
     pub levels: Vec<BenchLevel>,
 }
@@ -59,9 +59,16 @@ impl BenchReport {
     }
 }
 
-/// Runs the levels, each `repeat` times (fastest end-to-end run reported).
-pub fn run(levels: &[usize], repeat: usize) -> Result<BenchReport, Box<dyn std::error::Error>> {
-    let preset = "paper-convergence";
+/// The preset of README's speed table.
+pub const DEFAULT_PRESET: &str = "paper-convergence";
+
+/// Runs `preset` (2D or 3D) at each level, each `repeat` times (fastest end-to-end run
+/// reported).
+pub fn run(
+    preset: &str,
+    levels: &[usize],
+    repeat: usize,
+) -> Result<BenchReport, Box<dyn std::error::Error>> {
     let mut out = Vec::new();
     for &level in levels {
         let mut best: Option<BenchLevel> = None;
@@ -74,7 +81,7 @@ pub fn run(levels: &[usize], repeat: usize) -> Result<BenchReport, Box<dyn std::
         out.push(best.expect("repeat ≥ 1"));
     }
     Ok(BenchReport {
-        preset,
+        preset: preset.to_string(),
         repeat,
         levels: out,
     })
