@@ -345,8 +345,7 @@ fn box_convergence(n: usize) -> Simulation<3> {
     doc["mesh"]["h"] = json!(format!("1/{n}"));
     doc["time"]["k"] = json!(format!("1/{n}"));
     doc["output"] = json!({"every": 0, "last": false, "fields": []});
-    contact_core::run::run_to_end::<3>(scene::validate(&doc).unwrap(), Default::default())
-        .unwrap()
+    contact_core::run::run_to_end::<3>(scene::validate(&doc).unwrap(), Default::default()).unwrap()
 }
 
 #[test]
@@ -364,7 +363,13 @@ fn the_3d_convergence_test_converges_at_order_one() {
         let w = prolongate(&sim.mesh, &sim.w, 3, mesh).expect("nested boxes");
         let z = prolongate(&sim.mesh, &sim.state.zeta, 1, mesh).expect("nested boxes");
         let dw: Vec<f64> = reference.w.iter().zip(&w).map(|(a, b)| a - b).collect();
-        let dz: Vec<f64> = reference.state.zeta.iter().zip(&z).map(|(a, b)| a - b).collect();
+        let dz: Vec<f64> = reference
+            .state
+            .zeta
+            .iter()
+            .zip(&z)
+            .map(|(a, b)| a - b)
+            .collect();
         rows.push((
             n,
             norms::strain_norm(mesh, geo, &dw) / w_ref,
@@ -373,15 +378,40 @@ fn the_3d_convergence_test_converges_at_order_one() {
     }
     let order = |a: f64, b: f64| (a / b).log2();
     for r in &rows {
-        eprintln!("h = 1/{}: |w − w_ref|_V / |w_ref|_V = {:.3e}, |ζ − ζ_ref|_Z0 / |ζ_ref|_Z0 = {:.3e}", r.0, r.1, r.2);
+        eprintln!(
+            "h = 1/{}: |w − w_ref|_V / |w_ref|_V = {:.3e}, |ζ − ζ_ref|_Z0 / |ζ_ref|_Z0 = {:.3e}",
+            r.0, r.1, r.2
+        );
     }
     let ow: Vec<f64> = rows.windows(2).map(|p| order(p[0].1, p[1].1)).collect();
     let oz: Vec<f64> = rows.windows(2).map(|p| order(p[0].2, p[1].2)).collect();
     eprintln!("orders w {ow:?}, ζ {oz:?}; |w_ref|_V = {w_ref}, |ζ_ref|_Z0 = {z_ref}");
-    assert!(rows.windows(2).all(|p| p[1].1 < p[0].1 && p[1].2 < p[0].2), "{rows:?}");
+    assert!(
+        rows.windows(2).all(|p| p[1].1 < p[0].1 && p[1].2 < p[0].2),
+        "{rows:?}"
+    );
     // At h = k = 1/2 the velocity at T is exactly 0 (B = 2A at ζ = 1 with the paper's
     // moduli, so the load of step 2, f − B ε(k w_1) = f − 2k f, vanishes at k = 1/2): its error
     // is 1 and the first order is not asymptotic. The second is the one to read.
     assert!((0.8..1.4).contains(&ow[1]), "orders of w {ow:?}");
     assert!(oz.iter().all(|&o| o > 0.9), "orders of ζ {oz:?}");
+}
+
+#[test]
+fn a_box_carries_an_error_estimate_from_the_nested_coarse_boxes() {
+    let mut doc = presets::get("box-exp3").unwrap();
+    doc["error_estimate"] = json!(true);
+    doc["output"] = json!({"every": 0, "last": true, "fields": ["u"]});
+    let summary = contact_core::run::run::<3>(
+        scene::validate(&doc).unwrap(),
+        Default::default(),
+        |_, _| std::ops::ControlFlow::Continue(()),
+    )
+    .unwrap();
+    let e = summary.error_estimate.expect("asked for");
+    assert_eq!((e.coarse_h, e.coarse_k), (0.25, 0.25));
+    assert!(e.check, "h = k = 1/8 also has the (4h, 4k) run");
+    let last = e.final_.expect("an estimate at T");
+    let w = last.w.unwrap();
+    assert!(w > 0.0 && w < 0.5 && !last.flagged, "{last:?}");
 }
