@@ -5,11 +5,12 @@
 //! 0 ≤ ζ ≤ 1, w · n_i = 0, the isotropic friction law); the VTU of a box has tetrahedra
 //! and 6-component stresses.
 
+mod common;
 use base64::Engine;
+use common::dirichlet::{self, BOX_ROTATION};
 use contact_core::expr::Expr;
 use contact_core::fem::loads::cell_rule;
-use contact_core::fem::{assembly, loads, DofMap, Geometry};
-use contact_core::linalg::{Cholesky, Csr};
+use contact_core::fem::{assembly, Geometry};
 use contact_core::mesh::{AnyMesh, Mesh};
 use contact_core::output::vtk::write_vtu;
 use contact_core::problem::{Problem, ScalarField, VectorField};
@@ -20,58 +21,6 @@ use serde_json::{json, Value};
 
 const ETA: f64 = 1.0;
 const XI: f64 = 0.5;
-
-/// Solves (A ε(w_h), ε(v)) = (f, v) on the box with w_h = w* at the boundary nodes.
-fn solve(mesh: &Mesh<3>, f: &VectorField, exact: impl Fn([f64; 3]) -> [f64; 3]) -> Vec<f64> {
-    let geo = Geometry::new(mesh);
-    let all = DofMap::all_free(mesh);
-    let k = assembly::viscous_stiffness(mesh, &geo, &all, ETA, XI);
-    let n3 = 3 * mesh.n_nodes();
-    let mut rhs = vec![0.0; n3];
-    loads::add_body_force(mesh, &geo, f, 0.0, &mut rhs);
-    let mut boundary = vec![false; mesh.n_nodes()];
-    mesh.facets
-        .iter()
-        .flat_map(|f| f.nodes)
-        .for_each(|i| boundary[i] = true);
-    let mut w = vec![0.0; n3];
-    for (i, p) in mesh.nodes.iter().enumerate().filter(|(i, _)| boundary[*i]) {
-        w[3 * i..3 * i + 3].copy_from_slice(&exact(*p));
-    }
-    let mut index = vec![usize::MAX; n3];
-    let mut n = 0;
-    for (d, slot) in index.iter_mut().enumerate() {
-        if !boundary[d / 3] {
-            *slot = n;
-            n += 1;
-        }
-    }
-    let mut kw = vec![0.0; n3];
-    k.mul_vec(&w, &mut kw);
-    let mut b = vec![0.0; n];
-    let mut t = Vec::new();
-    for r in 0..n3 {
-        if index[r] == usize::MAX {
-            continue;
-        }
-        b[index[r]] = rhs[r] - kw[r];
-        for j in k.indptr[r]..k.indptr[r + 1] {
-            let c = k.indices[j];
-            if index[c] != usize::MAX {
-                t.push((index[r], index[c], k.values[j]));
-            }
-        }
-    }
-    let kii = Csr::from_triplets(n, n, t);
-    let mut chol = Cholesky::new(kii.lower_csc().as_ref()).unwrap();
-    chol.solve_in_place(&mut b);
-    for d in 0..n3 {
-        if index[d] != usize::MAX {
-            w[d] = b[index[d]];
-        }
-    }
-    w
-}
 
 /// ‖ε(w*) − ε(w_h)‖_L2 by the 4-point rule, ε(w*) = (xx, yy, zz, xy, yz, xz) pointwise.
 fn strain_error(mesh: &Mesh<3>, w: &[f64], eps: impl Fn([f64; 3]) -> [f64; 6]) -> f64 {
@@ -112,7 +61,7 @@ fn a_linear_velocity_is_reproduced_exactly_on_tetrahedra() {
     let exact = |p: [f64; 3]| -> [f64; 3] {
         std::array::from_fn(|r| 0.1 * r as f64 + (0..3).map(|c| g[r][c] * p[c]).sum::<f64>())
     };
-    let w = solve(&mesh, &VectorField::constant3([0.0; 3]), exact);
+    let w = dirichlet::solve(&mesh, (ETA, XI), &VectorField::constant3([0.0; 3]), exact);
     for (i, p) in mesh.nodes.iter().enumerate() {
         let v = exact(*p);
         for c in 0..3 {
@@ -150,7 +99,7 @@ fn manufactured_solution_converges_at_order_one_on_tetrahedra() {
         .iter()
         .map(|&n| {
             let mesh = Mesh::cuboid(1.0, 1.0, 1.0, n, n, n);
-            strain_error(&mesh, &solve(&mesh, &f, exact), eps)
+            strain_error(&mesh, &dirichlet::solve(&mesh, (ETA, XI), &f, exact), eps)
         })
         .collect();
     let orders: Vec<f64> = errors.windows(2).map(|e| (e[0] / e[1]).log2()).collect();
@@ -161,29 +110,8 @@ fn manufactured_solution_converges_at_order_one_on_tetrahedra() {
     );
 }
 
-/// The rotation and translation of `tests/meshes/box-rotated.msh` (x_file = R x_box + t;
-/// generate_box_rotated.py), with its 17 significant digits.
-#[allow(clippy::excessive_precision)]
-const R: [[f64; 3]; 3] = [
-    [
-        0.78163917390702509,
-        -0.48292928421421222,
-        0.39473979817379978,
-    ],
-    [
-        0.55011723070435836,
-        0.83203013377463464,
-        -0.071392499417875857,
-    ],
-    [
-        -0.29395787843858057,
-        0.27295633888831428,
-        0.91601506688731726,
-    ],
-];
-
 fn rotate(v: [f64; 3]) -> [f64; 3] {
-    std::array::from_fn(|r| (0..3).map(|c| R[r][c] * v[c]).sum())
+    std::array::from_fn(|r| (0..3).map(|c| BOX_ROTATION[r][c] * v[c]).sum())
 }
 
 /// The rotated box file, by name.

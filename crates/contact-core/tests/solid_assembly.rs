@@ -6,6 +6,8 @@
 
 #![allow(clippy::needless_range_loop)] // Index loops over nodes and components spell out the formulas.
 
+mod common;
+use common::dirichlet::BOX_ROTATION;
 use contact_core::fem::prolongation::{parent_cells, prolongate};
 use contact_core::fem::{assembly, DofMap, Geometry};
 use contact_core::linalg::Csr;
@@ -193,27 +195,7 @@ fn read(name: &str) -> Mesh<3> {
     import::import::<3>(&bytes).unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
-/// R and t of tests/meshes/box-rotated.msh (copied from generate_box_rotated.py): the file's
-/// nodes are R x + t for the nodes x of `Mesh::<3>::cuboid(2.0, 1.0, 1.0, 8, 4, 4)`.
-// 17 significant digits, as written into the file: they round-trip to the same f64.
-#[allow(clippy::excessive_precision)]
-const R: [V3; 3] = [
-    [
-        0.78163917390702509,
-        -0.48292928421421222,
-        0.39473979817379978,
-    ],
-    [
-        0.55011723070435836,
-        0.83203013377463464,
-        -0.071392499417875857,
-    ],
-    [
-        -0.29395787843858057,
-        0.27295633888831428,
-        0.91601506688731726,
-    ],
-];
+const R: [V3; 3] = BOX_ROTATION;
 const T: V3 = [0.3, -0.2, 0.5];
 
 #[test]

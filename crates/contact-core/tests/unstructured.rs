@@ -3,9 +3,10 @@
 //! |w − w_h|_V = ‖ε(w − w_h)‖_L2 halves with h (order 1), for the operator
 //! (A ε(w), ε(v)) = (f, v) of (3.13) with A(τ) = 2η τ + ξ tr(τ) I and w = w* on ∂Ω.
 
+mod common;
+use common::dirichlet;
 use contact_core::expr::Expr;
-use contact_core::fem::{assembly, loads, DofMap, Geometry};
-use contact_core::linalg::{Cholesky, Csr};
+use contact_core::fem::Geometry;
 use contact_core::mesh::{polygon, Mesh};
 use contact_core::problem::{ScalarField, VectorField};
 
@@ -25,60 +26,6 @@ fn bracket() -> Mesh {
     let hole = vec![[0.3, 0.3], [0.6, 0.3], [0.6, 0.6], [0.3, 0.6]];
     let t = polygon::triangulate(&outer, &[hole], 0.25, 100_000).unwrap();
     Mesh::from_cells(t.nodes, t.triangles.concat()).unwrap()
-}
-
-/// Solves (A ε(w_h), ε(v)) = (f, v) with w_h = w* at the boundary nodes.
-fn solve(mesh: &Mesh, f: &VectorField, exact: impl Fn([f64; 2]) -> [f64; 2]) -> Vec<f64> {
-    let geo = Geometry::new(mesh);
-    let all = DofMap::all_free(mesh);
-    let k = assembly::viscous_stiffness(mesh, &geo, &all, ETA, XI);
-    let mut rhs = vec![0.0; 2 * mesh.n_nodes()];
-    loads::add_body_force(mesh, &geo, f, 0.0, &mut rhs);
-    let mut boundary = vec![false; mesh.n_nodes()];
-    mesh.facets
-        .iter()
-        .flat_map(|f| f.nodes)
-        .for_each(|i| boundary[i] = true);
-    let mut w = vec![0.0; 2 * mesh.n_nodes()];
-    for (i, p) in mesh.nodes.iter().enumerate().filter(|(i, _)| boundary[*i]) {
-        let v = exact(*p);
-        w[2 * i] = v[0];
-        w[2 * i + 1] = v[1];
-    }
-    // Interior numbering, and the right-hand side minus the boundary values' contribution.
-    let mut index = vec![usize::MAX; 2 * mesh.n_nodes()];
-    let mut n = 0;
-    for d in 0..2 * mesh.n_nodes() {
-        if !boundary[d / 2] {
-            index[d] = n;
-            n += 1;
-        }
-    }
-    let mut kw = vec![0.0; w.len()];
-    k.mul_vec(&w, &mut kw);
-    let mut b = vec![0.0; n];
-    let mut t = Vec::new();
-    for r in 0..w.len() {
-        if index[r] == usize::MAX {
-            continue;
-        }
-        b[index[r]] = rhs[r] - kw[r];
-        for j in k.indptr[r]..k.indptr[r + 1] {
-            let c = k.indices[j];
-            if index[c] != usize::MAX {
-                t.push((index[r], index[c], k.values[j]));
-            }
-        }
-    }
-    let kii = Csr::from_triplets(n, n, t);
-    let mut chol = Cholesky::new(kii.lower_csc().as_ref()).unwrap();
-    chol.solve_in_place(&mut b);
-    for d in 0..w.len() {
-        if index[d] != usize::MAX {
-            w[d] = b[index[d]];
-        }
-    }
-    w
 }
 
 /// ‖ε(w*) − ε(w_h)‖_L2 with ε(w*) given pointwise (exact for linear ε(w*) by the
@@ -109,7 +56,7 @@ fn field(fx: &str, fy: &str) -> VectorField {
 fn patch_test_a_linear_velocity_is_exact_on_an_unstructured_mesh() {
     let mesh = bracket().refine();
     let exact = |p: [f64; 2]| [0.1 * p[0] + 0.3 * p[1] + 0.2, -0.2 * p[0] + 0.05 * p[1]];
-    let w = solve(&mesh, &VectorField::constant([0.0, 0.0]), exact);
+    let w = dirichlet::solve(&mesh, (ETA, XI), &VectorField::constant([0.0, 0.0]), exact);
     for (i, p) in mesh.nodes.iter().enumerate() {
         let v = exact(*p);
         assert!((w[2 * i] - v[0]).abs() < 1e-12 && (w[2 * i + 1] - v[1]).abs() < 1e-12);
@@ -131,7 +78,7 @@ fn manufactured_solution_converges_at_order_one() {
     let mut mesh = bracket();
     let mut errors = Vec::new();
     for _ in 0..4 {
-        let w = solve(&mesh, &f, exact);
+        let w = dirichlet::solve(&mesh, (ETA, XI), &f, exact);
         errors.push(strain_error(&mesh, &w, eps));
         mesh = mesh.refine();
     }

@@ -7,6 +7,8 @@ use contact_core::solve::stepper::{Simulation, StepReport};
 use contact_core::solve::SolverSettings;
 use serde_json::Value;
 
+pub mod dirichlet;
+
 /// A preset at resolution h = 1/nh, k = 1/nk, with JSON edits (pointer, value) applied
 /// (a null value removes the field).
 pub fn problem(preset: &str, nh: usize, nk: usize, edits: &[(&str, Value)]) -> Problem {
