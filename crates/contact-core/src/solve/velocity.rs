@@ -40,8 +40,10 @@ pub struct VelocityStep {
     k_ci: Csr,
     /// Tangential DOFs per Γ3 node: d − 1.
     block: usize,
-    /// ω_i per contact DOF (repeated over a node's DOFs).
+    /// ω_i per contact DOF (repeated over a node's DOFs) ...
     weights: Vec<f64>,
+    /// ... and per Γ3 node (what the 3D reduced problem takes).
+    node_weights: Vec<f64>,
     law: FrictionLaw,
     schur: Option<DMatrix<f64>>,
     /// Tangential velocities on Γ3 (the warm start of the next step).
@@ -77,6 +79,12 @@ impl VelocityStep {
             k_ci,
             block: D - 1,
             weights: dofs.contact.iter().map(|c| c.weight).collect(),
+            node_weights: dofs
+                .contact
+                .iter()
+                .step_by(D - 1)
+                .map(|c| c.weight)
+                .collect(),
             law,
             schur: None,
             x: vec![0.0; m],
@@ -163,6 +171,7 @@ impl VelocityStep {
                 let mut x = std::mem::take(&mut self.x);
                 let law = self.law.clone();
                 let weights = std::mem::take(&mut self.weights);
+                let node_weights = std::mem::take(&mut self.node_weights);
                 // Same force scale as the full residual below, and half its tolerance: the
                 // recovery of the interior adds rounding only.
                 let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
@@ -189,7 +198,7 @@ impl VelocityStep {
                         &friction_isotropic::Reduced {
                             s,
                             b: &b,
-                            weights: &node_weights(&weights, block),
+                            weights: &node_weights,
                             law: &law,
                             scale: Some(scale),
                         },
@@ -199,6 +208,7 @@ impl VelocityStep {
                     ),
                 };
                 self.weights = weights;
+                self.node_weights = node_weights;
                 iterations = rep?.iterations;
                 // w_I = K_II⁻¹ (f_I − K_IC x).
                 let wi = &mut w[..n_i];
@@ -289,10 +299,10 @@ impl VelocityStep {
         let interior = self.r[..n_i].iter().fold(0.0f64, |s, v| s.max(v.abs()));
         let contact = match self.block {
             1 => friction_reduced::kkt_violation(&self.r[n_i..], &self.x, &self.weights, &self.law),
-            b => friction_isotropic::kkt_violation(
+            _ => friction_isotropic::kkt_violation(
                 &self.r[n_i..],
                 &self.x,
-                &node_weights(&self.weights, b),
+                &self.node_weights,
                 &self.law,
             ),
         };
@@ -301,11 +311,6 @@ impl VelocityStep {
         }
         interior.max(contact)
     }
-}
-
-/// ω_i per node from ω per contact DOF (`block` DOFs per node).
-fn node_weights(weights: &[f64], block: usize) -> Vec<f64> {
-    weights.iter().step_by(block).copied().collect()
 }
 
 /// S = K_CC − K_CI K_II⁻¹ K_IC by blocked solves with the K_II factor.
