@@ -824,6 +824,37 @@ fn jobs_on_uploaded_meshes() {
     let summary = get(a, &format!("/jobs/{solid_job}/summary")).json();
     assert_eq!(summary["mesh"]["dim"], 3);
     assert_eq!(summary["mesh"]["tetrahedra"], tets);
+    // A study of the uploaded tetrahedra: its levels are Bey refinements of the upload.
+    let study = json!({"study": {"scene": solid, "refine": [0, 1], "k": "1/4",
+                                 "reference": {"refine": 2, "k": "1/4"}}});
+    let r = post_json(a, "/jobs", &study);
+    assert_eq!(r.status, 202, "{}", r.text());
+    let study_job = r.json()["id"].as_str().unwrap().to_string();
+    let done = wait_status(
+        a,
+        &study_job,
+        &["succeeded", "failed"],
+        Duration::from_secs(300),
+    );
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let table = get(a, &format!("/jobs/{study_job}/summary")).json();
+    let rows = table["rows"]
+        .as_array()
+        .unwrap_or_else(|| panic!("{table}"));
+    assert_eq!(rows.len(), 2, "{table}");
+    for row in rows {
+        assert!(row["worst_residual"].as_f64().unwrap() <= 1e-10, "{row}");
+    }
+    assert!(
+        rows[1]["err_w"].as_f64().unwrap() < rows[0]["err_w"].as_f64().unwrap(),
+        "{table}"
+    );
+    // Each Bey refinement multiplies the free velocity DOFs by about 8 (3 per new node).
+    let unknowns: Vec<u64> = rows
+        .iter()
+        .map(|r| r["unknowns"].as_u64().unwrap())
+        .collect();
+    assert!(unknowns[1] > 5 * unknowns[0], "{unknowns:?}");
     // A bundled mesh is still known by its name.
     let mut bundled = plate_scene("plate-with-hole.msh", "bundled", 4);
     bundled["output"]["every"] = json!(4);

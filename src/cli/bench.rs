@@ -20,6 +20,10 @@ pub struct BenchArgs {
     /// run alone.
     #[arg(long)]
     pub tables: bool,
+    /// Instead: the Schur complement onto the contact DOFs of the preset's velocity
+    /// operator, by blocked solves and as the trailing block of the factor, at each level.
+    #[arg(long)]
+    pub schur: bool,
 }
 
 pub fn main(args: BenchArgs) -> ExitCode {
@@ -28,6 +32,15 @@ pub fn main(args: BenchArgs) -> ExitCode {
         // The threads a study uses by default.
         let threads = study::Execution::default().threads;
         return match bench::tables(repeat, threads) {
+            Ok(r) => {
+                println!("{}", pretty(&r));
+                ExitCode::SUCCESS
+            }
+            Err(e) => fail(1, &e.to_string()),
+        };
+    }
+    if args.schur {
+        return match bench::schur(&args.preset, &args.levels, repeat) {
             Ok(r) => {
                 println!("{}", pretty(&r));
                 ExitCode::SUCCESS

@@ -89,6 +89,18 @@ pub fn run(
 
 fn one(preset: &str, level: usize) -> Result<BenchLevel, Box<dyn std::error::Error>> {
     let start = Instant::now();
+    let problem = leveled(preset, level)?;
+    match problem.dim() {
+        2 => measure::<2>(problem, level, start),
+        _ => measure::<3>(problem, level, start),
+    }
+}
+
+/// `preset` validated at h = k = 1/`level`.
+fn leveled(
+    preset: &str,
+    level: usize,
+) -> Result<crate::problem::Problem, Box<dyn std::error::Error>> {
     let mut doc = presets::get(preset).ok_or("unknown preset")?;
     let frac = serde_json::Value::String(format!("1/{level}"));
     scene::apply_overrides(
@@ -99,11 +111,7 @@ fn one(preset: &str, level: usize) -> Result<BenchLevel, Box<dyn std::error::Err
             t_end: None,
         },
     );
-    let problem = scene::validate(&doc)?;
-    match problem.dim() {
-        2 => measure::<2>(problem, level, start),
-        _ => measure::<3>(problem, level, start),
-    }
+    Ok(scene::validate(&doc)?)
 }
 
 /// Runs a validated problem to the end and measures it (the clock started at `start`).
@@ -148,6 +156,79 @@ fn peak_rss_mib() -> Option<f64> {
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb / 1024.0)
+}
+
+/// The two ways of forming the Schur complement S onto the contact DOFs
+/// ([`crate::linalg::bordered`]), measured on one scene's velocity operator.
+#[derive(Debug, Clone, Serialize)]
+pub struct SchurLevel {
+    pub level: usize,
+    pub unknowns: usize,
+    pub contact_dofs: usize,
+    /// The factorisation of K_II every run makes (for scale).
+    pub factor_s: f64,
+    pub factor_nnz: usize,
+    /// S from m solves with that factor, in blocks.
+    pub blocked_s: f64,
+    /// S as L_CC L_CCᵀ from a factor of K with the contact DOFs last.
+    pub trailing_s: f64,
+    /// max |S_trailing − S_blocked| / max |S_blocked|.
+    pub relative_difference: f64,
+}
+
+/// [`SchurLevel`] of `preset` at each 1/h = 1/k in `levels` (fastest of `repeat`).
+pub fn schur(
+    preset: &str,
+    levels: &[usize],
+    repeat: usize,
+) -> Result<Vec<SchurLevel>, Box<dyn std::error::Error>> {
+    use crate::linalg::{schur_complement, Cholesky, SchurPath};
+    let mut out = Vec::new();
+    for &level in levels {
+        let problem = leveled(preset, level)?;
+        let (k, n_i) = match problem.dim() {
+            2 => {
+                let sim = Simulation::<2>::new(problem, SolverSettings::default())?;
+                let (k, n_i) = sim.velocity_operator();
+                (k.clone(), n_i)
+            }
+            _ => {
+                let sim = Simulation::<3>::new(problem, SolverSettings::default())?;
+                let (k, n_i) = sim.velocity_operator();
+                (k.clone(), n_i)
+            }
+        };
+        let t0 = Instant::now();
+        let k_ii = Cholesky::new(k.block(0..n_i, 0..n_i).lower_csc().as_ref())?;
+        let factor_s = t0.elapsed().as_secs_f64();
+        let best = |path: SchurPath| {
+            let mut fastest: Option<(f64, nalgebra::DMatrix<f64>)> = None;
+            for _ in 0..repeat {
+                let t = Instant::now();
+                let (s, taken) = schur_complement(&k, n_i, &k_ii, path);
+                let secs = t.elapsed().as_secs_f64();
+                assert_eq!(taken, path, "no fallback on a velocity operator");
+                if fastest.as_ref().is_none_or(|f| secs < f.0) {
+                    fastest = Some((secs, s));
+                }
+            }
+            fastest.expect("repeat ≥ 1")
+        };
+        let (blocked_s, s_b) = best(SchurPath::BlockedSolves);
+        let (trailing_s, s_t) = best(SchurPath::TrailingBlock);
+        let scale = s_b.amax().max(f64::MIN_POSITIVE);
+        out.push(SchurLevel {
+            level,
+            unknowns: k.nrows,
+            contact_dofs: k.nrows - n_i,
+            factor_s,
+            factor_nnz: k_ii.nnz_l(),
+            blocked_s,
+            trailing_s,
+            relative_difference: (&s_t - &s_b).amax() / scale,
+        });
+    }
+    Ok(out)
 }
 
 /// The paper's Tables 1 and 2 computed together (one shared h = k = 1/128 reference, a

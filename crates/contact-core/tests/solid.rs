@@ -267,13 +267,18 @@ fn the_vtu_of_a_box_holds_tetrahedra_and_symmetric_tensors() {
     assert!(bytes[8..].iter().all(|&t| t == 10));
 }
 
-/// box-convergence at h = k = 1/n, run to T.
-fn box_convergence(n: usize) -> Simulation<3> {
+/// box-convergence at h = k = 1/n.
+fn box_convergence_problem(n: usize) -> Problem {
     let mut doc = presets::get("box-convergence").unwrap();
     doc["mesh"]["h"] = json!(format!("1/{n}"));
     doc["time"]["k"] = json!(format!("1/{n}"));
     doc["output"] = json!({"every": 0, "last": false, "fields": []});
-    contact_core::run::run_to_end::<3>(scene::validate(&doc).unwrap(), Default::default()).unwrap()
+    scene::validate(&doc).unwrap()
+}
+
+/// box-convergence at h = k = 1/n, run to T.
+fn box_convergence(n: usize) -> Simulation<3> {
+    contact_core::run::run_to_end::<3>(box_convergence_problem(n), Default::default()).unwrap()
 }
 
 #[test]
@@ -323,6 +328,26 @@ fn the_3d_convergence_test_converges_at_order_one() {
     // is 1 and the first order is not asymptotic. The second is the one to read.
     assert!((0.8..1.4).contains(&ow[1]), "orders of w {ow:?}");
     assert!(oz.iter().all(|&o| o > 0.9), "orders of ζ {oz:?}");
+
+    // The study service's table (strains taken on parent cells, no prolongation of w) is the
+    // same numbers as the interpolation above.
+    let problem = box_convergence_problem(16);
+    let table = contact_core::study::run_ladder(&problem, &[(2, 2), (4, 4), (8, 8)], (16, 16))
+        .expect("3D study");
+    eprintln!("{}", table.text_table());
+    assert!((table.reference.w_v - w_ref).abs() <= 1e-12 * w_ref);
+    assert!((table.reference.zeta_z0 - z_ref).abs() <= 1e-12 * z_ref);
+    for (row, r) in table.rows.iter().zip(&rows) {
+        assert_eq!(row.h, 1.0 / r.0 as f64);
+        assert!(
+            (row.err_w - r.1).abs() <= 1e-9 * r.1,
+            "{row:?} against {r:?}"
+        );
+        assert!(
+            (row.err_zeta - r.2).abs() <= 1e-9 * r.2,
+            "{row:?} against {r:?}"
+        );
+    }
 }
 
 #[test]

@@ -220,11 +220,6 @@ pub fn parent_cells<const D: usize>(coarse: &Mesh<D>, fine: &Mesh<D>) -> Option<
     lattice_parents(&c, &f)
 }
 
-/// [`parent_cells`] of two triangle meshes.
-pub fn parent_triangles(coarse_mesh: &Mesh, fine_mesh: &Mesh) -> Option<Vec<u32>> {
-    parent_cells(coarse_mesh, fine_mesh)
-}
-
 /// Rectangles: the parent of every fine triangle, in the fine cell order.
 fn grid_parents(coarse: &Grid, fine: &Grid) -> Vec<u32> {
     let (rx, ry) = (fine.nx / coarse.nx, fine.ny / coarse.ny);
@@ -332,7 +327,7 @@ mod tests {
         for pattern in [MeshPattern::Diagonal, MeshPattern::AntiDiagonal] {
             let coarse = Mesh::rectangle(2.0, 1.0, 4, 2, pattern);
             let fine = Mesh::rectangle(2.0, 1.0, 12, 6, pattern);
-            let parents = parent_triangles(&coarse, &fine).unwrap();
+            let parents = parent_cells(&coarse, &fine).unwrap();
             assert_eq!(parents.len(), fine.n_cells());
             for (t, &p) in parents.iter().enumerate() {
                 let c = fine.triangle(t).iter().fold([0.0; 2], |a, &n| {
@@ -361,7 +356,7 @@ mod tests {
         }
         let a = Mesh::rectangle(1.0, 1.0, 3, 3, MeshPattern::Diagonal);
         assert!(
-            parent_triangles(&a, &Mesh::rectangle(1.0, 1.0, 4, 4, MeshPattern::Diagonal)).is_none()
+            parent_cells(&a, &Mesh::rectangle(1.0, 1.0, 4, 4, MeshPattern::Diagonal)).is_none()
         );
     }
 

@@ -8,9 +8,11 @@
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::perm::PermRef;
+use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky,
-    SymmetricOrdering,
+    SymbolicCholeskyRaw, SymmetricOrdering,
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::SparseColMatRef;
@@ -65,17 +67,36 @@ impl std::fmt::Debug for Cholesky {
 impl Cholesky {
     /// Symbolic analysis and first numeric factorisation of the lower triangle `a_lower`.
     pub fn new(a_lower: SparseColMatRef<'_, usize, f64>) -> Result<Self, FactorError> {
+        Self::with_ordering(a_lower, None)
+    }
+
+    /// [`Cholesky::new`] with the symmetric ordering `forward` (row i of the factored
+    /// P A Pᵀ is row `forward[i]` of A) instead of AMD; the analysis may still reorder within
+    /// it (postordering), which [`Cholesky::forward`] reports.
+    pub fn with_ordering(
+        a_lower: SparseColMatRef<'_, usize, f64>,
+        forward: Option<&[usize]>,
+    ) -> Result<Self, FactorError> {
         let params = CholeskySymbolicParams {
             supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
             ..Default::default()
         };
-        let symbolic = factorize_symbolic_cholesky(
-            a_lower.symbolic(),
-            Side::Lower,
-            SymmetricOrdering::Amd,
-            params,
-        )
-        .map_err(FactorError::Symbolic)?;
+        let inverse = forward.map(|f| {
+            let mut inv = vec![0; f.len()];
+            for (i, &p) in f.iter().enumerate() {
+                inv[p] = i;
+            }
+            inv
+        });
+        let ordering = match (forward, &inverse) {
+            (Some(f), Some(inv)) => {
+                SymmetricOrdering::Custom(PermRef::new_checked(f, inv, f.len()))
+            }
+            _ => SymmetricOrdering::Amd,
+        };
+        let symbolic =
+            factorize_symbolic_cholesky(a_lower.symbolic(), Side::Lower, ordering, params)
+                .map_err(FactorError::Symbolic)?;
         let solve_scratch = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
         let mut this = Cholesky {
             l_values: Arc::new(vec![0.0; symbolic.len_val()]),
@@ -89,6 +110,22 @@ impl Cholesky {
 
     pub fn n(&self) -> usize {
         self.symbolic.nrows()
+    }
+
+    /// The ordering of the factor: row i of P A Pᵀ = L Lᵀ is row `forward()[i]` of A.
+    pub fn forward(&self) -> Vec<usize> {
+        match self.symbolic.perm() {
+            Some(p) => p.arrays().0.to_vec(),
+            None => (0..self.n()).collect(),
+        }
+    }
+
+    /// The supernodal factor L of P A Pᵀ (always supernodal, see the module doc).
+    pub(crate) fn supernodal(&self) -> SupernodalLltRef<'_, usize, f64> {
+        match self.symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => SupernodalLltRef::new(s, &self.l_values),
+            SymbolicCholeskyRaw::Simplicial(_) => unreachable!("supernodal forced"),
+        }
     }
 
     /// Number of stored entries of the factor L.

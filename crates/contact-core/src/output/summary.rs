@@ -3,6 +3,7 @@
 //! `steps[]` (the same per step plus `velocity` and `damage` solver reports), `timing`.
 
 use crate::estimate::ErrorEstimate;
+use crate::linalg::SchurPath;
 use crate::problem::{FrictionLaw, MeshPattern, Problem};
 use crate::solve::smallness::SmallnessReport;
 use crate::solve::stepper::{Simulation, StepReport};
@@ -174,7 +175,12 @@ impl Summary {
                 factor_n,
                 factor_nnz,
                 contact_solver: if contact {
-                    "dense Schur complement"
+                    match sim.schur_path() {
+                        SchurPath::TrailingBlock => {
+                            "dense Schur complement (trailing block of the factor)"
+                        }
+                        SchurPath::BlockedSolves => "dense Schur complement (blocked solves)",
+                    }
                 } else {
                     "none"
                 },

@@ -10,11 +10,11 @@
 //!   convex iff λ_min(W^{-½} S_A W^{-½}) > c2τ (S_A: Schur complement of the velocity
 //!   operator). Since S_A ⪰ 2η S_G, the paper's estimate implies the discrete one.
 
-use super::velocity::{schur_complement, VelocityStep};
+use super::velocity::VelocityStep;
 use super::SolveError;
 use crate::fem::{assembly, DofMap, Geometry};
 use crate::linalg::dense::min_eig_scaled;
-use crate::linalg::Cholesky;
+use crate::linalg::{schur_complement, Cholesky, SchurPath};
 use crate::mesh::Mesh;
 use crate::problem::Problem;
 
@@ -61,7 +61,6 @@ pub fn check<const D: usize>(
     let d: Vec<f64> = velocity.weights().iter().map(|w| 1.0 / w.sqrt()).collect();
     let gram = assembly::viscous_stiffness(mesh, geo, dofs, 0.5, 0.0);
     let n_i = dofs.n_interior;
-    let n = dofs.n_free();
     let g_ii =
         Cholesky::new(gram.block(0..n_i, 0..n_i).lower_csc().as_ref()).map_err(|source| {
             SolveError::Factor {
@@ -69,7 +68,7 @@ pub fn check<const D: usize>(
                 source,
             }
         })?;
-    let s_g = schur_complement(&gram, &g_ii, &gram.block(n_i..n, 0..n_i), n_i);
+    let (s_g, _) = schur_complement(&gram, n_i, &g_ii, SchurPath::TrailingBlock);
     let c_tau = (1.0 / min_eig_scaled(&s_g, &d)).sqrt();
     let lhs = c2 * c_tau * c_tau;
     let discrete = min_eig_scaled(velocity.schur(), &d) - c2;

@@ -17,7 +17,7 @@ use crate::fem::{assembly, loads, norms, DofMap, Geometry};
 use crate::laws::constitutive::{elastic_stress, viscous_stress, von_mises};
 use crate::laws::damage_source::phi;
 use crate::laws::Tensor;
-use crate::linalg::Csr;
+use crate::linalg::{Csr, SchurPath};
 use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::{Problem, SmallnessPolicy};
 use std::time::Instant;
@@ -273,7 +273,8 @@ impl<const D: usize> Prepared<D> {
         let dofs = DofMap::new(&mesh, &problem.boundary);
         let visc = problem.material.viscosity;
         let k = assembly::viscous_stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi);
-        let mut velocity = VelocityStep::new(k, &dofs, problem.friction.clone())?;
+        let mut velocity =
+            VelocityStep::new(k, &dofs, problem.friction.clone(), SchurPath::default())?;
         let smallness = smallness::check(problem, &mesh, &geo, &dofs, &mut velocity)?;
         let mass = assembly::mass(&mesh, &geo);
         Ok(Prepared {
@@ -637,6 +638,17 @@ impl<const D: usize> Simulation<D> {
     /// Dimension and factor size of the velocity system (interior DOFs).
     pub fn velocity_factor_size(&self) -> (usize, usize) {
         self.velocity.solver.factor_size()
+    }
+
+    /// How the velocity step forms its Schur complement onto Γ3.
+    pub fn schur_path(&self) -> crate::linalg::SchurPath {
+        self.velocity.solver.schur_path()
+    }
+
+    /// The free-DOF velocity operator K (interior DOFs first) and the number of interior
+    /// DOFs (for benchmarks of its factorisation).
+    pub fn velocity_operator(&self) -> (&Csr, usize) {
+        self.velocity.solver.operator()
     }
 
     /// One forward+backward substitution with the velocity factor on a copy of the current

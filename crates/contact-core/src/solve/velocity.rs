@@ -8,8 +8,9 @@
 //!
 //! K_II is factored once per job. Per step: one solve for y = K_II⁻¹ f_I; if every contact
 //! node sticks (|b_i| ≤ ω_i μ(0), checked exactly) then x = 0 and w_I = y: done. Otherwise
-//! the Schur complement is formed (once, lazily, by blocked solves), the reduced problem is
-//! solved, and one more solve recovers w_I.
+//! S is formed (once, lazily, as the trailing block of a factor of K with the contact DOFs
+//! last: [`crate::linalg::schur`]), the reduced problem is solved, and one more solve
+//! recovers w_I.
 //!
 //! Each Γ3 node has d − 1 consecutive tangential DOFs: one in 2D (the reduced problem of
 //! [`super::friction_reduced`]), two in 3D (the isotropic, group-sparse one of
@@ -18,13 +19,9 @@
 use super::{friction_isotropic, friction_reduced};
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::fem::DofMap;
-use crate::linalg::{Cholesky, Csr};
+use crate::linalg::{schur_complement, Cholesky, Csr, SchurPath};
 use crate::problem::FrictionLaw;
 use nalgebra::DMatrix;
-
-/// Schur complements are formed in blocks of this many right-hand sides, bounding the dense
-/// scratch to n_I × 32 values while keeping the supernodal solves BLAS-3.
-const SCHUR_BLOCK: usize = 32;
 
 /// Most rounds of iterative refinement of the interior velocity per step.
 const REFINEMENTS: usize = 3;
@@ -45,6 +42,8 @@ pub struct VelocityStep {
     /// ... and per Γ3 node (what the 3D reduced problem takes).
     node_weights: Vec<f64>,
     law: FrictionLaw,
+    /// How S is formed; after forming it, the path taken.
+    schur_path: SchurPath,
     schur: Option<DMatrix<f64>>,
     /// Tangential velocities on Γ3 (the warm start of the next step).
     x: Vec<f64>,
@@ -55,11 +54,12 @@ pub struct VelocityStep {
 }
 
 impl VelocityStep {
-    /// Factors K_II of the free-DOF operator `k` (numbered as in `dofs`).
+    /// Factors the free-DOF operator `k` (numbered as in `dofs`: interior, then contact).
     pub fn new<const D: usize>(
         k: Csr,
         dofs: &DofMap<D>,
         law: FrictionLaw,
+        path: SchurPath,
     ) -> Result<Self, SolveError> {
         let n_i = dofs.n_interior;
         let n = dofs.n_free();
@@ -77,6 +77,7 @@ impl VelocityStep {
             n_i,
             k_ii,
             k_ci,
+            schur_path: path,
             block: D - 1,
             weights: dofs.contact.iter().map(|c| c.weight).collect(),
             node_weights: dofs
@@ -123,6 +124,16 @@ impl VelocityStep {
         (self.k_ii.n(), self.k_ii.nnz_l())
     }
 
+    /// How S is (to be) formed.
+    pub fn schur_path(&self) -> SchurPath {
+        self.schur_path
+    }
+
+    /// The free-DOF operator K and the number of interior DOFs (for benchmarks).
+    pub fn operator(&self) -> (&Csr, usize) {
+        (&self.k, self.n_i)
+    }
+
     /// One forward + backward substitution with the K_II factor, in place (for benchmarks).
     pub fn substitute(&mut self, v: &mut [f64]) {
         self.k_ii.solve_in_place(v);
@@ -131,7 +142,9 @@ impl VelocityStep {
     /// S = K_CC − K_CI K_II⁻¹ K_IC, computed on first use.
     pub fn schur(&mut self) -> &DMatrix<f64> {
         if self.schur.is_none() {
-            self.schur = Some(schur_complement(&self.k, &self.k_ii, &self.k_ci, self.n_i));
+            let (s, path) = schur_complement(&self.k, self.n_i, &self.k_ii, self.schur_path);
+            self.schur = Some(s);
+            self.schur_path = path;
         }
         self.schur.as_ref().unwrap()
     }
@@ -311,39 +324,4 @@ impl VelocityStep {
         }
         interior.max(contact)
     }
-}
-
-/// S = K_CC − K_CI K_II⁻¹ K_IC by blocked solves with the K_II factor.
-pub fn schur_complement(k: &Csr, k_ii: &Cholesky, k_ci: &Csr, n_i: usize) -> DMatrix<f64> {
-    let m = k.nrows - n_i;
-    let mut s = DMatrix::zeros(m, m);
-    for i in 0..m {
-        for j in 0..m {
-            s[(i, j)] = k.get(n_i + i, n_i + j);
-        }
-    }
-    let mut start = 0;
-    while start < m {
-        let cols = SCHUR_BLOCK.min(m - start);
-        // Z = K_II⁻¹ K_IC[:, start..start+cols]; column c of K_IC is row c of K_CI.
-        let mut z = vec![0.0; n_i * cols];
-        for c in 0..cols {
-            let row = start + c;
-            for p in k_ci.indptr[row]..k_ci.indptr[row + 1] {
-                z[c * n_i + k_ci.indices[p]] = k_ci.values[p];
-            }
-        }
-        k_ii.solve_block_in_place(&mut z, cols);
-        let mut col = vec![0.0; m];
-        for c in 0..cols {
-            k_ci.mul_vec(&z[c * n_i..(c + 1) * n_i], &mut col);
-            for i in 0..m {
-                s[(i, start + c)] -= col[i];
-            }
-        }
-        start += cols;
-    }
-    // Symmetrise against rounding so the dense Cholesky sees an exactly symmetric matrix.
-    let st = s.transpose();
-    (s + st) * 0.5
 }

@@ -2,9 +2,9 @@
 //! (exact for nested P1 meshes), compared with the reference at the common time nodes.
 
 use super::levels::{LevelRun, RunStats};
-use super::reference::{double_dot, strains, Reference};
+use super::reference::{double_dot, strains, sym_len, Reference};
 use super::spec::{Plan, Vary};
-use crate::fem::prolongation::{parent_triangles, prolongate};
+use crate::fem::prolongation::{parent_cells, prolongate};
 use crate::fem::{norms, Geometry};
 use serde::Serialize;
 use std::collections::BTreeSet;
@@ -72,11 +72,11 @@ pub struct StudyResult {
     pub threads: usize,
 }
 
-pub(super) fn tabulate(
+pub(super) fn tabulate<const D: usize>(
     plan: &Plan,
-    reference: &Reference,
+    reference: &Reference<D>,
     from_cache: bool,
-    levels: &[LevelRun],
+    levels: &[LevelRun<D>],
     compared: &BTreeSet<usize>,
     threads: usize,
     seconds: f64,
@@ -159,17 +159,17 @@ struct LevelErrors {
 }
 
 /// `ratio` = reference steps per level step. |w − I w_c|_V is summed over the reference
-/// triangles with the coarse strain taken on each one's parent (exact for nested P1 meshes,
+/// cells with the coarse strain taken on each one's parent (exact for nested P1 meshes,
 /// no interpolation); ζ is interpolated and measured with the reference mass matrix.
-fn level_errors(
-    reference: &Reference,
-    level: &LevelRun,
+fn level_errors<const D: usize>(
+    reference: &Reference<D>,
+    level: &LevelRun<D>,
     ratio: usize,
     compared: &BTreeSet<usize>,
 ) -> LevelErrors {
     let fine = &reference.mesh;
     // Nesting was checked when the plan was made, so these cannot fail here.
-    let parents = parent_triangles(&level.mesh, fine).expect("nested meshes");
+    let parents = parent_cells(&level.mesh, fine).expect("nested meshes");
     let coarse_geo = Geometry::new(&level.mesh);
     let mut scratch = vec![0.0; fine.n_nodes()];
     let biggest = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
@@ -190,14 +190,19 @@ fn level_errors(
         };
         let rs = &reference.snapshots[i];
         let coarse_strain = strains(&level.mesh, &coarse_geo, &snap.w);
+        let s = sym_len(D);
+        let mut diff = [0.0; 6];
         let ew2: f64 = rs
             .strain
-            .iter()
+            .chunks_exact(s)
             .zip(&parents)
             .zip(&reference.geo.measure)
             .map(|((e, &p), a)| {
-                let c = coarse_strain[p as usize];
-                a * double_dot([e[0] - c[0], e[1] - c[1], e[2] - c[2]])
+                let c = &coarse_strain[s * p as usize..][..s];
+                for ((d, e), c) in diff.iter_mut().zip(e).zip(c) {
+                    *d = e - c;
+                }
+                a * double_dot::<D>(&diff[..s])
             })
             .sum();
         let z = prolongate(&level.mesh, &snap.zeta, 1, fine).expect("nested meshes");

@@ -30,7 +30,7 @@ impl Work {
     }
 }
 
-/// w_n (interleaved x, y per node) and ζ_n at one kept step.
+/// w_n (interleaved components per node) and ζ_n at one kept step.
 pub struct Snapshot {
     pub step: usize,
     pub w: Vec<f64>,
@@ -56,8 +56,8 @@ pub struct RunStats {
     pub steps_near_iteration_limit: usize,
 }
 
-pub struct LevelRun {
-    pub mesh: Mesh,
+pub struct LevelRun<const D: usize = 2> {
+    pub mesh: Mesh<D>,
     pub unknowns: usize,
     pub steps: usize,
     /// Wall time of the whole run, set-up (assembly, factorisation) included.
@@ -67,7 +67,7 @@ pub struct LevelRun {
     pub snapshots: Vec<Snapshot>,
 }
 
-impl LevelRun {
+impl<const D: usize> LevelRun<D> {
     pub fn snapshot_steps(&self) -> BTreeSet<usize> {
         self.snapshots.iter().map(|s| s.step).collect()
     }
@@ -84,12 +84,12 @@ impl LevelRun {
 /// the set-up is taken from (or, first, left in) that slot; a run that reuses it counts the
 /// set-up's time in its own `seconds` all the same, so that work–precision figures are those
 /// of standalone runs.
-pub fn run_level(
+pub fn run_level<const D: usize>(
     work: &Work,
     settings: SolverSettings,
     tick: &(dyn Fn() -> ControlFlow<()> + Sync),
-    shared: Option<&Mutex<Option<Prepared>>>,
-) -> Result<LevelRun, super::StudyError> {
+    shared: Option<&Mutex<Option<Prepared<D>>>>,
+) -> Result<LevelRun<D>, super::StudyError> {
     let start = Instant::now();
     let mut reused_seconds = 0.0;
     let prepared = match shared {
@@ -101,13 +101,13 @@ pub fn run_level(
                     p.clone()
                 }
                 None => {
-                    let p = Prepared::new(&work.problem).map_err(RunError::from)?;
+                    let p = Prepared::<D>::new(&work.problem).map_err(RunError::from)?;
                     *slot = Some(p.clone());
                     p
                 }
             }
         }
-        None => Prepared::new(&work.problem).map_err(RunError::from)?,
+        None => Prepared::<D>::new(&work.problem).map_err(RunError::from)?,
     };
     let mut sim = Simulation::from_prepared(work.problem.clone(), settings, prepared)
         .map_err(RunError::from)?;

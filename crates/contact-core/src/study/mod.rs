@@ -103,6 +103,50 @@ pub fn run_many(
     for plan in plans {
         check_nested(plan)?;
     }
+    // The runs of one dimension share a schedule; a batch mixing 2D and 3D studies runs its
+    // 3D schedule after the 2D one, on one progress scale.
+    let (solid, plane): (Vec<usize>, Vec<usize>) =
+        (0..plans.len()).partition(|&i| plans[i].base.dim() == 3);
+    if solid.is_empty() {
+        return run_many_in::<2>(plans, cache, exec, started, progress);
+    }
+    if plane.is_empty() {
+        return run_many_in::<3>(plans, cache, exec, started, progress);
+    }
+    let pick = |idx: &[usize]| idx.iter().map(|&i| plans[i].clone()).collect::<Vec<_>>();
+    let (plane_plans, solid_plans) = (pick(&plane), pick(&solid));
+    let solid_total: usize = solid_plans.iter().map(total_steps).sum();
+    let plane_done = AtomicUsize::new(0);
+    let first = |done: usize, total: usize| {
+        plane_done.store(total, Ordering::Relaxed);
+        progress(done, total + solid_total)
+    };
+    let plane_results = run_many_in::<2>(&plane_plans, cache, exec, started, &first)?;
+    let offset = plane_done.load(Ordering::Relaxed);
+    let second = |done: usize, total: usize| progress(offset + done, offset + total);
+    let solid_results = run_many_in::<3>(&solid_plans, cache, exec, started, &second)?;
+    let mut results: Vec<Option<StudyResult>> = vec![None; plans.len()];
+    for (i, r) in plane
+        .into_iter()
+        .chain(solid)
+        .zip(plane_results.into_iter().chain(solid_results))
+    {
+        results[i] = Some(r);
+    }
+    Ok(results
+        .into_iter()
+        .map(|r| r.expect("every study ran"))
+        .collect())
+}
+
+/// [`run_many`] of studies whose bodies have dimension D.
+fn run_many_in<const D: usize>(
+    plans: &[Plan],
+    cache: &ReferenceCache,
+    exec: Execution,
+    started: Instant,
+    progress: &(dyn Fn(usize, usize) -> ControlFlow<()> + Sync),
+) -> Result<Vec<StudyResult>, StudyError> {
     let compared: Vec<BTreeSet<usize>> = plans.iter().map(compared_steps).collect();
     // One slot per distinct reference, locked in key order (no deadlock between concurrent
     // callers). Holding a slot while computing makes another study of the same reference
@@ -123,20 +167,23 @@ pub fn run_many(
         .collect();
     let mut jobs: Vec<Work> = Vec::new();
     // Per group: the cached reference, or the index of the job computing it.
-    let mut sources: Vec<Result<Arc<Reference>, usize>> = Vec::new();
+    let mut sources: Vec<Result<Arc<Reference<D>>, usize>> = Vec::new();
     for ((_, members), guard) in groups.iter().zip(&guards) {
         let mut keep: BTreeSet<usize> = BTreeSet::new();
         for &i in members {
             keep.extend(&compared[i]);
         }
-        match guard
+        let cached = guard
+            .as_ref()
+            .and_then(|r| r.clone().downcast::<Reference<D>>().ok());
+        match cached
             .as_ref()
             .filter(|r| keep.is_subset(&r.snapshot_steps()))
         {
             Some(r) => sources.push(Ok(r.clone())),
             None => {
                 // The union with what an earlier study kept lets the new entry serve both.
-                if let Some(old) = guard.as_ref() {
+                if let Some(old) = &cached {
                     keep.extend(old.snapshot_steps());
                 }
                 sources.push(Err(jobs.len()));
@@ -187,11 +234,11 @@ pub fn run_many(
         }
     }
     let total = jobs.iter().map(|j| j.problem.steps).sum::<usize>();
-    let mut done: Vec<Option<Done>> = run_all(jobs, exec, total, progress)?
+    let mut done: Vec<Option<Done<D>>> = run_all(jobs, exec, total, progress)?
         .into_iter()
         .map(Some)
         .collect();
-    let mut references: Vec<(Arc<Reference>, bool)> = Vec::with_capacity(groups.len());
+    let mut references: Vec<(Arc<Reference<D>>, bool)> = Vec::with_capacity(groups.len());
     for (source, guard) in sources.into_iter().zip(guards.iter_mut()) {
         references.push(match source {
             Ok(r) => (r, true),
@@ -215,7 +262,7 @@ pub fn run_many(
         let (reference, cached) = &references[g];
         // Later studies of a group reuse the reference the first one computed.
         let cached = *cached || groups[g].1[0] != i;
-        let runs: Vec<LevelRun> = level_jobs[i]
+        let runs: Vec<LevelRun<D>> = level_jobs[i]
             .iter()
             .map(|&j| match done[j].take() {
                 Some(Done::Level(r)) => r,
@@ -276,15 +323,23 @@ fn compared_steps(plan: &Plan) -> BTreeSet<usize> {
         let ratio = ref_steps / steps.max(1);
         all.extend((1..=steps).map(|m| m * ratio));
     }
-    // ζ per node and three strain components per triangle (see reference::Reference); a
-    // given mesh has about two triangles per node.
+    // ζ per node and the strain's components per cell (see reference::Reference); a given
+    // mesh has about two triangles, or about six tetrahedra, per node.
     let reference = with(&plan.base, (ref_n, ref_steps));
-    let per_snapshot = match &reference.body {
-        None => {
+    let per_cell = reference::sym_len(reference.dim());
+    let per_snapshot = match (&reference.body, reference.depth_cells()) {
+        (None, None) => {
             let (nx, ny) = reference.cells();
-            ((nx + 1) * (ny + 1) + 2 * nx * ny * 3) * 8
+            ((nx + 1) * (ny + 1) + 2 * nx * ny * per_cell) * 8
         }
-        Some(_) => 7 * reference.n_nodes() * 8,
+        (None, Some(nz)) => {
+            let (nx, ny) = reference.cells();
+            ((nx + 1) * (ny + 1) * (nz + 1) + 6 * nx * ny * nz * per_cell) * 8
+        }
+        (Some(_), _) => {
+            let cells_per_node = if reference.dim() == 3 { 6 } else { 2 };
+            (1 + cells_per_node * per_cell) * reference.n_nodes() * 8
+        }
     };
     let fit = (SNAPSHOT_BUDGET_BYTES / per_snapshot.max(1)).max(1);
     if all.len() <= fit {
@@ -299,26 +354,26 @@ fn compared_steps(plan: &Plan) -> BTreeSet<usize> {
 }
 
 /// A finished run.
-enum Done {
-    Level(LevelRun),
-    Reference(Reference),
+enum Done<const D: usize> {
+    Level(LevelRun<D>),
+    Reference(Reference<D>),
 }
 
 /// Runs the jobs on `exec.threads` threads, largest first, and returns them in input order.
-fn run_all(
+fn run_all<const D: usize>(
     jobs: Vec<Work>,
     exec: Execution,
     total: usize,
     progress: &(dyn Fn(usize, usize) -> ControlFlow<()> + Sync),
-) -> Result<Vec<Done>, StudyError> {
+) -> Result<Vec<Done<D>>, StudyError> {
     let mut order: Vec<usize> = (0..jobs.len()).collect();
     order.sort_by_key(|&i| std::cmp::Reverse(jobs[i].cost()));
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
-    let results: Vec<Mutex<Option<Result<Done, StudyError>>>> =
+    let results: Vec<Mutex<Option<Result<Done<D>, StudyError>>>> =
         jobs.iter().map(|_| Mutex::new(None)).collect();
-    let mut setups: HashMap<&(String, usize), Mutex<Option<Prepared>>> = HashMap::new();
+    let mut setups: HashMap<&(String, usize), Mutex<Option<Prepared<D>>>> = HashMap::new();
     for key in jobs.iter().filter_map(|j| j.share.as_ref()) {
         setups.entry(key).or_insert_with(|| Mutex::new(None));
     }

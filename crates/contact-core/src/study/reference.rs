@@ -6,15 +6,16 @@ use super::levels::{LevelRun, RunStats};
 use crate::fem::{assembly, norms, Geometry};
 use crate::linalg::Csr;
 use crate::mesh::Mesh;
+use std::any::Any;
 use std::collections::{BTreeSet, VecDeque};
 use std::sync::{Arc, Mutex};
 
 /// A finished reference run reduced to what comparisons need: per kept step the strain
-/// ε(w) on every triangle (w itself is never needed: errors in |·|_V compare strains) and ζ,
+/// ε(w) on every cell (w itself is never needed: errors in |·|_V compare strains) and ζ,
 /// with the norms |w|_V and |ζ|_Z0; the mesh, its geometry and mass matrix.
-pub struct Reference {
-    pub mesh: Mesh,
-    pub geo: Geometry,
+pub struct Reference<const D: usize = 2> {
+    pub mesh: Mesh<D>,
+    pub geo: Geometry<D>,
     pub mass: Csr,
     pub unknowns: usize,
     pub steps: usize,
@@ -28,29 +29,43 @@ pub struct Reference {
 
 pub struct RefSnapshot {
     pub step: usize,
-    /// (ε_xx, ε_yy, ε_xy) per triangle.
-    pub strain: Vec<[f64; 3]>,
+    /// The [`sym_len`] independent components of ε per cell, cell after cell
+    /// ([`strains`]).
+    pub strain: Vec<f64>,
     pub zeta: Vec<f64>,
 }
 
-/// (ε_xx, ε_yy, ε_xy) of the nodal field `w` on every triangle.
-pub fn strains(mesh: &Mesh, geo: &Geometry, w: &[f64]) -> Vec<[f64; 3]> {
-    (0..mesh.n_cells())
-        .map(|t| {
-            let e = geo.strain(mesh, t, w);
-            [e[(0, 0)], e[(1, 1)], e[(0, 1)]]
-        })
-        .collect()
+/// Independent components of a symmetric D × D tensor: 3 in 2D, 6 in 3D.
+pub const fn sym_len(d: usize) -> usize {
+    d * (d + 1) / 2
 }
 
-/// ε:ε of a symmetric tensor stored as (xx, yy, xy).
+/// ε of the nodal field `w` on every cell, as [`sym_len`]`(D)` numbers per cell: the
+/// diagonal (xx, yy[, zz]) first, then the off-diagonal entries (xy[, yz, xz]).
+pub fn strains<const D: usize>(mesh: &Mesh<D>, geo: &Geometry<D>, w: &[f64]) -> Vec<f64> {
+    let mut out = Vec::with_capacity(sym_len(D) * mesh.n_cells());
+    for t in 0..mesh.n_cells() {
+        let e = geo.strain(mesh, t, w);
+        out.extend((0..D).map(|i| e[(i, i)]));
+        out.extend(
+            (1..D)
+                .flat_map(|off| (0..D - off).map(move |i| (i, i + off)))
+                .map(|ij| e[ij]),
+        );
+    }
+    out
+}
+
+/// ε:ε of a symmetric tensor stored as [`strains`] stores it: each off-diagonal entry
+/// counts twice.
 #[inline]
-pub fn double_dot(e: [f64; 3]) -> f64 {
-    e[0] * e[0] + e[1] * e[1] + 2.0 * e[2] * e[2]
+pub fn double_dot<const D: usize>(e: &[f64]) -> f64 {
+    let (diagonal, off) = e.split_at(D);
+    diagonal.iter().map(|x| x * x).sum::<f64>() + 2.0 * off.iter().map(|x| x * x).sum::<f64>()
 }
 
-impl Reference {
-    pub fn new(run: LevelRun) -> Reference {
+impl<const D: usize> Reference<D> {
+    pub fn new(run: LevelRun<D>) -> Reference<D> {
         let LevelRun {
             mesh,
             unknowns,
@@ -69,9 +84,9 @@ impl Reference {
             .map(|s| {
                 let strain = strains(&mesh, &geo, &s.w);
                 let w2: f64 = strain
-                    .iter()
+                    .chunks_exact(sym_len(D))
                     .zip(&geo.measure)
-                    .map(|(e, a)| a * double_dot(*e))
+                    .map(|(e, a)| a * double_dot::<D>(e))
                     .sum();
                 w_norms.push(w2.sqrt());
                 zeta_norms.push(norms::mass_norm(&mass, &s.zeta, &mut scratch));
@@ -106,7 +121,9 @@ impl Reference {
     }
 }
 
-pub type Slot = Arc<Mutex<Option<Arc<Reference>>>>;
+/// A cached reference: a [`Reference<D>`] of the scene's dimension (the key, a hash of the
+/// scene, fixes D).
+pub type Slot = Arc<Mutex<Option<Arc<dyn Any + Send + Sync>>>>;
 
 /// At most `capacity` references, least recently used evicted first.
 pub struct ReferenceCache {

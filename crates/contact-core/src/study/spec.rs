@@ -277,16 +277,6 @@ pub fn parse_with(
     let Some(base) = base.filter(|_| errors.is_empty()) else {
         return Err(ValidationErrors(errors));
     };
-    if base.dim() == 3 {
-        // The study machinery (levels, shared references, error tables) is 2D; a 3D ladder is
-        // measured by tests/solid.rs and README for now.
-        return Err(err(
-            "/scene/domain",
-            "convergence studies of 3D bodies are not supported yet: run the levels as \
-             separate jobs (each can carry \"error_estimate\": true)"
-                .into(),
-        ));
-    }
     if base.pattern == MeshPattern::Cross {
         return Err(err(
             "/scene/mesh/pattern",
@@ -400,16 +390,17 @@ mod tests {
         assert_eq!((plan.levels, plan.vary), (vec![(4, 4), (8, 8)], Vary::Both));
     }
 
-    /// Regression: a 3D scene reached the 2D study runs, whose mesh of the wrong dimension
-    /// panics; it is refused at the scene's domain instead.
     #[test]
-    fn studies_of_3d_bodies_are_refused_not_run() {
+    fn a_box_study_is_planned_on_nested_boxes() {
         let mut doc = study(json!(["1/2", "1/4"]), json!("1/4"));
         doc["scene"] = json!("box-convergence");
         doc["reference"] = json!({"h": "1/8", "k": "1/4"});
-        let e = parse(&doc, "/study").unwrap_err();
-        assert_eq!(e.0[0].pointer, "/study/scene/domain", "{e}");
-        assert!(e.0[0].message.contains("3D"), "{e}");
+        let (plan, _) = parse(&doc, "/study").unwrap();
+        assert_eq!(plan.base.dim(), 3);
+        assert_eq!(
+            (plan.levels, plan.reference),
+            (vec![(2, 4), (4, 4)], (8, 4))
+        );
     }
 
     #[test]
