@@ -16,7 +16,7 @@ import pytest
 
 from contact_sim import ApiError, Client, Job, JobCancelled
 from contact_sim._sse import events
-from conftest import MESHES
+from conftest import MESHES, REPO
 
 
 def rectangle_counts(width: int, height: int, h: int) -> tuple[int, int, int]:
@@ -184,10 +184,28 @@ def test_cancel_a_running_job(client: Client) -> None:
     job.delete()
 
 
-def test_wait_by_polling(client: Client) -> None:
-    job = client.submit("paper-exp3", overrides={"h": "1/8", "k": "1/64"})
-    job.wait(progress=False, events=False, timeout=60)
-    assert job.status == "succeeded" and job.progress["step"] == 64
+def test_wait_follows_the_event_stream_or_polls(client: Client) -> None:
+    requests: list[str] = []
+    client._http.event_hooks["request"].append(
+        lambda r: requests.append(f"{r.method} {r.url.path} {r.headers.get('if-none-match', '')}")
+    )
+    streamed = client.submit("paper-exp3", overrides={"h": "1/8", "k": "1/32"})
+    requests.clear()
+    streamed.wait(progress=False, timeout=60)
+    assert streamed.status == "succeeded" and streamed.progress["step"] == 32
+    # One stream to the end, then the final resource once.
+    path = f"/jobs/{streamed.id}"
+    assert requests == [f"GET {path}/events ", f"GET {path} "]
+
+    # Long enough (2,145 nodes, 256 steps) to be polled more than once.
+    polled = client.submit("paper-exp3", overrides={"h": "1/32", "k": "1/256"})
+    requests.clear()
+    polled.wait(progress=False, events=False, timeout=60)
+    assert polled.status == "succeeded" and polled.progress["step"] == 256
+    path = f"/jobs/{polled.id}"
+    assert len(requests) >= 2 and all(r.startswith(f"GET {path} ") for r in requests)
+    # Every poll after the first one sends the ETag it was given.
+    assert requests[0] == f"GET {path} " and all(r != f"GET {path} " for r in requests[1:])
 
 
 def test_mesh_upload_and_a_job_on_it(client: Client, tmp_path: Path) -> None:
@@ -304,3 +322,24 @@ def test_3d_job_fields_and_vtu(client: Client) -> None:
     assert np.array_equal(m.cells_dict["tetra"], f.tetrahedra)
     assert np.array_equal(m.point_data["u"], f.u)
     assert np.array_equal(m.cell_data["sigma"][0], f.sigma)
+
+
+def test_readme_from_python_lines_run(
+    server_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    section = readme.split("\n## From Python\n", 1)[1].split("\n## ", 1)[0]
+    code = section.split("```python\n", 1)[1].split("```", 1)[0]
+    assert len(code.strip().splitlines()) == 5
+    assert "http://127.0.0.1:8080" in code
+    monkeypatch.chdir(tmp_path)
+    scope: dict[str, object] = {}
+    exec(compile(code.replace("http://127.0.0.1:8080", server_url), "README.md", "exec"), scope)
+    job = scope["job"]
+    assert isinstance(job, Job) and job.status == "succeeded"
+    nodes, triangles, _ = rectangle_counts(2, 1, 16)
+    f = scope["f"]
+    assert f.nodes.shape == (nodes, 2) and f.triangles.shape == (triangles, 3)  # type: ignore[attr-defined]
+    assert (tmp_path / "exp3.vtu").stat().st_size > 0
+    assert (tmp_path / f"contact-sim-{job.id}.tar").stat().st_size > 0
+    scope["client"].close()  # type: ignore[attr-defined]

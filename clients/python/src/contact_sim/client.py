@@ -505,6 +505,7 @@ class _Progress:
     def __init__(self, enabled: bool, job: Job) -> None:
         self.bar: Any = None
         self.running = False
+        self.shown = ""
         if not enabled:
             return
         try:
@@ -527,7 +528,9 @@ class _Progress:
             bar.update(step - bar.n)
         residual = p.get("last_residual")
         post = status if residual is None else f"{status}, residual {residual:.1e}"
-        bar.set_postfix_str(post, refresh=True)
+        # tqdm limits its own redraws; a change of status is drawn at once.
+        bar.set_postfix_str(post, refresh=status != self.shown)
+        self.shown = status
 
     def close(self) -> None:
         if self.bar is not None:
