@@ -270,6 +270,7 @@ def test_vtu_read_back_by_meshio(client: Client) -> None:
     job = client.submit("paper-exp3", overrides={"h": "1/4", "k": "1/8"}).wait(progress=False)
     nodes, triangles, _ = rectangle_counts(2, 1, 4)
     f = job.fields()
+    assert f.triangles is not None
     for step, ref in (("last", f), (0, job.fields(step=0))):
         m = job.to_meshio(step)
         assert m.points.shape == (nodes, 3) and not m.points[:, 2].any()
@@ -322,6 +323,19 @@ def test_3d_job_fields_and_vtu(client: Client) -> None:
     assert np.array_equal(m.cells_dict["tetra"], f.tetrahedra)
     assert np.array_equal(m.point_data["u"], f.u)
     assert np.array_equal(m.cell_data["sigma"][0], f.sigma)
+
+
+def test_token_is_sent_as_bearer(server_url: str) -> None:
+    seen: list[str] = []
+    with Client(server_url, token="s3cret") as c:
+        c._http.event_hooks["request"].append(
+            lambda r: seen.append(r.headers.get("authorization", ""))
+        )
+        assert c.health()["status"] == "ok"
+        assert [p["name"] for p in c.presets()][:1] == ["paper-exp1"]
+    assert seen == ["Bearer s3cret"] * 2
+    with Client(server_url) as c:
+        assert "authorization" not in c._http.headers
 
 
 def test_readme_from_python_lines_run(
