@@ -79,6 +79,10 @@ def test_lifecycle_submit_wait_results_list_delete(
         assert names == expected
         member = tar.extractfile(f"{job.id}/summary.json")
         assert member is not None and json.load(member) == summary
+    assert job.download(f"{tmp_path}/new/") == tmp_path / "new" / archive.name
+    with tarfile.open(tmp_path / "new" / archive.name) as tar:
+        assert set(tar.getnames()) == expected
+    assert job.download(tmp_path / "named.tar") == tmp_path / "named.tar"
 
     # The same scene again is answered with the finished job; an idempotency key gives the
     # same job on every retry.

@@ -466,9 +466,9 @@ class Job:
 
     def to_meshio(self, step: Union[int, str] = "last") -> "meshio.Mesh":
         """Step ``step`` as a meshio Mesh, read from the service's VTU: 3D points (z = 0 in
-        2D), ``triangle`` or ``tetra`` cells, point data u, w (3 components), zeta, cell data
-        sigma (6 components, VTK's order xx, yy, zz, xy, yz, xz) and von_mises. Needs the
-        meshio extra."""
+        2D), ``triangle`` or ``tetra`` cells, point data u, w (3 components), zeta (and the
+        contact state of Γ3 nodes), cell data sigma (6 components, VTK's order xx, yy, zz,
+        xy, yz, xz) and von_mises, field data TimeValue and Step. Needs the meshio extra."""
         import meshio
 
         with tempfile.TemporaryDirectory() as d:
@@ -479,9 +479,10 @@ class Job:
     def download(self, path: Union[str, "os.PathLike[str]"] = ".") -> Path:
         """Saves the whole result as one tar archive (scene, summary, PVD, the VTU of every
         step, in one folder named after the job) and returns its path; a directory gets
-        ``contact-sim-<id>.tar`` inside it."""
+        ``contact-sim-<id>.tar`` inside it (a path ending in a slash is a directory, created
+        if need be)."""
         dest = Path(path)
-        if dest.is_dir():
+        if dest.is_dir() or str(path).endswith(("/", os.sep)):
             dest = dest / f"contact-sim-{self.id}.tar"
         return self.client._download(self._path("/archive.tar"), dest)
 
