@@ -4,6 +4,7 @@ ephemeral loopback port, one server for the whole session."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import subprocess
@@ -32,24 +33,13 @@ def binary() -> Path:
     )
 
 
-@pytest.fixture(scope="session")
-def server_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    data = tmp_path_factory.mktemp("data")
-    log_path = data.parent / "server.log"
+@contextlib.contextmanager
+def serve(data: Path, *extra: str) -> Iterator[str]:
+    """A server on `data` (its log next to it) for as long as the block runs: its URL."""
+    log_path = data.parent / f"{data.name}.log"
     with open(log_path, "wb") as log:
         proc = subprocess.Popen(
-            [
-                str(binary()),
-                "serve",
-                "--addr",
-                "127.0.0.1:0",
-                "--data-dir",
-                str(data),
-                "--workers",
-                "2",
-                "--submit-rate",
-                "0",
-            ],
+            [str(binary()), "serve", "--addr", "127.0.0.1:0", "--data-dir", str(data), *extra],
             stdout=log,
             stderr=subprocess.STDOUT,
             env={**os.environ, "RUST_LOG": "info"},
@@ -74,6 +64,12 @@ def server_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
             proc.kill()
             proc.wait()
     assert "panicked" not in log_path.read_text(errors="replace"), log_path.read_text()
+
+
+@pytest.fixture(scope="session")
+def server_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    with serve(tmp_path_factory.mktemp("data"), "--workers", "2", "--submit-rate", "0") as url:
+        yield url
 
 
 @pytest.fixture

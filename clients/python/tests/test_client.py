@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from contact_sim import ApiError, Client, Job, JobCancelled
+from contact_sim import ApiError, Client, Job, JobCancelled, JobFailed
 from contact_sim._sse import events
-from conftest import MESHES, REPO
+from conftest import MESHES, REPO, serve
 
 
 def rectangle_counts(width: int, height: int, h: int) -> tuple[int, int, int]:
@@ -143,6 +143,43 @@ def test_problem_of_a_response_that_is_not_json() -> None:
     err = ApiError.from_response(502, "text/html", b"<html>Bad Gateway</html>", 3.0)
     assert (err.status, err.errors, err.retry_after) == (502, [], 3.0)
     assert "Bad Gateway" in str(err)
+
+
+def test_a_failed_job_raises_its_problem(client: Client) -> None:
+    problem = {
+        "type": "/problems/smallness",
+        "title": "smallness condition",
+        "status": 422,
+        "detail": "the smallness condition (2.31) fails",
+        "errors": [{"pointer": "/friction", "message": "c2τ·cτ² ≥ m_A"}],
+    }
+    job = Job(client, {"id": "j1", "status": "failed", "error": problem})
+    with pytest.raises(JobFailed) as e:
+        job._check()
+    assert (e.value.job_id, e.value.status, e.value.type) == ("j1", 422, "/problems/smallness")
+    assert e.value.errors == [("/friction", "c2τ·cτ² ≥ m_A")]
+    assert str(e.value).startswith("job j1 failed: 422 smallness condition")
+    with pytest.raises(JobCancelled):
+        Job(client, {"id": "j2", "status": "cancelled"})._check()
+
+
+def test_submissions_refused_for_rate_are_retried(tmp_path: Path) -> None:
+    # One submission a second, no burst: the second and third are refused with 429 and
+    # Retry-After, and go through when retried.
+    data = tmp_path / "data"
+    with serve(data, "--workers", "1", "--submit-rate", "1", "--submit-burst", "1") as url:
+        statuses: list[int] = []
+        with Client(url) as c:
+            c._http.event_hooks["response"].append(lambda r: statuses.append(r.status_code))
+            jobs = [c.submit("paper-exp1", {"h": "1/2", "k": f"1/{n}"}) for n in (2, 4, 8)]
+            assert len({j.id for j in jobs}) == 3
+            assert 429 in statuses and statuses.count(202) == 3
+        # Without retries the refusal is the caller's: two submissions within a second
+        # cannot both pass a bucket of one.
+        with Client(url, retries=0) as c, pytest.raises(ApiError) as e:
+            for k in ("1/16", "1/32"):
+                c.submit("paper-exp1", {"h": "1/2", "k": k})
+        assert e.value.status == 429 and e.value.retry_after is not None
 
 
 def test_server_sent_events_framing() -> None:
