@@ -1,0 +1,538 @@
+"""The client: one :class:`Client` per service, a :class:`Job` per submitted simulation or
+study. Every URL, query parameter and shape is the one of the service's contract
+(``api/openapi.yaml``, also served at ``GET /openapi.yaml``)."""
+
+from __future__ import annotations
+
+import email.utils
+import json
+import os
+import tempfile
+import time
+from fractions import Fraction
+from pathlib import Path
+from typing import (
+    TYPE_CHECKING,
+    Any,
+    Dict,
+    Iterator,
+    List,
+    Mapping,
+    Optional,
+    Sequence,
+    Union,
+)
+
+import httpx
+
+from . import _sse
+from .errors import ApiError, JobCancelled, JobFailed
+from .fields import Fields
+
+if TYPE_CHECKING:  # optional extras, imported where used
+    import meshio
+    import pandas
+
+__all__ = ["Client", "Job"]
+
+__version__ = "0.1.0"
+
+#: A preset name, a scene / preset request / study request document, or a JSON file of one.
+Submission = Union[str, Mapping[str, Any], "os.PathLike[str]"]
+#: h, k or t_end: a number, a ratio string ("1/32") or a Fraction.
+Ratio = Union[int, float, str, Fraction]
+
+FINISHED = frozenset({"succeeded", "failed", "cancelled"})
+
+
+def _ratio(v: Ratio) -> Union[int, float, str]:
+    if isinstance(v, Fraction):
+        return f"{v.numerator}/{v.denominator}"
+    return v
+
+
+def _retry_after(r: httpx.Response) -> Optional[float]:
+    """Seconds of a Retry-After header (delay-seconds or an HTTP date)."""
+    value = r.headers.get("retry-after")
+    if value is None:
+        return None
+    try:
+        return max(0.0, float(value))
+    except ValueError:
+        pass
+    try:
+        when = email.utils.parsedate_to_datetime(value)
+    except (TypeError, ValueError):
+        return None
+    return max(0.0, when.timestamp() - time.time())
+
+
+def _error(r: httpx.Response) -> ApiError:
+    return ApiError.from_response(
+        r.status_code, r.headers.get("content-type", ""), r.read(), _retry_after(r)
+    )
+
+
+class Client:
+    """A contact-sim service at ``url``.
+
+    ``token`` is sent as ``Authorization: Bearer <token>`` on every request. Submissions
+    refused for load (429 rate limit, 503 queue full) are retried up to ``retries`` times
+    after the server's Retry-After: nothing was created by a refused request, so retrying
+    cannot duplicate a job. Use as a context manager, or call :meth:`close`."""
+
+    def __init__(
+        self,
+        url: str = "http://127.0.0.1:8080",
+        token: Optional[str] = None,
+        *,
+        timeout: float = 60.0,
+        retries: int = 5,
+    ) -> None:
+        headers = {"User-Agent": f"contact-sim-python/{__version__}"}
+        if token:
+            headers["Authorization"] = f"Bearer {token}"
+        self.url = url.rstrip("/")
+        self.retries = retries
+        self._http = httpx.Client(base_url=self.url, headers=headers, timeout=timeout)
+
+    def __enter__(self) -> "Client":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._http.close()
+
+    def __repr__(self) -> str:
+        return f"Client({self.url!r})"
+
+    # -- transport ----------------------------------------------------------------------
+
+    def _send(self, method: str, path: str, **kw: Any) -> httpx.Response:
+        """One request; 4xx/5xx raise :class:`ApiError`, 429/503 are retried first."""
+        for attempt in range(self.retries + 1):
+            r = self._http.request(method, path, **kw)
+            if r.status_code in (429, 503) and attempt < self.retries:
+                wait = _retry_after(r)
+                time.sleep(min(60.0, wait if wait is not None else 2.0**attempt))
+                continue
+            if r.status_code >= 400:
+                raise _error(r)
+            return r
+        raise AssertionError("unreachable")
+
+    def _json(self, method: str, path: str, **kw: Any) -> Any:
+        return self._send(method, path, **kw).json()
+
+    def _download(self, path: str, dest: Path) -> Path:
+        """Streams a response body into ``dest`` (complete or not at all)."""
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=".part")
+        try:
+            with os.fdopen(fd, "wb") as out, self._http.stream("GET", path) as r:
+                if r.status_code >= 400:
+                    raise _error(r)
+                for chunk in r.iter_bytes():
+                    out.write(chunk)
+            os.replace(tmp, dest)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return dest
+
+    def _pages(self, path: str, key: str, params: Dict[str, Any]) -> Iterator[Any]:
+        """The items of a paginated listing, following ``next`` (a URL with its query: the
+        cursor, limit and filter) until it is null."""
+        page = self._json("GET", path, params=params)
+        yield from page[key]
+        while page.get("next"):
+            page = self._json("GET", page["next"])
+            yield from page[key]
+
+    # -- jobs ---------------------------------------------------------------------------
+
+    def submit(
+        self,
+        scene_or_preset: Submission,
+        overrides: Optional[Mapping[str, Ratio]] = None,
+        idempotency_key: Optional[str] = None,
+    ) -> "Job":
+        """Submits a preset by name (with ``overrides`` of ``h``, ``k``, ``t_end``), or a
+        document: a scene, ``{"preset": ..., "overrides": ...}`` or a study
+        ``{"study": {...}}`` (``{"study": {"preset": "paper-table-1"}}`` for Table 1). A
+        path reads the document from a JSON file.
+
+        A scene identical to one already computed is answered with that job (already
+        succeeded). With ``idempotency_key``, the same key and body give the same job, so a
+        submission can be retried safely after a lost answer."""
+        body: Dict[str, Any]
+        if isinstance(scene_or_preset, str):
+            body = {"preset": scene_or_preset}
+        elif isinstance(scene_or_preset, os.PathLike):
+            body = json.loads(Path(scene_or_preset).read_text(encoding="utf-8"))
+        else:
+            body = dict(scene_or_preset)
+        if overrides:
+            if "preset" not in body:
+                raise ValueError(
+                    "overrides apply to a preset; in a scene set mesh.h, time.k and "
+                    "time.t_end instead"
+                )
+            body["overrides"] = {
+                **body.get("overrides", {}),
+                **{k: _ratio(v) for k, v in overrides.items()},
+            }
+        headers = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
+        return Job(self, self._json("POST", "/jobs", json=body, headers=headers))
+
+    def job(self, job_id: str) -> "Job":
+        """The job with this id (404 raises :class:`ApiError`)."""
+        return Job(self, self._json("GET", f"/jobs/{job_id}"))
+
+    def jobs(self, status: Optional[str] = None, page_size: int = 50) -> Iterator["Job"]:
+        """Every job, newest first, fetched ``page_size`` at a time as the iteration goes;
+        ``status`` keeps one of queued, running, succeeded, failed, cancelled."""
+        params: Dict[str, Any] = {"limit": page_size}
+        if status is not None:
+            params["status"] = status
+        for resource in self._pages("/jobs", "jobs", params):
+            yield Job(self, resource)
+
+    # -- meshes -------------------------------------------------------------------------
+
+    def upload_mesh(self, path: Union[str, "os.PathLike[str]"]) -> str:
+        """Uploads a gmsh ``.msh`` file (MSH 4.1, ASCII or binary) and returns its id, the
+        SHA-256 of the file, for a scene's ``"domain": {"mesh": id}``. Uploading the same
+        file again returns the same id."""
+        data = Path(path).read_bytes()
+        r = self._send(
+            "POST",
+            "/meshes",
+            content=data,
+            headers={"Content-Type": "application/octet-stream"},
+        )
+        return str(r.json()["id"])
+
+    def mesh(self, mesh_id: str) -> Dict[str, Any]:
+        """An uploaded mesh: ``id``, ``bytes``, ``created_at`` and its ``summary`` (nodes,
+        cells, groups, bounding box, cell sizes, quality)."""
+        return dict(self._json("GET", f"/meshes/{mesh_id}"))
+
+    def meshes(self, page_size: int = 50) -> Iterator[Dict[str, Any]]:
+        """Every uploaded mesh, newest first, fetched ``page_size`` at a time."""
+        yield from self._pages("/meshes", "meshes", {"limit": page_size})
+
+    def delete_mesh(self, mesh_id: str) -> None:
+        """Removes an uploaded mesh (409 while a queued or running job uses it)."""
+        self._send("DELETE", f"/meshes/{mesh_id}")
+
+    # -- the rest -----------------------------------------------------------------------
+
+    def presets(self) -> List[Dict[str, Any]]:
+        """The built-in scenes: ``name``, ``description``, ``href``."""
+        return list(self._json("GET", "/presets")["presets"])
+
+    def preset(self, name: str) -> Dict[str, Any]:
+        """A built-in scene as a complete scene document, to edit and submit."""
+        return dict(self._json("GET", f"/presets/{name}"))
+
+    def health(self) -> Dict[str, Any]:
+        return dict(self._json("GET", "/healthz"))
+
+
+class Job:
+    """A submitted simulation or study. ``resource`` is the job as last fetched (status,
+    progress, times, error, links); :meth:`refresh` fetches it again."""
+
+    def __init__(self, client: Client, resource: Mapping[str, Any]) -> None:
+        self.client = client
+        self.resource: Dict[str, Any] = dict(resource)
+        self.id: str = str(resource["id"])
+        self._dim: Optional[int] = None
+
+    def __repr__(self) -> str:
+        return f"<Job {self.id} {self.kind} {self.status}>"
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Job) and other.id == self.id
+
+    def __hash__(self) -> int:
+        return hash(self.id)
+
+    @property
+    def status(self) -> str:
+        return str(self.resource["status"])
+
+    @property
+    def kind(self) -> str:
+        """``simulation`` or ``study``."""
+        return str(self.resource.get("kind", "simulation"))
+
+    @property
+    def progress(self) -> Dict[str, Any]:
+        """``step``, ``steps``, ``percent``, ``eta_s``, ``last_residual``."""
+        return dict(self.resource.get("progress") or {})
+
+    @property
+    def finished(self) -> bool:
+        return self.status in FINISHED
+
+    def _path(self, tail: str = "") -> str:
+        return f"/jobs/{self.id}{tail}"
+
+    def refresh(self) -> "Job":
+        self.resource = dict(self.client._json("GET", self._path()))
+        return self
+
+    # -- waiting ------------------------------------------------------------------------
+
+    def wait(
+        self,
+        progress: bool = True,
+        timeout: Optional[float] = None,
+        events: bool = True,
+    ) -> "Job":
+        """Blocks until the job is finished and returns it once succeeded.
+
+        Follows the job's event stream (``GET /jobs/{id}/events``); where that is not
+        available (a proxy that buffers, a cut connection) it polls ``GET /jobs/{id}``
+        after each Retry-After, with ``If-None-Match``; ``events=False`` polls from the
+        start. ``progress`` shows a tqdm bar (steps, ETA) when tqdm is installed.
+
+        Raises :class:`JobFailed` (with the job's problem) or :class:`JobCancelled`, and
+        ``TimeoutError`` after ``timeout`` seconds (the job keeps running)."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        bar = _Progress(progress, self)
+        try:
+            final = self._follow_events(bar, deadline) if events else None
+            if final is None:
+                self._poll(bar, deadline)
+            else:
+                self.refresh()
+                bar.show(self.progress, self.status)
+        finally:
+            bar.close()
+        return self._check()
+
+    def _check(self) -> "Job":
+        if self.status == "failed":
+            error = self.resource.get("error") or {
+                "type": "about:blank",
+                "title": "job failed",
+                "status": 500,
+                "detail": "the job failed without a recorded reason",
+            }
+            raise JobFailed(self.id, error)
+        if self.status == "cancelled":
+            raise JobCancelled(self.id)
+        return self
+
+    @staticmethod
+    def _remaining(deadline: Optional[float]) -> Optional[float]:
+        if deadline is None:
+            return None
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise TimeoutError("the job did not finish in time")
+        return left
+
+    def _follow_events(self, bar: "_Progress", deadline: Optional[float]) -> Optional[str]:
+        """The final status from the event stream, or None when the stream is unusable or
+        ended early (the caller polls then)."""
+        # The server sends a keep-alive comment every 15 s: a longer silence is a dead
+        # connection.
+        left = self._remaining(deadline)
+        read = 45.0 if left is None else min(45.0, left)
+        timeout = httpx.Timeout(10.0, read=read)
+        try:
+            with self.client._http.stream(
+                "GET",
+                self._path("/events"),
+                headers={"Accept": "text/event-stream"},
+                timeout=timeout,
+            ) as r:
+                if r.status_code == 404:
+                    raise _error(r)
+                ctype = r.headers.get("content-type", "")
+                if r.status_code != 200 or not ctype.startswith("text/event-stream"):
+                    return None
+                for ev in _sse.events(r.iter_lines()):
+                    try:
+                        data = json.loads(ev.data)
+                    except ValueError:
+                        continue
+                    status = str(data.get("status", ""))
+                    self.resource["status"] = status
+                    bar.show(data, status)
+                    if ev.event == "status" or status in FINISHED:
+                        return status
+                    self._remaining(deadline)
+        except httpx.TimeoutException:
+            self._remaining(deadline)
+        except httpx.TransportError:
+            pass
+        return None
+
+    def _poll(self, bar: "_Progress", deadline: Optional[float]) -> None:
+        etag: Optional[str] = None
+        failures = 0
+        while True:
+            left = self._remaining(deadline)
+            headers = {"If-None-Match": etag} if etag else {}
+            try:
+                r = self.client._http.get(self._path(), headers=headers)
+            except httpx.TransportError:
+                # A restarting server: bounded retries, then the error.
+                failures += 1
+                if failures > 5:
+                    raise
+                time.sleep(1.0 if left is None else min(1.0, left))
+                continue
+            failures = 0
+            if r.status_code >= 400:
+                raise _error(r)
+            if r.status_code == 200:
+                self.resource = dict(r.json())
+                etag = r.headers.get("etag")
+                bar.show(self.progress, self.status)
+                if self.finished:
+                    return
+            pause = _retry_after(r)
+            pause = 1.0 if pause is None else pause
+            left = self._remaining(deadline)
+            time.sleep(pause if left is None else min(pause, left))
+
+    # -- results ------------------------------------------------------------------------
+
+    def summary(self) -> Dict[str, Any]:
+        """The run summary (norms per step, solver figures, timings), or a study's error
+        table as JSON (``rows``, ``reference``, ``lsq_order_w``, ...)."""
+        return dict(self.client._json("GET", self._path("/summary")))
+
+    def table(self) -> "pandas.DataFrame":
+        """A study's table as a DataFrame, one row per level: ``h``, ``k`` (and ``refine``
+        on a given mesh), ``err_w``, ``err_zeta``, ``order_w``, ... ; nested figures are
+        flattened (``velocity_iterations_mean``). ``attrs`` carries the reference run,
+        ``vary`` and the least-squares orders. Needs the pandas extra."""
+        import pandas as pd
+
+        s = self.summary()
+        if s.get("kind") != "study":
+            raise ValueError(f"job {self.id} is a simulation; tables are made by studies")
+        df = pd.json_normalize(s["rows"], sep="_")
+        for key in ("name", "vary", "reference", "lsq_order_w", "lsq_order_zeta"):
+            if key in s:
+                df.attrs[key] = s[key]
+        return df
+
+    def table_text(self) -> str:
+        """A study's table in the layout of the paper's Tables 1–2."""
+        return self.client._send("GET", self._path("/summary"), params={"format": "text"}).text
+
+    def report_svg(self) -> str:
+        """A study's report: errors against h (or k) with slope guides, and work–precision."""
+        return self.client._send("GET", self._path("/report.svg")).text
+
+    def fields(
+        self,
+        step: Union[int, str] = "last",
+        names: Optional[Sequence[str]] = None,
+        mesh: bool = True,
+    ) -> Fields:
+        """Step ``step`` (a stored step, 0 for the initial state, or "last") as numpy
+        arrays: ``names`` is a subset of u, w, zeta, sigma, von_mises, contact (default
+        all), ``mesh`` adds nodes, cells and the boundary. See :class:`Fields`."""
+        params: Dict[str, str] = {"step": str(step)}
+        if names is not None:
+            params["fields"] = ",".join(names)
+        if mesh:
+            params["mesh"] = "1"
+        doc = self.client._json("GET", self._path("/fields"), params=params)
+        dim = None
+        if not mesh and ("u" in doc or "w" in doc) and "sigma" not in doc:
+            dim = self._dimension()
+        return Fields.from_json(doc, dim)
+
+    def _dimension(self) -> int:
+        if self._dim is None:
+            self._dim = int(self.summary()["mesh"]["dim"])
+        return self._dim
+
+    def vtu(self, step: Union[int, str] = "last") -> bytes:
+        """Step ``step`` as a VTK UnstructuredGrid (.vtu) file's bytes."""
+        return self.client._send("GET", self._path(f"/fields/{step}.vtu")).content
+
+    def to_meshio(self, step: Union[int, str] = "last") -> "meshio.Mesh":
+        """Step ``step`` as a meshio Mesh, read from the service's VTU: 3D points (z = 0 in
+        2D), ``triangle`` or ``tetra`` cells, point data u, w (3 components), zeta (and the
+        contact state of Γ3 nodes), cell data sigma (6 components, VTK's order xx, yy, zz,
+        xy, yz, xz) and von_mises, field data TimeValue and Step. Needs the meshio extra."""
+        import meshio
+
+        with tempfile.TemporaryDirectory() as d:
+            path = Path(d) / f"step-{step}.vtu"
+            path.write_bytes(self.vtu(step))
+            return meshio.read(path)
+
+    def download(self, path: Union[str, "os.PathLike[str]"] = ".") -> Path:
+        """Saves the whole result as one tar archive (scene, summary, PVD, the VTU of every
+        step, in one folder named after the job) and returns its path; a directory gets
+        ``contact-sim-<id>.tar`` inside it (a path ending in a slash is a directory, created
+        if need be)."""
+        dest = Path(path)
+        if dest.is_dir() or str(path).endswith(("/", os.sep)):
+            dest = dest / f"contact-sim-{self.id}.tar"
+        return self.client._download(self._path("/archive.tar"), dest)
+
+    # -- control ------------------------------------------------------------------------
+
+    def cancel(self) -> "Job":
+        """Cancels a queued or running job (a running one stops within one time step); 409
+        (:class:`ApiError`) when it has already finished otherwise."""
+        self.resource = dict(self.client._json("POST", self._path("/cancel")))
+        return self
+
+    def delete(self) -> None:
+        """Removes a finished job and its results (409 while it is queued or running)."""
+        self.client._send("DELETE", self._path())
+
+
+class _Progress:
+    """A tqdm bar over the job's time steps (no-op without tqdm or when disabled). Its clock
+    restarts when the job starts running, so the ETA does not count the time queued."""
+
+    def __init__(self, enabled: bool, job: Job) -> None:
+        self.bar: Any = None
+        self.running = False
+        self.shown = ""
+        if not enabled:
+            return
+        try:
+            from tqdm.auto import tqdm
+        except ImportError:
+            return
+        self.bar = tqdm(total=None, desc=f"{job.kind} {job.id[:8]}", unit="step", leave=True)
+
+    def show(self, p: Mapping[str, Any], status: str) -> None:
+        bar = self.bar
+        if bar is None:
+            return
+        steps, step = p.get("steps"), int(p.get("step") or 0)
+        if status == "running" and not self.running:
+            self.running = True
+            bar.reset(total=steps or None)
+        elif steps and bar.total != steps:
+            bar.total = steps
+        if step > bar.n:
+            bar.update(step - bar.n)
+        residual = p.get("last_residual")
+        post = status if residual is None else f"{status}, residual {residual:.1e}"
+        # tqdm limits its own redraws; a change of status is drawn at once.
+        bar.set_postfix_str(post, refresh=status != self.shown)
+        self.shown = status
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
