@@ -22,6 +22,7 @@ export class ApiProblem extends Error {
 
 const KEY_STORE = 'contact-sim-api-key';
 let asking = null; // the pending dialog's promise, shared by every request that got a 401
+let declined = false; // the user cancelled the dialog: not asked again until askApiKey()
 
 export function apiKey() {
   try {
@@ -82,7 +83,9 @@ function askKey(refused) {
       const key = dialog.returnValue === 'ok' ? dialog.querySelector('#auth-key').value.trim() : '';
       dialog.remove();
       if (key) setApiKey(key);
+      declined = !key;
       asking = null;
+      if (declined) document.dispatchEvent(new CustomEvent('api-key-declined'));
       resolve(!!key);
     });
     dialog.showModal();
@@ -104,8 +107,14 @@ export async function authFetch(path, init = {}) {
     if (sent && (apiKey() || memoryKey) === sent) setApiKey(null);
     // Another request may have got a key meanwhile: use it without asking again.
     if (!sent && (apiKey() || memoryKey)) continue;
-    if (!(await askKey(!!sent))) return resp;
+    if (declined || !(await askKey(!!sent))) return resp;
   }
+}
+
+/** Asks for a key again (after the dialog was cancelled); true when one was given. */
+export function askApiKey() {
+  declined = false;
+  return askKey(false);
 }
 
 async function request(method, path, body) {

@@ -339,7 +339,15 @@ $('#format-scene').addEventListener('click', () => {
 
 // A scene on an uploaded mesh starts from the selected preset (an imported mesh has no h).
 new MeshUpload($('#mesh-upload'), {
-  baseScene: async () => ({ doc: await presetDoc(false), name: presetSelect.value }),
+  baseScene: async () => {
+    // A study preset starts from the scene it studies.
+    if (isStudy()) {
+      const study = (await fetchPreset(presetSelect.value)).study;
+      const scene = typeof study.scene === 'string' ? await fetchPreset(study.scene) : study.scene;
+      return { doc: scene, name: typeof study.scene === 'string' ? study.scene : presetSelect.value };
+    }
+    return { doc: await presetDoc(false), name: presetSelect.value };
+  },
   onScene: (doc) => {
     if (editor.edited && !confirm('Replace the edited scene with the scene on the uploaded mesh?')) return false;
     editor.text = JSON.stringify(doc, null, 2);
@@ -449,6 +457,19 @@ function restoreForm() {
   }
   return false;
 }
+
+// Without a key (the dialog was cancelled) the page asks no more by itself: a button in the
+// header asks again and reloads.
+document.addEventListener('api-key-declined', () => {
+  if ($('#auth-button')) return;
+  $('.top').append(el('button', {
+    id: 'auth-button', type: 'button', class: 'small',
+    onclick: async () => {
+      if (await api.askApiKey()) location.reload();
+    },
+  }, 'Enter API key'));
+  setStatus('This server needs an API key: use "Enter API key" at the top.', true);
+});
 
 // ---- start -------------------------------------------------------------------------------
 

@@ -445,7 +445,7 @@ export class SimulationView {
     const xs = sorted.map((e) => N[e.node][axis]);
     this.gammaNote.textContent = `${c.length} contact nodes by ${names[axis]}${d === 3 ? ' (each node a dot)' : ''}; ${c.filter((e) => e.slipping).length} slip.`;
     const opts = { xs, xLabel: names[axis], fromZero: false, dots: d === 3 };
-    linePlot(this.gammaPlots, { ...opts, id: 'plot-slip', title: 'slip velocity |w_τ|', ys: sorted.map((e) => e.slip_velocity), colour: SLIP });
+    linePlot(this.gammaPlots, { ...opts, id: 'plot-slip', title: 'slip velocity w_τ', ys: sorted.map((e) => e.slip_velocity), colour: SLIP });
     linePlot(this.gammaPlots, { ...opts, id: 'plot-friction', title: 'friction traction', ys: sorted.map((e) => e.friction_traction), colour: '#5f3dc4' });
   }
 

@@ -657,6 +657,8 @@ async function testStudyView() {
   await estPage.close();
 }
 
+const fmtNum = (x) => Number(x.toPrecision(4));
+
 /** Submits through the API and waits until the job has succeeded; returns its id. */
 async function runJob(body, what, limitMs = 60_000) {
   const request = context.request;
@@ -752,6 +754,13 @@ async function testAnyMesh() {
   check(atNode.visible && Math.abs(atNode.value - f.zeta[node]) < 5e-3,
     `readout at node ${node} (${nx.toFixed(3)}, ${ny.toFixed(3)}): ${atNode.value} vs ζ = ${f.zeta[node]}`);
   check(f.mesh.parts.map((p) => p.type).join() === 'clamped,contact,traction', `mesh parts from the server: ${JSON.stringify(f.mesh.parts)}`);
+  // Along Γ3: the slip velocity of every contact node at the shown step, by x.
+  const lastContact = (await (await context.request.get(`${base}/jobs/${jobId}/fields?step=last&fields=contact`)).json()).contact;
+  const slipPlot = await page.$eval('#plot-slip', (s) => ({ n: Number(s.dataset.points), min: Number(s.dataset.ymin), max: Number(s.dataset.ymax), path: s.querySelector('path').getAttribute('d') }));
+  const slips = lastContact.map((c) => c.slip_velocity);
+  const [minSlip, maxSlip] = [Math.min(...slips), Math.max(...slips)];
+  check(maxSlip > minSlip && slipPlot.n === lastContact.length && slipPlot.min === minSlip && slipPlot.max === maxSlip && slipPlot.path.split(/[ML]/).length - 1 === lastContact.length,
+    `the Γ3 plot shows the slip velocity of the ${lastContact.length} contact nodes (${fmtNum(minSlip)} … ${fmtNum(maxSlip)}; ${lastContact.filter((c) => c.slipping).length} slip)`);
 
   // Zoom with the wheel about the pointer, pan by dragging, reset.
   const before = await canvasStats(page);
@@ -930,6 +939,7 @@ async function testMeshUpload() {
   await page.dispatchEvent('body', 'drop', { dataTransfer: dt });
   await page.waitForFunction(() => document.querySelector('#mesh-summary caption')?.textContent === 'dropped.msh');
   check(!(await page.$eval('body', (b) => b.classList.contains('dropping'))), 'a dropped .msh is uploaded and summarised');
+  await axeCheck(page, 'with the mesh upload form');
   await page.locator('#submit-panel').screenshot({ path: path.join(outDir, 'client-mesh-upload-mocked.png') });
   await page.setViewportSize({ width: 390, height: 844 });
   await page.waitForTimeout(200);
@@ -1388,6 +1398,7 @@ async function testViewer3d() {
     if (Math.abs(r - 0xfb) + Math.abs(g - 0xfb) + Math.abs(b - 0xfc) > 24) body++;
   }
   check(body > 0.12 * shot.width * shot.height, `the screenshot of the canvas shows the body (${(100 * body / (shot.width * shot.height)).toFixed(1)}% of ${shot.width}×${shot.height} px)`);
+  await axeCheck(page, 'on the 3D view');
   await page.screenshot({ path: path.join(outDir, 'client-3d-box.png'), fullPage: true });
   await page.setViewportSize({ width: 390, height: 844 });
   await page.waitForTimeout(300);
@@ -1514,6 +1525,7 @@ async function testApiKeys() {
   await page.selectOption('#preset-select', 'paper-exp2');
   await page.fill('#ov-h', '1/16');
   await page.fill('#ov-k', '1/500');
+  await page.fill('#job-name', `auth test ${Date.now()}`); // a new scene: run, not answered from the store
   await page.click('#submit-preset');
   await page.waitForSelector('#viewer[data-state="waiting"]', { timeout: 10_000 });
   const id = await page.getAttribute('#viewer', 'data-job');
@@ -1551,6 +1563,50 @@ async function testApiKeys() {
   await page.waitForSelector('body[data-ready="true"]', { timeout: 15_000 });
   check((await page.locator(`${item}`).count()) === 1, 'with the right key again the job list is back');
   await page.close();
+
+  // Cancelling the dialog: no more dialogs by themselves; a button asks again.
+  const declined = await context.newPage();
+  declined.on('pageerror', (e) => pageErrors.push(String(e)));
+  await requireKey(declined, key);
+  await declined.goto(base + '/');
+  await declined.waitForSelector('#auth-dialog[open]', { timeout: 10_000 });
+  await declined.click('#auth-dialog button[value="cancel"]');
+  await declined.waitForSelector('#auth-button', { timeout: 10_000 });
+  await declined.waitForSelector('body[data-ready="true"]', { timeout: 10_000 });
+  check((await declined.locator('#auth-dialog').count()) === 0, 'after Cancel the page does not ask again by itself');
+  await declined.click('#auth-button');
+  await declined.fill('#auth-key', key);
+  await Promise.all([declined.waitForNavigation(), declined.click('#auth-dialog button[value="ok"]')]);
+  await declined.waitForSelector('body[data-ready="true"]', { timeout: 15_000 });
+  check((await declined.locator('#preset-select option').count()) > 5, '"Enter API key" asks again, and the page loads with the key');
+  await declined.close();
+
+  // The event stream reader (fetch, not EventSource) against a scripted stream: fields split
+  // over chunks and CRLF, comments, multi-line data, ids; when the stream drops before the
+  // final status it reconnects after `retry` ms with Last-Event-ID, as EventSource does.
+  const sse = await openPage();
+  const fake = 'e0000000-0000-4000-8000-00000000000e';
+  const asked = [];
+  await sse.route((u) => u.pathname === `/jobs/${fake}/events`, (route) => {
+    const h = route.request().headers();
+    asked.push({ last: h['last-event-id'] ?? null, at: Date.now() });
+    const body = asked.length === 1
+      ? ': keep-alive\r\nretry: 300\r\nid: 7\r\nevent: progress\r\ndata: {"status":"running",\r\ndata: "step":1,"steps":2}\r\n\r\n'
+      : 'id: 8\nevent: status\ndata: {"status":"succeeded","step":2,"steps":2}\n\nevent: progress\ndata: {"step":99}\n\n';
+    return route.fulfill({ status: 200, headers: { 'Content-Type': 'text/event-stream' }, body });
+  });
+  const got = await sse.evaluate(async (id) => {
+    const api = await import('/client/api.js');
+    return new Promise((resolve) => {
+      const events = [];
+      api.follow(id, (ev) => events.push(ev), () => resolve(events));
+    });
+  }, fake);
+  check(JSON.stringify(got) === JSON.stringify([{ status: 'running', step: 1, steps: 2 }, { status: 'succeeded', step: 2, steps: 2 }]),
+    `the stream's events are parsed (multi-line data, CRLF, comments) and end at the final status: ${JSON.stringify(got)}`);
+  check(asked.length === 2 && asked[0].last === null && asked[1].last === '7' && asked[1].at - asked[0].at >= 280,
+    `after a drop it reconnects with Last-Event-ID 7 after retry: 300 ms (${asked.length} requests, ${asked.length > 1 ? asked[1].at - asked[0].at : '–'} ms apart)`);
+  await sse.close();
 }
 
 // CLIENT_TESTS=5,7 runs only those sections (while working on one); all by default.
