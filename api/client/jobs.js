@@ -27,10 +27,17 @@ function readLabels() {
   }
 }
 
+let labels = readLabels();
+// Another tab submitted a job: its label is read at once.
+window.addEventListener('storage', (ev) => {
+  if (ev.key === LABELS_STORE) labels = readLabels();
+});
+
 /** Remembers what job `id` was submitted with: {h, k, T, edited, preset, mesh, study}. */
 export function rememberLabel(id, label) {
   const all = readLabels();
   all[id] = { ...label, at: Date.now() };
+  labels = all;
   const ids = Object.keys(all).sort((a, b) => all[b].at - all[a].at);
   for (const old of ids.slice(LABELS_KEPT)) delete all[old];
   try {
@@ -68,7 +75,7 @@ export class JobList {
     this.selected = null;
     this.timer = 0;
     this.empty = el('li', { class: 'empty' }, 'No jobs yet: run a preset or a scene.');
-    this.labels = readLabels();
+
   }
 
   /** Re-reads the list (first page), then schedules the next refresh. */
@@ -95,7 +102,6 @@ export class JobList {
 
   /** Adds or updates a job resource (e.g. the response of POST /jobs). */
   upsert(job) {
-    if (!this.labels[job.id]) this.labels = readLabels();
     const old = this.jobs.get(job.id);
     this.jobs.set(job.id, job);
     if (!isFinished(job)) this.followSome();
@@ -257,7 +263,7 @@ export class JobList {
     r.status.textContent = j.status;
     r.status.className = `status s-${j.status}`;
     r.progress.value = j.status === 'succeeded' ? 100 : p.percent ?? 0;
-    const label = labelText(this.labels[j.id]);
+    const label = labelText(labels[j.id]);
     r.label.textContent = label;
     r.label.hidden = !label;
     r.detail.textContent = detail;

@@ -26,6 +26,7 @@ const QUANTITIES = {
   w: { label: 'velocity |w|', key: 'w', perCell: false },
 };
 const CACHE_STEPS = 400;
+const RUN_RANGE_STEPS = 200;
 const FRAME_MS = 150;
 const ZOOM_MIN = 0.5;
 const ZOOM_MAX = 500;
@@ -480,13 +481,18 @@ export class SimulationView {
     const known = this.runRanges.get(key);
     if (known && !known.loading) return known;
     if (known) return null;
-    const entry = { loading: true, min: Infinity, max: -Infinity };
+    // A long run is sampled (evenly, first and last included): RUN_RANGE_STEPS requests at
+    // most, and the colour bar says so.
+    const all = this.steps;
+    const every = Math.max(1, Math.ceil((all.length - 1) / (RUN_RANGE_STEPS - 1)));
+    const picked = all.filter((_, i) => i % every === 0 || i === all.length - 1);
+    const entry = { loading: true, min: Infinity, max: -Infinity, sampled: picked.length < all.length ? `${picked.length} of ${all.length} steps` : null };
     this.runRanges.set(key, entry);
     const job = this.job;
     const q = QUANTITIES[key];
     const field = q.key;
     (async () => {
-      for (const s of this.steps) {
+      for (const s of picked) {
         if (this.job !== job) return;
         const cached = this.cache.get(s.n);
         const doc = cached || (await api.fields(job.id, s.n, false, [field]));
@@ -554,7 +560,10 @@ export class SimulationView {
       ? `${this.label(q)}: min ${fmt(min)}, max ${fmt(max)}${max - min <= 1e-12 * Math.max(1, Math.abs(max)) ? ' (uniform)' : ''}`
       : `${this.label(q)}: not stored`;
     if (q.key === 'zeta') this.cbLabel.textContent += ' · ζ = 1 is intact material, 0 fully damaged';
-    if (source === 'run') this.cbLabel.textContent += ' · colours span the whole run';
+    if (source === 'run') {
+      const sampled = this.runRanges?.get(this.quantity.value)?.sampled;
+      this.cbLabel.textContent += ` · colours span the whole run${sampled ? ` (sampled: ${sampled})` : ''}`;
+    }
     else if (source === 'run-loading') this.cbLabel.textContent += ' · reading the whole run…';
     if (this.d3 && this.partsBox.checked) this.cbLabel.textContent += ' · the faces show their boundary part now';
     const c = this.current.contact;

@@ -505,6 +505,7 @@ async function testInvalidScene() {
   await fnote.waitFor({ timeout: 5000 });
   const fline = Number(await fnote.getAttribute('data-line'));
   check(failText.split('\n')[fline].includes('1/(t - 0.25)'), `the editor marks line ${fline + 1}: ${failText.split('\n')[fline].trim()}`);
+  await page.screenshot({ path: path.join(outDir, 'client-failed-job.png'), fullPage: true });
   const flabel = await page.textContent(`#job-list li.job[data-id="${failId}"] .job-label`);
   check(flabel === 'h 1/4 · k 1/4 · T 1 · edited', `the entry says h, k, T and edited: "${flabel}"`);
 
@@ -561,6 +562,7 @@ async function testLiveJob() {
   await page.waitForFunction(() => Number(document.querySelector('#run-progress')?.value) > 0 && /ETA/.test(document.querySelector('#run-eta').textContent), null, { timeout: 10_000 });
   check(true, `progress bar in the result view: ${await page.getAttribute('#run-progress', 'value')}%, "${await page.textContent('#run-eta')}"`);
   await axeCheck(page, 'while a job runs');
+  await page.screenshot({ path: path.join(outDir, 'client-running-job.png'), fullPage: true });
   await page.click(`${item} button:has-text("Cancel")`);
   await page.waitForSelector(`${item}[data-status="cancelled"]`, { timeout: 15_000 });
   check(true, 'Cancel stops the job (status cancelled)');
@@ -1515,6 +1517,7 @@ async function testApiKeys() {
   await page.waitForSelector('#auth-dialog[open]', { timeout: 10_000 });
   check((await page.locator('#auth-dialog').count()) === 1, 'one dialog asks for the API key');
   await axeCheck(page, 'with the API key dialog open');
+  await page.screenshot({ path: path.join(outDir, 'client-api-key.png') });
   await page.fill('#auth-key', key);
   await page.click('#auth-dialog button[value="ok"]');
   await page.waitForSelector('body[data-ready="true"]', { timeout: 15_000 });
