@@ -109,6 +109,8 @@ async function axeCheck(page, what) {
     .filter(({ r }) => r.width < 24 - 0.01 || r.height < 24 - 0.01)
     .map(({ e, r }) => `${e.tagName.toLowerCase()}${e.id ? `#${e.id}` : ''}${e.className ? `.${String(e.className).split(' ')[0]}` : ''} ${r.width.toFixed(0)}×${r.height.toFixed(0)}`));
   check(small.length === 0, `every control ${what} is at least 24 × 24 px${small.length ? `: ${small.join(', ')}` : ''}`);
+  const unnamed = await page.$$eval('progress', (ps) => ps.filter((p) => !p.getAttribute('aria-label') && !p.getAttribute('aria-labelledby') && !p.labels?.length).length);
+  check(unnamed === 0, `every progress bar ${what} has a name (${unnamed} without)`);
 }
 
 /** The members of an uncompressed tar: name -> Buffer. */
@@ -249,6 +251,23 @@ async function testSimulation() {
   check(smallest >= 11, `plot text is at least 11 px as drawn (smallest ${smallest.toFixed(1)} px)`);
   const cut = plotText.filter((t) => !t.inside).map((t) => t.text);
   check(cut.length === 0, `no plot label is cut${cut.length ? `: ${cut.join(', ')}` : ''}`);
+  // Long labels (small values in exponent form) fit as well, at the narrowest plot width.
+  const longLabels = await page.evaluate(async () => {
+    const { linePlot } = await import('/client/plots.js');
+    const box = document.createElement('div');
+    box.style.width = '240px';
+    document.body.append(box);
+    linePlot(box, { title: 'tiny', xs: [0.25, 0.5, 1], ys: [1.2345e-4, -2.5e-5, 9.87e-6] });
+    const s = box.querySelector('svg');
+    const r = s.getBoundingClientRect();
+    const out = [...s.querySelectorAll('text')].filter((t) => t.textContent).map((t) => {
+      const b = t.getBoundingClientRect();
+      return { text: t.textContent, inside: b.left >= r.left - 0.5 && b.right <= r.right + 0.5 };
+    });
+    box.remove();
+    return out;
+  });
+  check(longLabels.length >= 5 && longLabels.every((t) => t.inside), `long labels fit too: ${longLabels.map((t) => t.text).join(', ')}`);
   const xFirst = await page.$$eval('#plots svg.plot', (svgs) => svgs.map((s) => [...s.querySelectorAll('text.tick')][2].textContent));
   check(xFirst.every((x) => x === '0'), `every time axis starts at 0: ${xFirst.join(', ')}`);
 
