@@ -1420,6 +1420,17 @@ async function testViewer3d() {
   }
   check(body > 0.12 * shot.width * shot.height, `the screenshot of the canvas shows the body (${(100 * body / (shot.width * shot.height)).toFixed(1)}% of ${shot.width}×${shot.height} px)`);
   await axeCheck(page, 'on the 3D view');
+  // PNG of the 3D view: the WebGL picture (its kept drawing buffer) over the colour bar.
+  const [png3] = await Promise.all([page.waitForEvent('download'), page.click('#export-png')]);
+  const img3 = decodePng(fs.readFileSync(await png3.path()));
+  const c3 = await page.$eval('#mesh-canvas-3d', (c) => [c.width, c.height]);
+  let drawn3 = 0;
+  for (let y = 0; y < c3[1]; y++) for (let x = 0; x < c3[0]; x++) {
+    const o = 4 * (y * img3.width + x);
+    if (img3.data[o] + img3.data[o + 1] + img3.data[o + 2] < 3 * 250) drawn3++;
+  }
+  check(img3.width === c3[0] && img3.height > c3[1] && drawn3 > 0.12 * c3[0] * c3[1],
+    `PNG of the 3D view: ${img3.width}×${img3.height}, the body on ${(100 * drawn3 / (c3[0] * c3[1])).toFixed(1)}% of the picture`);
   await page.screenshot({ path: path.join(outDir, 'client-3d-box.png'), fullPage: true });
   await page.setViewportSize({ width: 390, height: 844 });
   await page.waitForTimeout(300);
