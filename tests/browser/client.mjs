@@ -1639,6 +1639,22 @@ async function testApiKeys() {
     `the stream's events are parsed (multi-line data, CRLF, comments) and end at the final status: ${JSON.stringify(got)}`);
   check(asked.length === 2 && asked[0].last === null && asked[1].last === '7' && asked[1].at - asked[0].at >= 280,
     `after a drop it reconnects with Last-Event-ID 7 after retry: 300 ms (${asked.length} requests, ${asked.length > 1 ? asked[1].at - asked[0].at : '–'} ms apart)`);
+  // A refused stream (404: the job was deleted) is not retried: the caller polls instead.
+  const gone = 'e0000000-0000-4000-8000-00000000000f';
+  let goneAsked = 0;
+  await sse.route((u) => u.pathname === `/jobs/${gone}/events`, (route) => {
+    goneAsked++;
+    return route.fulfill({ status: 404, contentType: 'application/problem+json', body: '{"title":"not found","status":404}' });
+  });
+  const goneEvents = await sse.evaluate(async (id) => {
+    const api = await import('/client/api.js');
+    return new Promise((resolve) => {
+      const events = [];
+      api.follow(id, (ev) => events.push(ev), () => resolve(events));
+    });
+  }, gone);
+  await sse.waitForTimeout(400);
+  check(goneEvents.length === 0 && goneAsked === 1, `a refused stream ends at once, without retrying (${goneAsked} request)`);
   await sse.close();
 }
 
