@@ -218,6 +218,30 @@ fn whole_lifecycle_over_http() {
             && names.contains(&format!("{id}/fields/step_000000.vtu"))
     );
     assert_eq!(names.iter().filter(|n| n.ends_with(".vtu")).count(), 9);
+    // The archive opens in ParaView offline: its PVD names the VTU files by paths relative
+    // to itself, each a member of the archive (the browser's "ParaView" link is the archive).
+    let mut archive = tar::Archive::new(tar.as_slice());
+    let mut member_pvd = String::new();
+    for entry in archive.entries().unwrap() {
+        let mut entry = entry.unwrap();
+        if entry.path().unwrap().to_string_lossy() == format!("{id}/result.pvd") {
+            std::io::Read::read_to_string(&mut entry, &mut member_pvd).unwrap();
+        }
+    }
+    let xml = roxmltree::Document::parse(&member_pvd).expect("the archive's PVD is XML");
+    let files: Vec<&str> = xml
+        .descendants()
+        .filter(|n| n.has_tag_name("DataSet"))
+        .map(|n| n.attribute("file").unwrap())
+        .collect();
+    assert_eq!(files.len(), 9, "{member_pvd}");
+    for f in files {
+        assert!(!f.starts_with('/') && !f.contains("://"), "{f} is relative");
+        assert!(
+            names.contains(&format!("{id}/{f}")),
+            "{f} is in the archive"
+        );
+    }
 
     let metrics = String::from_utf8(get(a, "/metrics").body).unwrap();
     assert!(
@@ -341,6 +365,70 @@ fn tar_names(tar: &[u8]) -> Vec<String> {
         off += 512 + size.div_ceil(512) * 512;
     }
     names
+}
+
+/// The study presets (the paper's Tables 1 and 2) are listed apart from the scenes and served
+/// at /presets/{name} as the body that POST /jobs runs; other names stay 404.
+#[test]
+fn study_presets_are_listed_and_served_as_study_requests() {
+    let dir = temp_dir("study-presets");
+    let srv = Server::start(&dir, 0);
+    let a = srv.addr;
+    let list = get(a, "/presets").json();
+    let names = |key: &str| -> Vec<String> {
+        list[key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| {
+                assert_eq!(
+                    p["href"],
+                    format!("/presets/{}", p["name"].as_str().unwrap())
+                );
+                assert!(p["description"].as_str().is_some_and(|d| !d.is_empty()));
+                p["name"].as_str().unwrap().to_string()
+            })
+            .collect()
+    };
+    assert_eq!(names("presets"), contact_core::scene::presets::names());
+    assert_eq!(names("studies"), contact_core::study::presets::names());
+    for name in contact_core::study::presets::names() {
+        let r = get(a, &format!("/presets/{name}"));
+        assert_eq!(r.status, 200, "{name}");
+        let doc = r.json();
+        assert_eq!(
+            doc,
+            json!({"study": contact_core::study::presets::get(name).unwrap()})
+        );
+        // What the page puts in its editor runs as it is.
+        let posted = post_json(a, "/jobs", &doc);
+        assert_eq!(
+            posted.status,
+            202,
+            "{}",
+            String::from_utf8_lossy(&posted.body)
+        );
+        let job = posted.json();
+        assert_eq!(job["kind"], "study");
+        assert_eq!(job["scene"], *name);
+        let id = job["id"].as_str().unwrap();
+        let c = http(a, "POST", &format!("/jobs/{id}/cancel"), &[], b"");
+        assert!(c.status == 200 || c.status == 202, "{}", c.text());
+        wait_status(a, id, &["cancelled"], Duration::from_secs(10));
+    }
+    // The convergence preset says what this scheme gives, not only the paper's figure.
+    let conv = list["presets"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == "paper-convergence")
+        .unwrap();
+    assert!(conv["description"].as_str().unwrap().contains("0.1528"));
+    let r = get(a, "/presets/paper-table-3");
+    assert_problem(&r, 404);
+    assert!(String::from_utf8_lossy(&r.body).contains("paper-table-1"));
+    srv.stop();
+    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]

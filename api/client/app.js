@@ -6,9 +6,9 @@
 // (errors point into the scene, shown on the editor's lines).
 
 import * as api from './api.js';
-import { $, el } from './util.js';
+import { $, el, fmtSeconds } from './util.js';
 import { SceneEditor } from './editor.js';
-import { JobList, isFinished } from './jobs.js';
+import { JobList, isFinished, rememberLabel } from './jobs.js';
 import { SimulationView } from './viewer.js';
 import { StudyView } from './study.js';
 import { MeshUpload } from './meshes.js';
@@ -27,15 +27,34 @@ const narrow = window.matchMedia('(max-width: 900px)');
 const jobs = new JobList($('#job-list'), {
   onSelect: (job, byUser) => {
     show(job);
-    // In the one-column layout the results are below the list: bring them into view.
-    if (byUser && narrow.matches) $('#view-panel').scrollIntoView({ behavior: 'smooth', block: 'start' });
+    // In the one-column layout the results are below the list: bring them into view, and
+    // again once they are drawn (the view grows while it loads, which would leave a smooth
+    // scroll started now short of its target).
+    if (byUser && narrow.matches) scrollToResults(job.id);
   },
   onUpdate: (job) => {
     if (job.id !== jobs.selected) return;
-    if (job.deleted) clearView('The job was deleted.');
-    else if (!isFinished(job) || shownId !== job.id) show(job);
+    if (job.deleted) {
+      clearView('The job was deleted.');
+      // The address no longer names it (a reload would ask for a deleted job).
+      if (location.hash === `#job=${job.id}`) history.replaceState(null, '', location.pathname + location.search);
+    } else if (!isFinished(job) || shownId !== job.id) show(job);
   },
 });
+
+/** Scrolls the results to the top of the window now and when the job's view is ready. */
+function scrollToResults(id) {
+  const panel = $('#view-panel');
+  panel.scrollIntoView({ block: 'start' });
+  const until = Date.now() + 10_000;
+  const again = () => {
+    if (jobs.selected !== id || Date.now() > until) return;
+    if (viewRoot.dataset.job === id && ['ready', 'waiting', 'error'].includes(viewRoot.dataset.state)) {
+      requestAnimationFrame(() => panel.scrollIntoView({ block: 'start' }));
+    } else setTimeout(again, 100);
+  };
+  again();
+}
 
 function setStatus(text, bad = false) {
   status.textContent = text;
@@ -66,20 +85,51 @@ function show(job) {
   studyView.close();
   shownId = null;
   const p = job.progress || {};
+  const eta = p.eta_s != null ? ` · ETA ${fmtSeconds(p.eta_s)}` : '';
   const lines = {
     queued: 'is waiting for a worker.',
-    running: `is running: step ${p.step} of ${p.steps} (${p.percent ?? 0}%).`,
+    running: `is running: step ${p.step} of ${p.steps} (${p.percent ?? 0}%${eta}).`,
     cancelled: `was cancelled at step ${p.step}.`,
     failed: 'failed.',
   };
   viewRoot.dataset.state = 'waiting';
   viewRoot.dataset.job = job.id;
-  viewRoot.replaceChildren(
+  const children = [
     el('h2', {}, job.scene || 'job', ' ', el('small', {}, job.id.slice(0, 8))),
     el('p', { class: 'placeholder' }, `This ${job.kind || 'simulation'} ${lines[job.status] || job.status}`),
-    job.error ? el('p', { class: 'error' }, `${job.error.title}: ${job.error.detail}`) : null,
-    ...(job.error?.errors || []).map((e) => el('p', { class: 'error' }, el('code', {}, e.pointer), ': ', e.message)),
-  );
+  ];
+  if (job.status === 'running' || job.status === 'queued') {
+    children.push(el('div', { class: 'run-progress' },
+      el('progress', { id: 'run-progress', max: '100', value: String(p.percent ?? 0), 'aria-label': `progress of job ${job.id.slice(0, 8)}` }),
+      el('span', { id: 'run-eta' }, job.status === 'queued' ? 'queued' : `${p.percent ?? 0}%${eta}`)));
+  }
+  if (job.error) {
+    children.push(el('p', { class: 'error', id: 'job-error' }, `${job.error.title}: ${job.error.detail}`));
+    for (const e of job.error.errors || []) children.push(el('p', { class: 'error' }, el('code', {}, e.pointer), ': ', e.message));
+    markFailedScene(job);
+  }
+  viewRoot.replaceChildren(...children);
+}
+
+/**
+ * The scene text each job was submitted with from this tab (the editor's text, or the preset
+ * document the form expanded to), so that a job failing with a pointer into its scene (e.g.
+ * /loads/f0/0 for a load infinite at a quadrature point) can be marked on its editor line.
+ */
+const submittedText = new Map();
+
+function markFailedScene(job) {
+  const errs = (job.error?.errors || []).filter((e) => typeof e.pointer === 'string' && e.pointer.startsWith('/'));
+  const text = submittedText.get(job.id);
+  if (!errs.length || text === undefined) return;
+  // Never replace a scene the user is editing with another one.
+  if (editor.text !== text) {
+    if (editor.edited) return;
+    editor.text = text;
+    editorFromForm = false;
+  }
+  editor.showErrors(errs);
+  $('#scene-panel').open = true;
 }
 
 // ---- submitting --------------------------------------------------------------------------
@@ -105,7 +155,16 @@ function showFieldErrors(errors) {
   return rest;
 }
 
-async function submit(body, fromEditor) {
+/** Maps pointers into an expanded preset back to the form's inputs. */
+const FORM_POINTERS = { '/mesh/h': '/overrides/h', '/time/k': '/overrides/k', '/time/t_end': '/overrides/t_end', '/name': '/name', '/study/name': '/name' };
+
+/**
+ * Submits `body` (a document or the editor's text). `fromEditor`: pointers are into the
+ * editor's text; else into the form (`mapped`: the body is the preset expanded by the form,
+ * whose pointers FORM_POINTERS maps back). `label`: what the job list shows for it;
+ * `text`: the scene text to mark if the job fails at a pointer.
+ */
+async function submit(body, { fromEditor = false, mapped = false, label = null, text = null } = {}) {
   clearFieldErrors();
   if (fromEditor) editor.clearErrors();
   setStatus('Submitting…');
@@ -116,6 +175,8 @@ async function submit(body, fromEditor) {
         ? `Already computed: job ${job.id.slice(0, 8)} (identical scene).`
         : `Submitted: job ${job.id.slice(0, 8)}.`,
     );
+    if (label) rememberLabel(job.id, label);
+    if (text !== null) submittedText.set(job.id, text);
     jobs.upsert(job);
     jobs.select(job.id);
   } catch (e) {
@@ -123,13 +184,28 @@ async function submit(body, fromEditor) {
       // From the editor every pointer is into the scene text; from the form they name inputs.
       let rest = [];
       if (fromEditor) editor.showErrors(e.errors);
-      else rest = showFieldErrors(e.errors);
+      else rest = showFieldErrors(mapped ? e.errors.map((x) => ({ ...x, pointer: FORM_POINTERS[x.pointer] ?? x.pointer })) : e.errors);
       const extra = rest.map((r) => `${r.pointer}: ${r.message}`).join('; ');
       setStatus(`${e.title || 'invalid scene'}: ${e.errors.length} error${e.errors.length > 1 ? 's' : ''}${extra ? ` (${extra})` : ''}`, true);
     } else {
       setStatus(`${e.title || 'error'}: ${e.message}`, true);
     }
   }
+}
+
+/** h, k and T of a scene document (as written: "1/32" stays a fraction), for the job list. */
+function sceneFacts(doc) {
+  if (doc?.study) {
+    const st = doc.study;
+    return { study: true, h: st.h, k: st.k };
+  }
+  const t = doc?.time || {};
+  const T = t.t_end ?? t.T;
+  let k = t.k;
+  if (k === undefined && t.N !== undefined && T !== undefined) k = `${T}/${t.N}`;
+  const facts = { h: doc?.mesh?.h, k, T };
+  if (doc?.domain?.mesh) facts.mesh = doc.mesh?.refine !== undefined ? `own mesh, refine ${doc.mesh.refine}` : 'own mesh';
+  return facts;
 }
 
 /** A number when the text is one, else the text (fractions such as "1/16" stay strings). */
@@ -147,15 +223,55 @@ function overrides() {
   return o;
 }
 
-$('#preset-form').addEventListener('submit', (ev) => {
+const nameInput = $('#job-name');
+
+/** Whether the selected entry of the menu is a study preset (paper-table-1, ...). */
+const isStudy = () => presetList.find((x) => x.name === presetSelect.value)?.kind === 'study';
+
+$('#preset-form').addEventListener('submit', async (ev) => {
   ev.preventDefault();
   const o = overrides();
-  submit({ preset: presetSelect.value, ...(Object.keys(o).length ? { overrides: o } : {}) }, false);
+  const name = nameInput.value.trim();
+  const study = isStudy();
+  let doc;
+  try {
+    doc = await presetDoc();
+  } catch (e) {
+    setStatus(`Cannot load preset: ${e.message}`, true);
+    return;
+  }
+  const label = { ...sceneFacts(doc), preset: presetSelect.value, edited: false };
+  const text = study ? null : JSON.stringify(doc, null, 2);
+  if (name) {
+    // A named run is the preset's document with the name (POST {preset} has no name).
+    if (study) doc.study.name = name;
+    else doc.name = name;
+    submit(doc, { mapped: true, label, text: JSON.stringify(doc, null, 2) });
+  } else if (study) {
+    submit({ study: { preset: presetSelect.value } }, { label });
+  } else {
+    submit({ preset: presetSelect.value, ...(Object.keys(o).length ? { overrides: o } : {}) }, { label, text });
+  }
 });
 
-/** The selected preset's document with the form's h (unless `withH` is false), k and T. */
+let editorFromForm = true; // see editorFollowsForm
+const presetDocs = new Map(); // name -> the server's document (fetched once)
+
+async function fetchPreset(name) {
+  if (!presetDocs.has(name)) presetDocs.set(name, api.preset(name).catch((e) => {
+    presetDocs.delete(name);
+    throw e;
+  }));
+  return structuredClone(await presetDocs.get(name));
+}
+
+/**
+ * The selected preset's document with the form's h (unless `withH` is false), k and T; a
+ * study preset's document ({"study": {...}}) as it is.
+ */
 async function presetDoc(withH = true) {
-  const doc = await api.preset(presetSelect.value);
+  const doc = await fetchPreset(presetSelect.value);
+  if (doc.study) return doc;
   const o = overrides();
   if (o.h !== undefined && withH) (doc.mesh ??= {}).h = o.h;
   if (o.k !== undefined) {
@@ -176,6 +292,7 @@ async function loadPresetIntoEditor(open) {
   try {
     const doc = await presetDoc();
     editor.text = JSON.stringify(doc, null, 2);
+    editorFromForm = true;
     if (open) {
       $('#scene-panel').open = true;
       editor.textarea.focus();
@@ -192,12 +309,17 @@ $('#edit-preset').addEventListener('click', () => {
 });
 
 function submitScene() {
-  // Syntax errors are shown locally (with their line) instead of a bare 400 from the server.
-  if (editor.parse() === null) {
+  // Syntax errors are shown locally (with their line) instead of a bare 400 from the server;
+  // the previous answer's errors no longer describe this text.
+  const doc = editor.parse();
+  if (doc === null) {
+    editor.clearErrors();
+    editor.revealSyntax();
     setStatus('The scene is not valid JSON; see the marked line.', true);
     return;
   }
-  submit(editor.text, true);
+  const label = { ...sceneFacts(doc), edited: editor.edited };
+  submit(editor.text, { fromEditor: true, label, text: editor.text });
 }
 $('#submit-scene').addEventListener('click', submitScene);
 editor.textarea.addEventListener('keydown', (ev) => {
@@ -217,29 +339,154 @@ $('#format-scene').addEventListener('click', () => {
 
 // A scene on an uploaded mesh starts from the selected preset (an imported mesh has no h).
 new MeshUpload($('#mesh-upload'), {
-  baseScene: async () => ({ doc: await presetDoc(false), name: presetSelect.value }),
+  baseScene: async () => {
+    // A study preset starts from the scene it studies.
+    if (isStudy()) {
+      const study = (await fetchPreset(presetSelect.value)).study;
+      const scene = typeof study.scene === 'string' ? await fetchPreset(study.scene) : study.scene;
+      return { doc: scene, name: typeof study.scene === 'string' ? study.scene : presetSelect.value };
+    }
+    return { doc: await presetDoc(false), name: presetSelect.value };
+  },
   onScene: (doc) => {
     if (editor.edited && !confirm('Replace the edited scene with the scene on the uploaded mesh?')) return false;
     editor.text = JSON.stringify(doc, null, 2);
+    editorFromForm = false;
     $('#scene-panel').open = true;
     $('#scene-panel').scrollIntoView({ block: 'nearest' });
     return true;
   },
 });
 
-presetSelect.addEventListener('change', () => {
+/**
+ * The description of the selected preset, and, when h, k or T are typed, the values the run
+ * will use (the description quotes the preset's own).
+ */
+async function describePreset() {
   const p = presetList.find((x) => x.name === presetSelect.value);
-  presetDesc.textContent = p?.description || '';
+  const study = p?.kind === 'study';
+  for (const k of ['h', 'k', 't_end']) $(`#ov-${k}`).disabled = study;
+  const parts = [el('span', {}, p?.description || '')];
+  if (study) {
+    parts.push(el('span', { class: 'preset-note' },
+      ' A study runs every level and a reference, then shows the error table. Its document ({"study": {...}}) can be edited or pasted in the scene editor like a scene.'));
+  } else {
+    const o = overrides();
+    if (Object.keys(o).length) {
+      try {
+        const base = await fetchPreset(presetSelect.value);
+        const f = sceneFacts(base);
+        const said = (key, label, was) => (o[key] !== undefined ? `${label} = ${o[key]}${was !== undefined ? ` (preset: ${was})` : ''}` : null);
+        const run = [said('h', 'h', f.h), said('k', 'k', f.k), said('t_end', 'T', f.T)].filter(Boolean).join(', ');
+        parts.push(el('strong', { class: 'preset-note', id: 'preset-run' }, ` This run: ${run}.`));
+      } catch {
+        // The description alone.
+      }
+    }
+  }
+  presetDesc.replaceChildren(...parts);
+}
+
+/**
+ * The editor follows the form (preset, h, k, T) while its text is the form's: not once the
+ * user edited it, nor after a scene on an uploaded mesh or a failed job's scene was put in.
+ */
+let follow = 0;
+function editorFollowsForm() {
+  clearTimeout(follow);
+  follow = setTimeout(() => {
+    if (!editor.edited && editorFromForm) loadPresetIntoEditor(false);
+  }, 150);
+}
+
+presetSelect.addEventListener('change', () => {
+  describePreset();
+  editorFollowsForm();
+  saveForm();
+});
+for (const k of ['h', 'k', 't_end']) {
+  $(`#ov-${k}`).addEventListener('input', () => {
+    describePreset();
+    editorFollowsForm();
+    saveForm();
+  });
+}
+nameInput.addEventListener('input', saveForm);
+
+// ---- what a reload keeps -------------------------------------------------------------------
+// The form and an edited scene text live in this tab's sessionStorage, so a reload (or a
+// crash of the tab) does not lose them.
+
+const FORM_STORE = 'contact-sim-form';
+let saving = 0;
+function saveForm() {
+  clearTimeout(saving);
+  saving = setTimeout(() => {
+    const state = {
+      preset: presetSelect.value,
+      h: $('#ov-h').value, k: $('#ov-k').value, t_end: $('#ov-t_end').value, name: nameInput.value,
+      scene: editor.edited ? { text: editor.text, loaded: editor.loaded ?? '' } : null,
+    };
+    try {
+      sessionStorage.setItem(FORM_STORE, JSON.stringify(state));
+    } catch {
+      // Not kept (storage refused).
+    }
+  }, 100);
+}
+editor.textarea.addEventListener('input', saveForm);
+
+/** Restores the form and the edited text; true when an edited text was restored. */
+function restoreForm() {
+  let state;
+  try {
+    state = JSON.parse(sessionStorage.getItem(FORM_STORE) || 'null');
+  } catch {
+    state = null;
+  }
+  if (!state) return false;
+  if (presetList.some((p) => p.name === state.preset)) presetSelect.value = state.preset;
+  $('#ov-h').value = state.h || '';
+  $('#ov-k').value = state.k || '';
+  $('#ov-t_end').value = state.t_end || '';
+  nameInput.value = state.name || '';
+  if (state.scene) {
+    editor.restore(state.scene.text, state.scene.loaded);
+    editorFromForm = false;
+    return true;
+  }
+  return false;
+}
+
+// Without a key (the dialog was cancelled) the page asks no more by itself: a button in the
+// header asks again and reloads.
+document.addEventListener('api-key-declined', () => {
+  if ($('#auth-button')) return;
+  $('.top').append(el('button', {
+    id: 'auth-button', type: 'button', class: 'small',
+    onclick: async () => {
+      if (await api.askApiKey()) location.reload();
+    },
+  }, 'Enter API key'));
+  setStatus('This server needs an API key: use "Enter API key" at the top.', true);
 });
 
 // ---- start -------------------------------------------------------------------------------
 
 async function start() {
   try {
-    presetList = (await api.presets()).presets;
-    presetSelect.replaceChildren(...presetList.map((p) => el('option', { value: p.name }, p.name)));
-    presetSelect.dispatchEvent(new Event('change'));
-    await loadPresetIntoEditor(false);
+    const list = await api.presets();
+    const scenes = list.presets.map((p) => ({ ...p, kind: 'scene' }));
+    const studies = (list.studies || []).map((p) => ({ ...p, kind: 'study' }));
+    presetList = [...scenes, ...studies];
+    const option = (p) => el('option', { value: p.name }, p.name);
+    presetSelect.replaceChildren(
+      el('optgroup', { label: 'Simulations' }, scenes.map(option)),
+      ...(studies.length ? [el('optgroup', { label: 'Convergence studies (error tables)' }, studies.map(option))] : []),
+    );
+    const restored = restoreForm();
+    describePreset();
+    if (!restored) await loadPresetIntoEditor(false);
   } catch (e) {
     setStatus(`Cannot load the presets: ${e.message}`, true);
   }

@@ -37,3 +37,19 @@ export function niceRange(min, max) {
   }
   return [min, max];
 }
+
+/**
+ * About `count` round values (1, 2 or 5 × a power of ten apart) inside [lo, hi], for the
+ * colour bar's ticks.
+ */
+export function niceTicks(lo, hi, count = 5) {
+  if (!(hi > lo) || !Number.isFinite(lo) || !Number.isFinite(hi)) return [];
+  const raw = (hi - lo) / Math.max(1, count - 1);
+  const p = 10 ** Math.floor(Math.log10(raw));
+  const step = [1, 2, 5, 10].map((f) => f * p).find((s) => s >= raw * 0.999) ?? 10 * p;
+  const out = [];
+  for (let i = Math.ceil(lo / step - 1e-9); i * step <= hi + 1e-9 * step; i++) {
+    out.push(Number((i * step).toPrecision(12)));
+  }
+  return out;
+}

@@ -51,6 +51,24 @@ export class SceneEditor {
     this.textarea.scrollTop = 0;
   }
 
+  /** Puts back a text kept over a reload: `text` as edited from `loaded`. */
+  restore(text, loaded) {
+    this.text = loaded;
+    this.textarea.value = text;
+    this.render();
+  }
+
+  /** Scrolls the line of the syntax error (if any) into the middle of the editor. */
+  revealSyntax() {
+    if (!this.syntax) return;
+    const lines = this.text.split('\n');
+    const start = lines.slice(0, this.syntax.line).reduce((n, l) => n + l.length + 1, 0);
+    this.textarea.setSelectionRange(start, start);
+    const h = this.lineHeight();
+    this.textarea.scrollTop = Math.max(0, this.syntax.line * h - this.textarea.clientHeight / 2 + h);
+    this.syncScroll();
+  }
+
   /** True when the user changed the text since it was last set by the program. */
   get edited() {
     return this.textarea.value !== (this.loaded ?? '');

@@ -1,7 +1,7 @@
 // The job list: newest first, live progress, cancel and delete.
 //
 // Progress comes from Server-Sent Events (GET /jobs/{id}/events). Browsers allow only about
-// six HTTP/1.1 connections per host, and every open EventSource holds one, so at most
+// six HTTP/1.1 connections per host, and every open event stream holds one, so at most
 // MAX_STREAMS jobs are followed live; the others (and jobs submitted by other clients) are
 // picked up by re-reading the list now and then.
 
@@ -12,6 +12,53 @@ const MAX_STREAMS = 3;
 const FINISHED = new Set(['succeeded', 'failed', 'cancelled']);
 
 export const isFinished = (job) => FINISHED.has(job.status);
+
+// What a job was run with (h, k, T, edited, the preset), as submitted from this browser: the
+// job resource names only the scene, so three runs of "paper-exp3" would look the same.
+// Kept in localStorage (the newest LABELS_KEPT), so a reload or another tab shows them too.
+const LABELS_STORE = 'contact-sim-job-labels';
+const LABELS_KEPT = 500;
+
+function readLabels() {
+  try {
+    return JSON.parse(localStorage.getItem(LABELS_STORE) || '{}') || {};
+  } catch {
+    return {};
+  }
+}
+
+let labels = readLabels();
+// Another tab submitted a job: its label is read at once.
+window.addEventListener('storage', (ev) => {
+  if (ev.key === LABELS_STORE) labels = readLabels();
+});
+
+/** Remembers what job `id` was submitted with: {h, k, T, edited, preset, mesh, study}. */
+export function rememberLabel(id, label) {
+  const all = readLabels();
+  all[id] = { ...label, at: Date.now() };
+  labels = all;
+  const ids = Object.keys(all).sort((a, b) => all[b].at - all[a].at);
+  for (const old of ids.slice(LABELS_KEPT)) delete all[old];
+  try {
+    localStorage.setItem(LABELS_STORE, JSON.stringify(all));
+  } catch {
+    // Not kept.
+  }
+}
+
+/** The short text of a job's label: "h 1/8 · k 1/8 · T 1 · edited". */
+export function labelText(label) {
+  if (!label) return '';
+  const parts = [];
+  const v = (x) => (Array.isArray(x) ? x.join(', ') : String(x));
+  if (label.h !== undefined) parts.push(`h ${v(label.h)}`);
+  if (label.k !== undefined) parts.push(`k ${v(label.k)}`);
+  if (label.T !== undefined) parts.push(`T ${v(label.T)}`);
+  if (label.mesh) parts.push(label.mesh);
+  if (label.edited) parts.push('edited');
+  return parts.join(' · ');
+}
 
 export class JobList {
   /**
@@ -28,6 +75,7 @@ export class JobList {
     this.selected = null;
     this.timer = 0;
     this.empty = el('li', { class: 'empty' }, 'No jobs yet: run a preset or a scene.');
+
   }
 
   /** Re-reads the list (first page), then schedules the next refresh. */
@@ -57,7 +105,10 @@ export class JobList {
     const old = this.jobs.get(job.id);
     this.jobs.set(job.id, job);
     if (!isFinished(job)) this.followSome();
-    if (old && (old.status !== job.status || old.progress?.step !== job.progress?.step)) this.onUpdate(job);
+    // The final event of a stream carries no error: the resource read after it does, and
+    // that is news too (the view shows the error at once).
+    const changed = old && (old.status !== job.status || old.progress?.step !== job.progress?.step || !!old.error !== !!job.error);
+    if (changed) this.onUpdate(job);
     if (!old) this.onUpdate(job);
     this.render();
   }
@@ -173,7 +224,8 @@ export class JobList {
     r.name = el('span', { class: 'job-name' });
     r.badge = el('span', { class: 'badge' });
     r.status = el('span', { class: 'status' });
-    r.progress = el('progress', { max: '100', value: '0' });
+    r.progress = el('progress', { max: '100', value: '0', 'aria-label': `progress of job ${id.slice(0, 8)}` });
+    r.label = el('div', { class: 'job-label' });
     r.detail = el('span', { class: 'job-detail' });
     r.cancel = el('button', { type: 'button', class: 'small', onclick: () => this.cancel(id) }, 'Cancel');
     r.delete = el('button', { type: 'button', class: 'small danger', onclick: () => this.remove(id) }, 'Delete');
@@ -183,6 +235,7 @@ export class JobList {
       'li',
       { class: 'job', dataset: { id } },
       el('button', { class: 'job-open', type: 'button', title: 'show this job', onclick: () => this.select(id, true) }, r.name, r.badge, r.status),
+      r.label,
       r.progress,
       el('div', { class: 'job-meta' }, r.detail, r.actions),
       r.id,
@@ -210,6 +263,9 @@ export class JobList {
     r.status.textContent = j.status;
     r.status.className = `status s-${j.status}`;
     r.progress.value = j.status === 'succeeded' ? 100 : p.percent ?? 0;
+    const label = labelText(labels[j.id]);
+    r.label.textContent = label;
+    r.label.hidden = !label;
     r.detail.textContent = detail;
     r.detail.title = detail;
     const want = done ? r.delete : r.cancel;

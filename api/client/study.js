@@ -43,12 +43,13 @@ export class StudyView {
         num(fmt(r.err_w)), num(order(r.order_w)),
         num(fmt(r.err_zeta)), num(order(r.order_zeta)),
         num(r.unknowns ?? '–'), num(r.steps ?? '–'), num(fmtSeconds(r.seconds))));
+    const img = el('img', { class: 'report', alt: 'error against the mesh size or time step, and error over time' });
     this.root.replaceChildren(
       el('div', { class: 'view-head' },
         el('h2', {}, job.scene || 'study', ' ', el('small', {}, id.slice(0, 8))),
         el('nav', { class: 'downloads', 'aria-label': 'downloads' },
-          el('a', { href: `/jobs/${id}/summary`, download: `study-${id.slice(0, 8)}.json` }, 'summary JSON'),
-          el('a', { href: report, download: `report-${id.slice(0, 8)}.svg` }, 'report SVG'))),
+          api.keyedLink(el('a', { href: `/jobs/${id}/summary`, download: `study-${id.slice(0, 8)}.json` }, 'summary JSON')),
+          api.keyedLink(el('a', { href: report, download: `report-${id.slice(0, 8)}.svg` }, 'report SVG')))),
       el('p', { class: 'run-info' },
         `Convergence in ${vary === 'hk' ? 'h = k' : vary || '?'} against the reference h = ${fmtStep(ref.h)}, k = ${fmtStep(ref.k)} `,
         `(|w|_V = ${fmt(ref.w_V, 10)}, |ζ|_Z0 = ${fmt(ref.zeta_Z0, 10)}, ${fmtSeconds(ref.seconds)}). `,
@@ -58,8 +59,9 @@ export class StudyView {
           el('thead', {}, el('tr', {},
             ['h', 'k', 'err w', 'order', 'err ζ', 'order', 'unknowns', 'steps', 'time'].map((h) => el('th', {}, h)))),
           el('tbody', {}, rows))),
-      el('img', { class: 'report', src: report, alt: 'error against the mesh size or time step, and error over time' }),
+      img,
     );
+    api.keyedImage(img, report);
     this.root.dataset.state = 'ready';
   }
 

@@ -17,7 +17,7 @@
 import * as api from './api.js';
 import { el, fmt, fmtStep, fmtSeconds } from './util.js';
 import { drawField, probe, partKinds, edgeKind, boundingBox, KINDS, STICK, SLIP } from './render.js';
-import { cssGradient, niceRange } from './colormap.js';
+import { cssGradient, niceRange, niceTicks, LUT } from './colormap.js';
 import { linePlot } from './plots.js';
 
 const QUANTITIES = {
@@ -26,6 +26,7 @@ const QUANTITIES = {
   w: { label: 'velocity |w|', key: 'w', perCell: false },
 };
 const CACHE_STEPS = 400;
+const RUN_RANGE_STEPS = 200;
 const FRAME_MS = 150;
 const ZOOM_MIN = 0.5;
 const ZOOM_MAX = 500;
@@ -94,6 +95,8 @@ export class SimulationView {
     this.resizeObserver?.disconnect();
     cancelAnimationFrame(this.pending);
     this.frame = null;
+    this.runRanges = null;
+    this.range = null;
     this.root.replaceChildren();
     delete this.root.dataset.state;
     delete this.root.dataset.step;
@@ -113,6 +116,7 @@ export class SimulationView {
     this.edges = el('input', { id: 'show-edges', type: 'checkbox', onchange: () => this.draw() });
     this.rangeMode = el('select', { id: 'range-mode', onchange: () => this.onRangeInputs(false) },
       el('option', { value: 'step' }, 'this step'),
+      el('option', { value: 'run' }, 'whole run'),
       el('option', { value: 'manual' }, 'fixed'));
     this.lo = el('input', { id: 'range-lo', type: 'number', step: 'any', 'aria-label': 'colour range minimum', oninput: () => this.draw() });
     this.hi = el('input', { id: 'range-hi', type: 'number', step: 'any', 'aria-label': 'colour range maximum', oninput: () => this.draw() });
@@ -128,6 +132,7 @@ export class SimulationView {
     this.cbLo = el('span', { class: 'cb-lo' });
     this.cbHi = el('span', { class: 'cb-hi' });
     this.cbLabel = el('span', { class: 'cb-label' });
+    this.cbTicks = el('div', { class: 'cb-ticks', 'aria-hidden': 'true' });
     this.contactInfo = el('span', { class: 'contact-info' });
     this.slider = el('input', {
       id: 'step-slider', type: 'range', min: '0', max: String(this.steps.length - 1), step: '1', value: '0',
@@ -135,8 +140,10 @@ export class SimulationView {
     });
     this.playBtn = el('button', { id: 'play', type: 'button', class: 'small', onclick: () => (this.playing ? this.stop() : this.play()) }, '▶ Play');
     this.stepLabel = el('span', { id: 'step-label', 'aria-live': 'off' });
-    this.vtuLink = el('a', { id: 'dl-vtu', download: '' }, 'VTU (this step)');
+    this.vtuLink = api.keyedLink(el('a', { id: 'dl-vtu', download: '' }, 'VTU (this step)'));
     const plots = el('div', { class: 'plots', id: 'plots' });
+    this.gammaPlots = el('div', { class: 'plots', id: 'gamma3-plots' });
+    this.gammaNote = el('p', { class: 'hint', id: 'gamma3-note' });
     const picture = this.d3 ? this.d3.element : el('div', { class: 'canvas-wrap' }, this.canvas, this.probeBox);
 
     const m = summary.mesh || {};
@@ -163,9 +170,12 @@ export class SimulationView {
         el('h2', {}, job.scene || 'simulation', ' ', el('small', {}, id.slice(0, 8))),
         el('nav', { class: 'downloads', 'aria-label': 'downloads' },
           this.vtuLink,
-          el('a', { href: `/jobs/${id}/result.pvd`, download: `contact-sim-${id.slice(0, 8)}.pvd` }, 'PVD (all steps)'),
-          el('a', { href: `/jobs/${id}/archive.tar`, download: '' }, 'archive.tar'),
-          el('a', { href: `/jobs/${id}/summary`, download: `summary-${id.slice(0, 8)}.json` }, 'summary JSON'))),
+          // ParaView needs the collection and its VTU files side by side: the archive has
+          // both, with the PVD naming the files by relative paths, so it opens offline.
+          api.keyedLink(el('a', { id: 'dl-paraview', href: `/jobs/${id}/archive.tar`, download: `contact-sim-${id.slice(0, 8)}.tar`,
+            title: 'a folder with result.pvd and every stored step as VTU: extract it and open result.pvd in ParaView' }, 'ParaView (PVD + VTU, .tar)')),
+          api.keyedLink(el('a', { href: `/jobs/${id}/summary`, download: `summary-${id.slice(0, 8)}.json` }, 'summary JSON')),
+          el('button', { id: 'export-png', type: 'button', class: 'small', title: 'the picture with its colour bar, as a PNG file', onclick: () => this.exportPng() }, 'PNG of the view'))),
       info,
       ...(estimate ? [estimate] : []),
       ...warnings,
@@ -181,7 +191,7 @@ export class SimulationView {
         viewButtons),
       picture,
       el('div', { class: 'colorbar', id: 'colorbar' },
-        this.cbLo, el('div', { class: 'bar', style: `background: ${cssGradient()}` }), this.cbHi, this.cbLabel),
+        this.cbLo, el('div', { class: 'cb-scale' }, el('div', { class: 'bar', style: `background: ${cssGradient()}` }), this.cbTicks), this.cbHi, this.cbLabel),
       this.boundaryLegend(),
       el('div', { class: 'legend' },
         'Γ3 contact: ', el('span', { class: 'swatch', style: `background:${STICK}` }), ' stick ',
@@ -190,7 +200,11 @@ export class SimulationView {
           ? ' · lines from slipping nodes: tangential velocity · grey: edges of the reference configuration · drag orbits, right drag pans, wheel zooms; on the focused picture the arrow keys orbit, Shift + arrows pan, + − zoom, Home resets'
           : ' · dashed: reference configuration')),
       el('div', { class: 'time' }, this.playBtn, this.slider, this.stepLabel),
+      el('h3', { class: 'plots-title' }, 'Norms over time ', el('span', { class: 'hint' }, '(click to show that time)')),
       plots,
+      el('h3', { class: 'plots-title' }, 'Along Γ3 at the shown step'),
+      this.gammaNote,
+      this.gammaPlots,
     );
     this.onRangeInputs(false);
 
@@ -202,7 +216,7 @@ export class SimulationView {
       ['|u|_V', 'u_V', '#5f3dc4'],
       ['|ζ|_Z0', 'zeta_L2', '#2b8a3e'],
       ['min ζ', 'zeta_min', '#c92a2a'],
-    ].map(([title, key, colour]) => linePlot(plots, { title, xs: ts, ys: s.map((r) => r[key]), colour }));
+    ].map(([title, key, colour]) => linePlot(plots, { title, xs: ts, ys: s.map((r) => r[key]), colour, onPick: (t) => this.seek(t) }));
 
     // Redraw at the new size when the layout changes (window resize, narrow screens). The
     // wrapper's width is watched, not the canvas, whose height draw() itself sets.
@@ -393,7 +407,47 @@ export class SimulationView {
     this.vtuLink.download = `step-${doc.n}.vtu`;
     this.slider.setAttribute('aria-valuetext', `step ${doc.n}, t = ${fmt(doc.t)}`);
     for (const p of this.plots) p.setMarker(doc.t);
+    this.drawGamma3();
     this.draw();
+  }
+
+  /** Shows the stored step nearest to time t (a click on a norm plot). */
+  seek(t) {
+    let best = 0;
+    this.steps.forEach((s, i) => {
+      if (Math.abs(s.t - t) < Math.abs(this.steps[best].t - t)) best = i;
+    });
+    this.stop();
+    this.slider.value = String(best);
+    this.show(best);
+  }
+
+  /**
+   * Slip velocity and friction traction of the contact nodes at the shown step, against
+   * their position along Γ3 (the coordinate in which the contact nodes spread most).
+   */
+  drawGamma3() {
+    const c = this.current.contact;
+    this.gammaPlots.replaceChildren();
+    if (!c || !c.length) {
+      this.gammaNote.textContent = c ? 'No contact nodes.' : 'The contact state is not stored at this step.';
+      return;
+    }
+    const d = this.dim;
+    const N = this.mesh.nodes;
+    const names = ['x', 'y', 'z'];
+    let axis = 0, spread = -1;
+    for (let a = 0; a < d; a++) {
+      const vs = c.map((e) => N[e.node][a]);
+      const sp = Math.max(...vs) - Math.min(...vs);
+      if (sp > spread) [axis, spread] = [a, sp];
+    }
+    const sorted = c.slice().sort((p, q) => N[p.node][axis] - N[q.node][axis]);
+    const xs = sorted.map((e) => N[e.node][axis]);
+    this.gammaNote.textContent = `${c.length} contact nodes by ${names[axis]}${d === 3 ? ' (each node a dot)' : ''}; ${c.filter((e) => e.slipping).length} slip.`;
+    const opts = { xs, xLabel: names[axis], fromZero: false, dots: d === 3 };
+    linePlot(this.gammaPlots, { ...opts, id: 'plot-slip', title: 'slip velocity w_τ', ys: sorted.map((e) => e.slip_velocity), colour: SLIP });
+    linePlot(this.gammaPlots, { ...opts, id: 'plot-friction', title: 'friction traction', ys: sorted.map((e) => e.friction_traction), colour: '#5f3dc4' });
   }
 
   /** Values of the selected quantity for the current step, and whether per triangle. */
@@ -416,10 +470,54 @@ export class SimulationView {
     return d[q.key] ? { v: d[q.key], perCell: q.perCell } : null;
   }
 
+  /**
+   * The extremes of the selected quantity over every stored step ("whole run"): null until
+   * they are known; the first call fetches the steps (that quantity only) in the background
+   * and redraws when done.
+   */
+  runRange() {
+    const key = this.quantity.value;
+    this.runRanges ??= new Map();
+    const known = this.runRanges.get(key);
+    if (known && !known.loading) return known;
+    if (known) return null;
+    // A long run is sampled (evenly, first and last included): RUN_RANGE_STEPS requests at
+    // most, and the colour bar says so.
+    const all = this.steps;
+    const every = Math.max(1, Math.ceil((all.length - 1) / (RUN_RANGE_STEPS - 1)));
+    const picked = all.filter((_, i) => i % every === 0 || i === all.length - 1);
+    const entry = { loading: true, min: Infinity, max: -Infinity, sampled: picked.length < all.length ? `${picked.length} of ${all.length} steps` : null };
+    this.runRanges.set(key, entry);
+    const job = this.job;
+    const q = QUANTITIES[key];
+    const field = q.key;
+    (async () => {
+      for (const s of picked) {
+        if (this.job !== job) return;
+        const cached = this.cache.get(s.n);
+        const doc = cached || (await api.fields(job.id, s.n, false, [field]));
+        let v = doc[field];
+        if (!v) continue;
+        if (field === 'w') {
+          const d = this.dim, n = v.length / d, m = new Float64Array(n);
+          for (let i = 0; i < n; i++) m[i] = Math.hypot(v[d * i], v[d * i + 1], d === 3 ? v[d * i + 2] : 0);
+          v = m;
+        }
+        for (const x of v) if (Number.isFinite(x)) { if (x < entry.min) entry.min = x; if (x > entry.max) entry.max = x; }
+      }
+      entry.loading = false;
+      if (this.job === job) this.draw();
+    })().catch(() => {
+      this.runRanges.delete(key);
+    });
+    return null;
+  }
+
   /** The range inputs are editable only in "fixed" mode; switching fills them with the current range. */
   onRangeInputs(quantityChanged) {
-    // A fixed range of one quantity means nothing for another: go back to automatic.
-    if (quantityChanged) this.rangeMode.value = 'step';
+    // A fixed range of one quantity means nothing for another: back to automatic (the
+    // whole run stays the whole run).
+    if (quantityChanged && this.rangeMode.value === 'manual') this.rangeMode.value = 'step';
     this.lo.disabled = this.hi.disabled = this.rangeMode.value !== 'manual';
     this.draw();
   }
@@ -430,23 +528,43 @@ export class SimulationView {
     let min = Infinity, max = -Infinity;
     if (vals) for (const x of vals.v) if (Number.isFinite(x)) { if (x < min) min = x; if (x > max) max = x; }
     let range;
-    if (this.rangeMode.value === 'manual' && Number(this.hi.value) > Number(this.lo.value)) {
+    let source = 'step';
+    const mode = this.rangeMode.value;
+    if (mode === 'manual' && Number(this.hi.value) > Number(this.lo.value)) {
       range = [Number(this.lo.value), Number(this.hi.value)];
+      source = 'manual';
     } else {
-      range = niceRange(min, max);
-      if (this.rangeMode.value !== 'manual') {
-        this.lo.value = String(Number(min.toPrecision(4)));
-        this.hi.value = String(Number(max.toPrecision(4)));
+      let [lo, hi] = [min, max];
+      const run = mode === 'run' && vals ? this.runRange() : null;
+      if (run) {
+        [lo, hi] = [Math.min(run.min, min), Math.max(run.max, max)];
+        source = 'run';
+      } else if (mode === 'run') source = 'run-loading';
+      range = niceRange(lo, hi);
+      if (mode !== 'manual') {
+        this.lo.value = String(Number(lo.toPrecision(4)));
+        this.hi.value = String(Number(hi.toPrecision(4)));
       }
     }
+    this.root.querySelector('#colorbar')?.setAttribute('data-range', source);
     if (this.d3) this.draw3d(vals, range);
     else this.draw2d(vals, range);
     const q = QUANTITIES[this.quantity.value];
     this.cbLo.textContent = fmt(range[0]);
     this.cbHi.textContent = fmt(range[1]);
+    this.range = range;
+    this.cbTicks.replaceChildren(...niceTicks(range[0], range[1], 5).map((v) => el('span', {
+      class: 'cb-tick', style: `left: ${(100 * (v - range[0])) / (range[1] - range[0])}%`, dataset: { value: String(v) },
+    }, fmt(v, 3))));
     this.cbLabel.textContent = vals
       ? `${this.label(q)}: min ${fmt(min)}, max ${fmt(max)}${max - min <= 1e-12 * Math.max(1, Math.abs(max)) ? ' (uniform)' : ''}`
       : `${this.label(q)}: not stored`;
+    if (q.key === 'zeta') this.cbLabel.textContent += ' · ζ = 1 is intact material, 0 fully damaged';
+    if (source === 'run') {
+      const sampled = this.runRanges?.get(this.quantity.value)?.sampled;
+      this.cbLabel.textContent += ` · colours span the whole run${sampled ? ` (sampled: ${sampled})` : ''}`;
+    }
+    else if (source === 'run-loading') this.cbLabel.textContent += ' · reading the whole run…';
     if (this.d3 && this.partsBox.checked) this.cbLabel.textContent += ' · the faces show their boundary part now';
     const c = this.current.contact;
     this.contactInfo.textContent = c ? `(${c.filter((x) => x.slipping).length} of ${c.length} nodes slip)` : '(contact state not stored)';
@@ -535,10 +653,64 @@ export class SimulationView {
     return Number((Math.round(f / p) * p).toPrecision(1));
   }
 
+  /**
+   * Saves the picture as shown with its colour bar (ticks, the field's name and range) and
+   * the step as a PNG file.
+   */
+  exportPng() {
+    const src = this.d3 ? this.d3.canvas : this.canvas;
+    if (!src || !src.width) return;
+    const dpr = window.devicePixelRatio || 1;
+    const W = src.width;
+    const barH = Math.round(14 * dpr), pad = Math.round(10 * dpr), font = Math.round(13 * dpr);
+    const H = src.height + pad + barH + pad + font + pad + font + pad;
+    const out = document.createElement('canvas');
+    out.width = W;
+    out.height = H;
+    const ctx = out.getContext('2d');
+    ctx.fillStyle = '#ffffff';
+    ctx.fillRect(0, 0, W, H);
+    ctx.drawImage(src, 0, 0);
+    // The colour bar: one column per map entry, so its colours are the map's own.
+    const y0 = src.height + pad;
+    const x0 = pad * 4, bw = W - 8 * pad;
+    for (let x = 0; x < bw; x++) {
+      const i = Math.min(255, Math.floor((256 * x) / bw));
+      ctx.fillStyle = `rgb(${LUT[3 * i]},${LUT[3 * i + 1]},${LUT[3 * i + 2]})`;
+      ctx.fillRect(x0 + x, y0, 1, barH);
+    }
+    ctx.fillStyle = '#1d2329';
+    ctx.font = `${font}px system-ui, sans-serif`;
+    ctx.textBaseline = 'top';
+    const [lo, hi] = this.range || [0, 1];
+    ctx.textAlign = 'center';
+    for (const v of niceTicks(lo, hi, 5)) {
+      const x = x0 + ((v - lo) / (hi - lo)) * bw;
+      ctx.fillRect(Math.round(x), y0 + barH, 1, Math.round(4 * dpr));
+      ctx.fillText(fmt(v, 3), x, y0 + barH + pad / 2);
+    }
+    ctx.textAlign = 'left';
+    ctx.fillText(`${this.cbLabel.textContent} · ${this.stepLabel.textContent} · ${this.job.scene || ''} ${this.job.id.slice(0, 8)}`,
+      pad, y0 + barH + pad + font + pad / 2, W - 2 * pad);
+    out.toBlob((blob) => {
+      const url = URL.createObjectURL(blob);
+      const a = el('a', { href: url, download: `contact-sim-${this.job.id.slice(0, 8)}-step-${this.current.n}.png` });
+      document.body.append(a);
+      a.click();
+      a.remove();
+      setTimeout(() => URL.revokeObjectURL(url), 60_000);
+    }, 'image/png');
+  }
+
   async play() {
     if (this.steps.length < 2) return;
     this.playing = true;
     this.playBtn.textContent = '❚❚ Pause';
+    // While playing, colours keep their meaning from step to step: the whole run's range.
+    if (this.rangeMode.value === 'step') {
+      this.rangeMode.value = 'run';
+      this.onRangeInputs(false);
+    }
     let idx = Number(this.slider.value);
     if (idx >= this.steps.length - 1) idx = -1; // at the end: start over
     while (this.playing && idx < this.steps.length - 1) {

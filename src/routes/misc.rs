@@ -9,6 +9,7 @@ use axum::http::{header, HeaderValue};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use contact_core::scene::presets;
+use contact_core::study::presets as study_presets;
 use serde_json::{json, Value};
 use std::sync::atomic::Ordering;
 
@@ -19,21 +20,38 @@ pub const OPENAPI: &str = include_str!("../../api/openapi.yaml");
 /// file next to `api/openapi.yaml` in the repository.
 pub const SCENE_SCHEMA: &str = include_str!("../../api/scene.schema.json");
 
+/// The built-in scenes, and the built-in convergence studies (the paper's Tables 1 and 2)
+/// under `studies`: both are read from `/presets/{name}`.
 pub async fn presets() -> Json<Value> {
     let list: Vec<Value> = presets::names()
         .iter()
         .map(|n| json!({"name": n, "description": presets::description(n), "href": format!("/presets/{n}")}))
         .collect();
-    Json(json!({"presets": list}))
+    let studies: Vec<Value> = study_presets::names()
+        .iter()
+        .map(|n| json!({"name": n, "description": study_presets::description(n), "href": format!("/presets/{n}")}))
+        .collect();
+    Json(json!({"presets": list, "studies": studies}))
 }
 
+/// A scene preset as its scene document; a study preset as the `{"study": {...}}` body that
+/// `POST /jobs` runs (so either can be edited and submitted as it is).
 pub async fn preset(Path(name): Path<String>) -> Result<Json<Value>, Problem> {
-    presets::get(&name).map(Json).ok_or_else(|| {
-        Problem::not_found(format!(
-            "unknown preset {name:?}; known: {}",
-            presets::names().join(", ")
-        ))
-    })
+    if let Some(doc) = presets::get(&name) {
+        return Ok(Json(doc));
+    }
+    if let Some(doc) = study_presets::get(&name) {
+        return Ok(Json(json!({ "study": doc })));
+    }
+    Err(Problem::not_found(format!(
+        "unknown preset {name:?}; known: {}",
+        presets::names()
+            .iter()
+            .chain(study_presets::names())
+            .copied()
+            .collect::<Vec<_>>()
+            .join(", ")
+    )))
 }
 
 pub async fn healthz(State(state): State<AppState>) -> Result<Json<Value>, Problem> {
