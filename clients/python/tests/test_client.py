@@ -278,6 +278,17 @@ def test_mesh_upload_and_a_job_on_it(client: Client, tmp_path: Path) -> None:
     assert e.value.status == 422 and e.value.detail
 
 
+def test_a_study_preset_is_submitted_by_name(client: Client) -> None:
+    job = client.submit("paper-table-2")
+    assert job.kind == "study"
+    with pytest.raises(ValueError):
+        client.submit("paper-table-1", overrides={"h": "1/4"})
+    # A scene preset's name still submits the scene.
+    assert client.submit("paper-exp1", overrides={"h": "1/4", "k": "1/4"}).kind == "simulation"
+    if job.refresh().status in ("queued", "running"):
+        job.cancel()
+
+
 def test_study_table_as_dataframe(client: Client) -> None:
     study = {
         "study": {

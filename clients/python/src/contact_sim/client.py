@@ -95,6 +95,7 @@ class Client:
         self.url = url.rstrip("/")
         self.retries = retries
         self._http = httpx.Client(base_url=self.url, headers=headers, timeout=timeout)
+        self._studies: Optional[List[str]] = None
 
     def __enter__(self) -> "Client":
         return self
@@ -159,17 +160,22 @@ class Client:
         overrides: Optional[Mapping[str, Ratio]] = None,
         idempotency_key: Optional[str] = None,
     ) -> "Job":
-        """Submits a preset by name (with ``overrides`` of ``h``, ``k``, ``t_end``), or a
-        document: a scene, ``{"preset": ..., "overrides": ...}`` or a study
-        ``{"study": {...}}`` (``{"study": {"preset": "paper-table-1"}}`` for Table 1). A
-        path reads the document from a JSON file.
+        """Submits a preset by name (with ``overrides`` of ``h``, ``k``, ``t_end``; a study
+        preset's name, e.g. "paper-table-1", submits that study), or a document: a scene,
+        ``{"preset": ..., "overrides": ...}`` or a study ``{"study": {...}}``. A path reads
+        the document from a JSON file.
 
         A scene identical to one already computed is answered with that job (already
         succeeded). With ``idempotency_key``, the same key and body give the same job, so a
         submission can be retried safely after a lost answer."""
         body: Dict[str, Any]
         if isinstance(scene_or_preset, str):
-            body = {"preset": scene_or_preset}
+            if scene_or_preset in self._study_presets():
+                if overrides:
+                    raise ValueError("a study preset takes no overrides: its levels are fixed")
+                body = {"study": {"preset": scene_or_preset}}
+            else:
+                body = {"preset": scene_or_preset}
         elif isinstance(scene_or_preset, os.PathLike):
             body = json.loads(Path(scene_or_preset).read_text(encoding="utf-8"))
         else:
@@ -186,6 +192,13 @@ class Client:
             }
         headers = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
         return Job(self, self._json("POST", "/jobs", json=body, headers=headers))
+
+    def _study_presets(self) -> List[str]:
+        """Names of the server's study presets (asked once per client)."""
+        if self._studies is None:
+            listing = self._json("GET", "/presets")
+            self._studies = [s["name"] for s in listing.get("studies", [])]
+        return self._studies
 
     def job(self, job_id: str) -> "Job":
         """The job with this id (404 raises :class:`ApiError`)."""
