@@ -4,8 +4,9 @@
 //! * `https_end_to_end`: `contact-sim serve --tls-cert --tls-key` on an ephemeral port:
 //!   health, a submitted job run to the end and read back, over HTTPS with the test CA as
 //!   the only root; a client that does not trust the CA is refused; plain HTTP to the port
-//!   and a silent connection are disconnected (not answered in plain text, not held open)
-//!   and the server answers HTTPS afterwards; bad certificate flags stop the start with a
+//!   and a silent connection are disconnected (not answered in plain text, not held open),
+//!   as is an incomplete request head after the handshake (the header timeout), and the
+//!   server answers HTTPS afterwards; bad certificate flags stop the start with a
 //!   message naming the file.
 //! * `postgres_over_tls`: the PostgreSQL store on a throwaway server with `ssl=on` that
 //!   refuses TCP connections without TLS: `sslmode=require` and `verify-full` connect (the
@@ -131,6 +132,55 @@ fn until_closed(addr: SocketAddr, bytes: &[u8], limit: Duration) -> (Vec<u8>, Du
     (got, t.elapsed())
 }
 
+/// Completes a TLS handshake (trusting `ca`), sends the start of a request head and no
+/// more, then reads until the server closes; returns what came back and how long the
+/// connection lasted after the handshake.
+fn incomplete_head_over_tls(addr: SocketAddr, ca: &str) -> (Vec<u8>, Duration) {
+    use rustls::pki_types::pem::PemObject;
+    let mut roots = rustls::RootCertStore::empty();
+    roots
+        .add(rustls::pki_types::CertificateDer::from_pem_slice(ca.as_bytes()).unwrap())
+        .unwrap();
+    let provider = Arc::new(rustls::crypto::ring::default_provider());
+    let config = rustls::ClientConfig::builder_with_provider(provider)
+        .with_safe_default_protocol_versions()
+        .unwrap()
+        .with_root_certificates(roots)
+        .with_no_client_auth();
+    let name = rustls::pki_types::ServerName::try_from("127.0.0.1").unwrap();
+    let conn = rustls::ClientConnection::new(Arc::new(config), name).unwrap();
+    let sock = TcpStream::connect(addr).unwrap();
+    sock.set_read_timeout(Some(Duration::from_secs(20)))
+        .unwrap();
+    let mut tls = rustls::StreamOwned::new(conn, sock);
+    while tls.conn.is_handshaking() {
+        tls.conn.complete_io(&mut tls.sock).unwrap();
+    }
+    let t = Instant::now();
+    tls.write_all(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n")
+        .unwrap();
+    tls.flush().unwrap();
+    let mut got = Vec::new();
+    let mut buf = [0u8; 4096];
+    loop {
+        match tls.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => got.extend_from_slice(&buf[..n]),
+            // Closed without close_notify, or reset: closed all the same.
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::UnexpectedEof | std::io::ErrorKind::ConnectionReset
+                ) =>
+            {
+                break
+            }
+            Err(e) => panic!("connection not closed after {:?}: {e}", t.elapsed()),
+        }
+    }
+    (got, t.elapsed())
+}
+
 #[test]
 fn https_end_to_end() {
     let dir = TempDir::new("https");
@@ -220,6 +270,14 @@ fn https_end_to_end() {
     // A connection that never starts the handshake is closed after the header timeout.
     let (got, took) = until_closed(node.addr, b"", Duration::from_secs(20));
     assert!(got.is_empty(), "{got:?}");
+    assert!(
+        took >= Duration::from_millis(900) && took < Duration::from_secs(10),
+        "closed after {took:?}"
+    );
+    // After the handshake, the header timeout still holds: an incomplete request head is
+    // disconnected after it, as on the plain port.
+    let (got, took) = incomplete_head_over_tls(node.addr, &ca.pem());
+    assert!(got.is_empty(), "{:?}", String::from_utf8_lossy(&got));
     assert!(
         took >= Duration::from_millis(900) && took < Duration::from_secs(10),
         "closed after {took:?}"
