@@ -17,7 +17,7 @@ use axum::Router;
 use hyper::body::Incoming;
 use hyper_util::rt::{TokioIo, TokioTimer};
 use std::future::Future;
-use std::pin::{pin, Pin};
+use std::pin::pin;
 use std::time::Duration;
 use tower_service::Service;
 
@@ -106,7 +106,7 @@ async fn drive<I, S, B>(
     B: hyper::body::Body + 'static,
     B::Error: Into<Box<dyn std::error::Error + Send + Sync>>,
 {
-    let mut conn: Pin<&mut _> = pin!(conn);
+    let mut conn = pin!(conn);
     let mut stopping = false;
     loop {
         tokio::select! {

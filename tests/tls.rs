@@ -11,7 +11,8 @@
 //! * `postgres_over_tls`: the PostgreSQL store on a throwaway server with `ssl=on` that
 //!   refuses TCP connections without TLS: `sslmode=require` and `verify-full` connect (the
 //!   session is encrypted), `verify-full` refuses a certificate of another CA and a host
-//!   name the certificate does not name, `verify-ca` accepts the latter; a whole node
+//!   name the certificate does not name, `verify-ca` accepts the latter; a password over
+//!   TLS with SCRAM channel binding required connects (a wrong one does not); a whole node
 //!   (store connection and its LISTEN connection) runs a job over `verify-full`.
 
 mod service_support;
@@ -28,6 +29,7 @@ use service_support::*;
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
+use std::str::FromStr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -396,6 +398,27 @@ fn postgres_over_tls() {
          sslmode=verify-full sslrootcert='{ca_s}'"
     );
     assert_eq!(session_is_encrypted(&keywords), Ok(true));
+
+    // A password over TLS: SCRAM with channel binding (tls-server-end-point) required, so
+    // the password exchange is tied to this TLS session.
+    let mut admin = ::postgres::Config::from_str(&PgTls::parse(&require).unwrap().url)
+        .unwrap()
+        .connect(PgTls::parse(&require).unwrap().connector().unwrap())
+        .unwrap();
+    admin
+        .batch_execute("CREATE ROLE scram LOGIN SUPERUSER PASSWORD 'pw'")
+        .unwrap();
+    let scram = format!(
+        "postgres://scram:pw@localhost:{port}/postgres?hostaddr=127.0.0.1&channel_binding=require\
+         &sslmode=verify-full&sslrootcert={ca_s}"
+    );
+    assert_eq!(session_is_encrypted(&scram), Ok(true));
+    assert_eq!(
+        PgStore::connect(&scram).unwrap().schema_version().unwrap(),
+        2
+    );
+    let e = session_is_encrypted(&scram.replace(":pw@", ":wrong@")).unwrap_err();
+    assert!(e.contains("password authentication failed"), "{e}");
 
     // verify-full refuses another CA's certificate, and a host name not in the certificate;
     // at once (not retried as an outage) and saying what to check.

@@ -154,10 +154,13 @@ impl PgTls {
                 }
             }
         };
-        let config = builder
+        let mut config = builder
             .dangerous()
             .with_custom_certificate_verifier(verifier)
             .with_no_client_auth();
+        // As libpq 17: PostgreSQL 17 requires it of `sslnegotiation=direct`, older servers
+        // ignore it.
+        config.alpn_protocols = vec![b"postgresql".to_vec()];
         Ok(MakeRustlsConnect::new(config))
     }
 }

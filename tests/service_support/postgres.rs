@@ -64,7 +64,8 @@ impl Postgres {
 
     /// As [`Postgres::start`], with TLS on (`ssl=on`, the given certificate) and every TCP
     /// connection without TLS refused (`hostnossl … reject` first in `pg_hba.conf`), so that
-    /// a connection that succeeds is encrypted.
+    /// a connection that succeeds is encrypted; the role `scram`, if created, authenticates
+    /// with SCRAM-SHA-256.
     pub fn start_tls(tag: &str, cert: ServerCert) -> Option<Postgres> {
         Postgres::start_with(tag, Some(cert))
     }
@@ -136,7 +137,12 @@ impl Postgres {
         std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600)).unwrap();
         let hba = self.data_dir().join("pg_hba.conf");
         let rules = std::fs::read_to_string(&hba).unwrap();
-        std::fs::write(&hba, format!("hostnossl all all all reject\n{rules}")).unwrap();
+        // The role `scram` (created by the test that uses it) logs in with a password.
+        std::fs::write(
+            &hba,
+            format!("hostnossl all all all reject\nhostssl all scram all scram-sha-256\n{rules}"),
+        )
+        .unwrap();
         if self.as_postgres {
             for f in [&crt, &key] {
                 let ok = Command::new("chown")
