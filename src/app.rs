@@ -68,7 +68,8 @@ pub async fn serve(
     // Peer addresses reach the handlers (per-client submission rate); slow clients are
     // disconnected after the header timeout.
     let header_timeout = state.rt.config.header_timeout;
-    let r = crate::server::run(listener, app(state), header_timeout, signal).await;
+    let tls = state.rt.config.tls.as_ref().map(|t| t.acceptor());
+    let r = crate::server::run(listener, app(state), header_timeout, tls, signal).await;
     tokio::task::spawn_blocking(move || rt.shutdown())
         .await
         .ok();

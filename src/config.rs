@@ -44,6 +44,8 @@ pub struct Config {
     /// Time a client has to send a complete request head (slow or silent clients are
     /// disconnected).
     pub header_timeout: std::time::Duration,
+    /// Certificate and key of HTTPS (`--tls-cert`, `--tls-key`); None: plain HTTP.
+    pub tls: Option<crate::tls::ServerTls>,
 }
 
 impl Default for Config {
@@ -66,6 +68,7 @@ impl Default for Config {
             submit_rate: 10.0,
             submit_burst: 50,
             header_timeout: std::time::Duration::from_secs(30),
+            tls: None,
         }
     }
 }

@@ -6,6 +6,7 @@
 pub mod app;
 pub mod config;
 pub mod jobs;
+pub mod json_body;
 pub mod lease;
 pub mod limits;
 pub mod meshes;
@@ -15,5 +16,6 @@ pub mod server;
 pub mod state;
 pub mod store;
 pub mod stream;
+pub mod tls;
 
 pub use config::Config;

@@ -5,6 +5,12 @@
 //! header read timeout.) Each request carries the peer address as
 //! `ConnectInfo<SocketAddr>` (per-client limits). On shutdown the listener stops accepting,
 //! every connection finishes its current request, and the call returns once all are closed.
+//!
+//! With a TLS acceptor (`serve --tls-cert`, see `crate::tls`) each connection first completes
+//! a TLS handshake in its own task, within the same `header_timeout`; a client that does not
+//! speak TLS (plain HTTP to the HTTPS port) fails the handshake, gets rustls' alert and is
+//! disconnected, logged at debug level only (it is the client's mistake, and per-connection
+//! noise at a higher level would let anyone fill the log).
 
 use axum::extract::ConnectInfo;
 use axum::Router;
@@ -15,11 +21,13 @@ use std::pin::pin;
 use std::time::Duration;
 use tower_service::Service;
 
-/// Serves `app` on `listener` until `shutdown` resolves, then drains the connections.
+/// Serves `app` on `listener` (HTTPS with `tls`) until `shutdown` resolves, then drains the
+/// connections.
 pub async fn run(
     listener: tokio::net::TcpListener,
     app: Router,
     header_timeout: Duration,
+    tls: Option<tokio_rustls::TlsAcceptor>,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
     let mut builder = hyper::server::conn::http1::Builder::new();
@@ -50,22 +58,32 @@ pub async fn run(
             let mut router = router.clone();
             router.call(req)
         });
-        let conn = builder.serve_connection(TokioIo::new(stream), service);
         let mut stop = stop_rx.clone();
         let close = close_rx.clone();
+        let Some(acceptor) = tls.clone() else {
+            let conn = builder.serve_connection(TokioIo::new(stream), service);
+            tokio::spawn(drive(conn, stop, close));
+            continue;
+        };
+        let builder = builder.clone();
         tokio::spawn(async move {
-            let mut conn = pin!(conn);
-            let mut stopping = false;
-            loop {
-                tokio::select! {
-                    _ = conn.as_mut() => break,
-                    _ = stop.wait_for(|s| *s), if !stopping => {
-                        stopping = true;
-                        conn.as_mut().graceful_shutdown();
+            let handshake = tokio::time::timeout(header_timeout, acceptor.accept(stream));
+            let stream = tokio::select! {
+                done = handshake => match done {
+                    Ok(Ok(stream)) => stream,
+                    Ok(Err(e)) => {
+                        tracing::debug!("TLS handshake with {peer} failed: {e}");
+                        return;
                     }
-                }
-            }
-            drop(close);
+                    Err(_) => {
+                        tracing::debug!("TLS handshake with {peer} timed out");
+                        return;
+                    }
+                },
+                _ = stop.wait_for(|s| *s) => return,
+            };
+            let conn = builder.serve_connection(TokioIo::new(stream), service);
+            drive(conn, stop, close).await;
         });
     }
     drop(listener);
@@ -73,4 +91,31 @@ pub async fn run(
     let _ = stop_tx.send(true);
     close_tx.closed().await;
     Ok(())
+}
+
+/// Runs one connection to its end; once `stop` turns true it finishes the current request
+/// and closes. Dropping `close` tells the accept loop this connection is gone.
+async fn drive<I, S, B>(
+    conn: hyper::server::conn::http1::Connection<I, S>,
+    mut stop: tokio::sync::watch::Receiver<bool>,
+    close: tokio::sync::watch::Receiver<()>,
+) where
+    I: hyper::rt::Read + hyper::rt::Write + Unpin,
+    S: hyper::service::HttpService<Incoming, ResBody = B>,
+    S::Error: Into<Box<dyn std::error::Error + Send + Sync>>,
+    B: hyper::body::Body + 'static,
+    B::Error: Into<Box<dyn std::error::Error + Send + Sync>>,
+{
+    let mut conn = pin!(conn);
+    let mut stopping = false;
+    loop {
+        tokio::select! {
+            _ = conn.as_mut() => break,
+            _ = stop.wait_for(|s| *s), if !stopping => {
+                stopping = true;
+                conn.as_mut().graceful_shutdown();
+            }
+        }
+    }
+    drop(close);
 }

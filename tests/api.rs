@@ -502,6 +502,59 @@ fn bad_input_gets_problem_json_naming_the_field() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A key repeated in one object of a body (the last would win in serde_json, the first in
+/// other readers) is refused with 422 at its pointer, however it is spelled, and nothing is
+/// queued.
+#[test]
+fn duplicate_keys_are_refused_at_their_pointer() {
+    let dir = temp_dir("duplicates");
+    let srv = Server::start(&dir, 0);
+    let a = srv.addr;
+    let ct = [("Content-Type", "application/json")];
+    // A whole scene with a second `f0` in `loads`: built from the preset's text, so the rest
+    // of the body is a valid scene (the same text without the repeat is accepted below).
+    let scene =
+        serde_json::to_string(&contact_core::scene::presets::get("paper-exp1").unwrap()).unwrap();
+    let loads = "\"loads\":{";
+    assert!(scene.contains(loads), "{scene}");
+    let twice = scene.replacen(loads, &format!("{loads}\"f0\":[5,5],"), 1);
+    let escaped = scene.replacen(loads, &format!("{loads}\"f\\u0030\":[5,5],"), 1);
+    for (body, pointer) in [
+        (
+            r#"{"preset": "paper-exp1", "preset": "paper-exp2"}"#.to_string(),
+            "/preset",
+        ),
+        (
+            r#"{"preset": "paper-exp1", "overrides": {"h": "1/4", "h": "1/8"}}"#.to_string(),
+            "/overrides/h",
+        ),
+        (
+            r#"{"\u0070reset": "paper-exp1", "preset": "paper-exp2"}"#.to_string(),
+            "/preset",
+        ),
+        (
+            r#"{"study": {"preset": "paper-table-1", "preset": "paper-table-2"}}"#.to_string(),
+            "/study/preset",
+        ),
+        (twice, "/loads/f0"),
+        (escaped, "/loads/f0"),
+    ] {
+        let r = http(a, "POST", "/jobs", &ct, body.as_bytes());
+        let p = assert_problem(&r, 422);
+        assert_eq!(p["errors"][0]["pointer"], pointer, "{body}");
+        assert!(
+            p["detail"].as_str().unwrap().contains("more than once"),
+            "{p}"
+        );
+    }
+    assert_eq!(get(a, "/jobs").json()["jobs"], json!([]));
+    // The same scene without the repeat is a job.
+    let r = http(a, "POST", "/jobs", &ct, scene.as_bytes());
+    assert_eq!(r.status, 202, "{}", r.text());
+    srv.stop();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn idempotency_cancellation_and_unfinished_results() {
     let dir = temp_dir("cancel");

@@ -92,6 +92,19 @@ fn invalid_scene_exits_2_with_pointer() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/material/viscosity/eta"), "{err}");
+    // A key repeated in one object: refused as the service refuses it, at its pointer.
+    doc["material"]["viscosity"]["eta"] = Value::from(1.0);
+    let text = doc.to_string();
+    let twice = text.replacen("\"damage\":{", "\"damage\":{\"kappa\":1,\"kappa\":2,", 1);
+    assert_ne!(twice, text);
+    std::fs::write(&path, twice).unwrap();
+    let out = bin().arg("run").arg(&path).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("\"/damage/kappa\"") && err.contains("more than once"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -559,7 +559,8 @@ fn a_node_started_before_the_database_waits_for_it() {
         (f["status"].as_str(), f["worker"].as_str()),
         (Some("succeeded"), Some("early-w0"))
     );
-    // A TLS requirement is a configuration error, reported at once rather than waited on.
+    // TLS required of a server without it: a configuration error, reported at once rather
+    // than waited on.
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_contact-sim"))
         .args(["worker", "--data-dir"])
         .arg(&data)
@@ -568,7 +569,7 @@ fn a_node_started_before_the_database_waits_for_it() {
         .unwrap();
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("TLS is not supported"), "{err}");
+    assert!(err.contains("server does not support TLS"), "{err}");
 }
 
 /// Meshes on the shared store: uploaded through the API node (its row in the database, its

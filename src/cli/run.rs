@@ -158,7 +158,8 @@ fn load_scene(path: Option<&Path>, preset: Option<&str>) -> Result<Value, String
         (Some(p), None) => {
             let text = std::fs::read_to_string(p)
                 .map_err(|e| format!("cannot read {}: {e}", p.display()))?;
-            serde_json::from_str(&text).map_err(|e| format!("{}: invalid JSON: {e}", p.display()))
+            contact_sim::json_body::parse(text.as_bytes())
+                .map_err(|e| format!("{}: {e}", p.display()))
         }
     }
 }

@@ -49,6 +49,13 @@ pub struct ServeArgs {
         default_value_t = Config::default().header_timeout.as_secs_f64()
     )]
     pub header_timeout: f64,
+    /// Serve HTTPS with this PEM certificate chain (server certificate first); needs
+    /// --tls-key.
+    #[arg(long = "tls-cert", value_name = "PEM", requires = "tls_key")]
+    pub tls_cert: Option<std::path::PathBuf>,
+    /// The PEM private key of --tls-cert.
+    #[arg(long = "tls-key", value_name = "PEM", requires = "tls_cert")]
+    pub tls_key: Option<std::path::PathBuf>,
 }
 
 impl Default for ServeArgs {
@@ -81,6 +88,10 @@ impl ServeArgs {
             submit_rate: self.submit_rate,
             submit_burst: self.submit_burst,
             header_timeout,
+            tls: match (&self.tls_cert, &self.tls_key) {
+                (Some(cert), Some(key)) => Some(contact_sim::tls::ServerTls::load(cert, key)?),
+                _ => None,
+            },
             ..base
         })
     }
@@ -121,8 +132,13 @@ fn serve(addr: &str, config: Config) -> ExitCode {
             Err(e) => return fatal(&format!("cannot listen on {addr}: {e}")),
         };
         tracing::info!(
-            "contact-sim {} listening on http://{} (data in {}, store {}, node {}, {} workers)",
+            "contact-sim {} listening on {}://{} (data in {}, store {}, node {}, {} workers)",
             env!("CARGO_PKG_VERSION"),
+            if config.tls.is_some() {
+                "https"
+            } else {
+                "http"
+            },
             listener
                 .local_addr()
                 .map(|a| a.to_string())

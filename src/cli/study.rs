@@ -86,8 +86,8 @@ fn plans(files: &[PathBuf], presets: &[String]) -> Result<Vec<Plan>, String> {
     for f in files {
         let text =
             std::fs::read_to_string(f).map_err(|e| format!("cannot read {}: {e}", f.display()))?;
-        let mut v: Value =
-            serde_json::from_str(&text).map_err(|e| format!("{} is not JSON: {e}", f.display()))?;
+        let mut v = contact_sim::json_body::parse(text.as_bytes())
+            .map_err(|e| format!("{}: {e}", f.display()))?;
         if let Some(inner) = v.get_mut("study") {
             v = inner.take();
         }

@@ -314,8 +314,7 @@ pub async fn submit(
             ));
         }
     }
-    let doc: Value = serde_json::from_slice(&body)
-        .map_err(|e| Problem::bad_request(format!("malformed JSON: {e}")))?;
+    let doc: Value = crate::json_body::parse(&body)?;
     crate::limits::check_depth(&doc, state.rt.config.max_json_depth)?;
     // Validation meshes the body (and reads an uploaded mesh): on the blocking pool.
     let st = state.clone();

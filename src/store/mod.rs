@@ -14,6 +14,7 @@
 mod claim;
 pub mod meshes;
 pub mod postgres;
+pub mod postgres_tls;
 pub mod results;
 mod row;
 pub mod sqlite;

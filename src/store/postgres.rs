@@ -26,6 +26,7 @@
 //! * **Versioned migrations** in [`MIGRATIONS`], recorded in `contact_sim_schema` and
 //!   applied at connect under a session advisory lock, so nodes starting together migrate
 //!   once; a database migrated by a newer build is refused.
+//! * **TLS** as libpq's `sslmode` and `sslrootcert` in the URL (`super::postgres_tls`).
 //!
 //! All calls block (the `postgres` crate drives `tokio-postgres` on a private runtime):
 //! call them from worker threads or `spawn_blocking`, never from an async task.
@@ -35,7 +36,8 @@ use std::time::Duration;
 
 use postgres::error::SqlState;
 use postgres::fallible_iterator::FallibleIterator;
-use postgres::{Client, Config, GenericClient, NoTls, Row};
+use postgres::{Client, Config, GenericClient, Row};
+use tokio_postgres_rustls::MakeRustlsConnect;
 use uuid::Uuid;
 
 use super::claim::{verdict, Candidate, Verdict};
@@ -191,18 +193,30 @@ fn is_unavailable(e: &postgres::Error) -> bool {
     }
 }
 
+/// The error with its causes (`postgres::Error`'s own text is only the kind, e.g. "db
+/// error" or "error performing TLS handshake"; the server's message or the certificate
+/// problem is in the source chain).
+pub fn describe(e: &postgres::Error) -> String {
+    let mut text = e.to_string();
+    let mut cause = std::error::Error::source(e);
+    while let Some(c) = cause {
+        text.push_str(": ");
+        text.push_str(&c.to_string());
+        cause = c.source();
+    }
+    text
+}
+
 fn classify(e: postgres::Error) -> StoreError {
-    if e.to_string().contains("TLS") {
-        // Not transient: this build connects without TLS.
-        StoreError::Db(format!(
-            "{e}: TLS is not supported; connect over a private network (sslmode=disable or prefer)"
-        ))
+    if super::postgres_tls::is_tls_refusal(&e) {
+        // Not transient: waiting does not make a certificate trusted.
+        StoreError::Db(super::postgres_tls::explain(&describe(&e)))
     } else if is_unavailable(&e) {
-        StoreError::Unavailable(e.to_string())
+        StoreError::Unavailable(describe(&e))
     } else if e.code() == Some(&SqlState::UNDEFINED_TABLE) {
-        StoreError::Db(format!("{e} (is the schema migrated?)"))
+        StoreError::Db(format!("{} (is the schema migrated?)", describe(&e)))
     } else {
-        StoreError::Db(e.to_string())
+        StoreError::Db(describe(&e))
     }
 }
 
@@ -266,6 +280,8 @@ fn migrate(client: &mut Client) -> Result<(), StoreError> {
 /// The PostgreSQL-backed [`Store`]. See the module documentation for the design.
 pub struct PgStore {
     config: Config,
+    /// TLS of every connection (`sslmode`, `sslrootcert` of the URL; see `postgres_tls`).
+    tls: MakeRustlsConnect,
     /// One connection per process, shared by the API and the workers; None after a
     /// connection was lost (the next call connects again).
     conn: Mutex<Option<Client>>,
@@ -281,6 +297,10 @@ impl PgStore {
     /// Connects to `url` (`postgres://user@host:port/db`, or the key=value form), applies
     /// pending migrations and returns the store. Fails if the database cannot be reached.
     pub fn connect(url: &str) -> Result<PgStore, StoreError> {
+        let tls = super::postgres_tls::PgTls::parse(url)
+            .and_then(|t| Ok((t.connector()?, t.url)))
+            .map_err(StoreError::Db);
+        let (tls, url) = tls?;
         let mut config: Config = url
             .parse()
             .map_err(|e| StoreError::Db(format!("invalid PostgreSQL URL: {e}")))?;
@@ -298,10 +318,11 @@ impl PgStore {
         if config.get_application_name().is_none() {
             config.application_name("contact-sim");
         }
-        let mut client = config.connect(NoTls).map_err(classify)?;
+        let mut client = config.connect(tls.clone()).map_err(classify)?;
         migrate(&mut client)?;
         Ok(PgStore {
             config,
+            tls,
             conn: Mutex::new(Some(client)),
         })
     }
@@ -330,7 +351,7 @@ impl PgStore {
         let mut guard = self.lock();
         if guard.as_ref().is_none_or(|c| c.is_closed()) {
             *guard = None;
-            *guard = Some(self.config.connect(NoTls).map_err(classify)?);
+            *guard = Some(self.config.connect(self.tls.clone()).map_err(classify)?);
         }
         let client = guard.as_mut().expect("connected above");
         let result = f(client);
@@ -365,20 +386,20 @@ impl PgStore {
 /// after every (re)connection (notifications sent while disconnected are lost, so the
 /// workers must look for themselves), and once a minute regardless. Stops when `wake`
 /// returns false.
-fn listen(config: Config, wake: Wake) {
+fn listen(config: Config, tls: MakeRustlsConnect, wake: Wake) {
     let mut backoff = Duration::from_millis(100);
     loop {
-        let mut client = match config.connect(NoTls) {
+        let mut client = match config.connect(tls.clone()) {
             Ok(c) => c,
             Err(e) => {
-                tracing::warn!("job notifications: cannot connect: {e}");
+                tracing::warn!("job notifications: cannot connect: {}", describe(&e));
                 std::thread::sleep(backoff);
                 backoff = (backoff * 2).min(Duration::from_secs(5));
                 continue;
             }
         };
         if let Err(e) = client.batch_execute(&format!("LISTEN {CHANNEL}")) {
-            tracing::warn!("job notifications: LISTEN failed: {e}");
+            tracing::warn!("job notifications: LISTEN failed: {}", describe(&e));
             std::thread::sleep(backoff);
             continue;
         }
@@ -402,7 +423,7 @@ fn listen(config: Config, wake: Wake) {
                     }
                 }
                 Err(e) => {
-                    tracing::warn!("job notifications: connection lost: {e}");
+                    tracing::warn!("job notifications: connection lost: {}", describe(&e));
                     break;
                 }
                 Ok(None) => {
@@ -911,9 +932,10 @@ impl Store for PgStore {
     /// [`listen`]); it reconnects by itself after the database restarts.
     fn watch_for_work(&self, wake: Wake) -> Result<(), StoreError> {
         let config = self.config.clone();
+        let tls = self.tls.clone();
         std::thread::Builder::new()
             .name("pg-listen".into())
-            .spawn(move || listen(config, wake))
+            .spawn(move || listen(config, tls, wake))
             .map_err(StoreError::Io)?;
         Ok(())
     }

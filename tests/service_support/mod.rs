@@ -39,6 +39,15 @@ impl Proc {
         Proc::spawn(&full, "listening on http://")
     }
 
+    /// As [`Proc::start`] for a server that serves HTTPS (`ARGS` has `--tls-cert` and
+    /// `--tls-key`): waits for its "listening on https://ADDR" line.
+    pub fn start_https(data_dir: &Path, args: &[&str]) -> Proc {
+        let dir = data_dir.to_str().expect("UTF-8 path");
+        let mut full = vec!["serve", "--addr", "127.0.0.1:0", "--data-dir", dir];
+        full.extend_from_slice(args);
+        Proc::spawn(&full, "listening on https://")
+    }
+
     /// Starts a compute-only node, `contact-sim worker --data-dir DIR ARGS…`, and waits for
     /// its start-up line (`addr` is meaningless for it).
     pub fn worker(data_dir: &Path, args: &[&str]) -> Proc {

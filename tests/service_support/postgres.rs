@@ -19,6 +19,14 @@ pub struct Postgres {
     dir: PathBuf,
     pub port: u16,
     as_postgres: bool,
+    /// Server settings beyond the common ones (`-c name=value …`).
+    extra_opts: String,
+}
+
+/// A server certificate chain and key (PEM) for [`Postgres::start_tls`].
+pub struct ServerCert<'a> {
+    pub chain: &'a str,
+    pub key: &'a str,
 }
 
 /// The newest installed server's binary directory.
@@ -51,6 +59,18 @@ impl Postgres {
     /// Starts a fresh server, or None (skip) when PostgreSQL is not installed and `CI` is
     /// not set.
     pub fn start(tag: &str) -> Option<Postgres> {
+        Postgres::start_with(tag, None)
+    }
+
+    /// As [`Postgres::start`], with TLS on (`ssl=on`, the given certificate) and every TCP
+    /// connection without TLS refused (`hostnossl … reject` first in `pg_hba.conf`), so that
+    /// a connection that succeeds is encrypted; the role `scram`, if created, authenticates
+    /// with SCRAM-SHA-256.
+    pub fn start_tls(tag: &str, cert: ServerCert) -> Option<Postgres> {
+        Postgres::start_with(tag, Some(cert))
+    }
+
+    fn start_with(tag: &str, tls: Option<ServerCert>) -> Option<Postgres> {
         let Some(bin) = find_bin() else {
             if std::env::var_os("CI").is_some() {
                 panic!(
@@ -77,11 +97,12 @@ impl Postgres {
             .and_then(|l| l.local_addr())
             .unwrap()
             .port();
-        let pg = Postgres {
+        let mut pg = Postgres {
             bin,
             dir,
             port,
             as_postgres,
+            extra_opts: String::new(),
         };
         let data = pg.data_dir();
         pg.run(
@@ -98,8 +119,45 @@ impl Postgres {
                 "--no-sync",
             ],
         );
+        if let Some(cert) = tls {
+            pg.enable_tls(cert);
+        }
         pg.ctl_start();
         Some(pg)
+    }
+
+    /// Writes the certificate and key next to the data directory (the key readable by the
+    /// server's user only, as PostgreSQL demands) and refuses TCP connections without TLS.
+    fn enable_tls(&mut self, cert: ServerCert) {
+        use std::os::unix::fs::PermissionsExt;
+        let crt = self.dir.join("server.crt");
+        let key = self.dir.join("server.key");
+        std::fs::write(&crt, cert.chain).unwrap();
+        std::fs::write(&key, cert.key).unwrap();
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let hba = self.data_dir().join("pg_hba.conf");
+        let rules = std::fs::read_to_string(&hba).unwrap();
+        // The role `scram` (created by the test that uses it) logs in with a password.
+        std::fs::write(
+            &hba,
+            format!("hostnossl all all all reject\nhostssl all scram all scram-sha-256\n{rules}"),
+        )
+        .unwrap();
+        if self.as_postgres {
+            for f in [&crt, &key] {
+                let ok = Command::new("chown")
+                    .arg("postgres:postgres")
+                    .arg(f)
+                    .status()
+                    .is_ok_and(|s| s.success());
+                assert!(ok, "chown {} to the postgres user failed", f.display());
+            }
+        }
+        self.extra_opts = format!(
+            " -c ssl=on -c ssl_cert_file='{}' -c ssl_key_file='{}'",
+            crt.display(),
+            key.display()
+        );
     }
 
     fn data_dir(&self) -> PathBuf {
@@ -158,9 +216,10 @@ impl Postgres {
         let data = self.data_dir();
         let opts = format!(
             "-p {} -c listen_addresses=127.0.0.1 -c unix_socket_directories='{}' -c fsync=off \
-             -c max_connections=200",
+             -c max_connections=200{}",
             self.port,
-            self.dir.display()
+            self.dir.display(),
+            self.extra_opts
         );
         let log = self.dir.join("server.log");
         self.run(
