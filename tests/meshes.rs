@@ -655,6 +655,20 @@ fn hostile_uploads_are_refused_with_a_reason() {
 
 /// The plate-with-hole preset on the uploaded mesh `id`, under `name`, with `steps` steps
 /// over t_end = 1 storing only the last.
+/// Submits a study, waits for it to succeed and returns the rows of its table.
+fn study_rows(a: std::net::SocketAddr, study: &Value) -> Vec<Value> {
+    let r = post_json(a, "/jobs", study);
+    assert_eq!(r.status, 202, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let done = wait_status(a, &id, &["succeeded", "failed"], Duration::from_secs(300));
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let table = get(a, &format!("/jobs/{id}/summary")).json();
+    table["rows"]
+        .as_array()
+        .unwrap_or_else(|| panic!("{table}"))
+        .clone()
+}
+
 fn plate_scene(id: &str, name: &str, steps: usize) -> Value {
     let mut s = contact_core::scene::presets::get("plate-with-hole").unwrap();
     s["name"] = json!(name);
@@ -760,20 +774,7 @@ fn jobs_on_uploaded_meshes() {
     // A study of the uploaded mesh: its levels are red refinements; h is refused there.
     let study = json!({"study": {"scene": plate_scene(&a_id, "s", 8), "refine": [0, 1], "k": "1/8",
                                  "reference": {"refine": 2, "k": "1/8"}}});
-    let r = post_json(a, "/jobs", &study);
-    assert_eq!(r.status, 202, "{}", r.text());
-    let study_job = r.json()["id"].as_str().unwrap().to_string();
-    let done = wait_status(
-        a,
-        &study_job,
-        &["succeeded", "failed"],
-        Duration::from_secs(180),
-    );
-    assert_eq!(done["status"], "succeeded", "{done}");
-    let table = get(a, &format!("/jobs/{study_job}/summary")).json();
-    let rows = table["rows"]
-        .as_array()
-        .unwrap_or_else(|| panic!("{table}"));
+    let rows = study_rows(a, &study);
     assert_eq!(rows.len(), 2);
     assert!(rows[1]["err_w"].as_f64().unwrap() < rows[0]["err_w"].as_f64().unwrap());
     let with_h = json!({"study": {"scene": plate_scene(&a_id, "s", 8), "h": "1/4", "k": ["1/4", "1/8"],
@@ -827,27 +828,14 @@ fn jobs_on_uploaded_meshes() {
     // A study of the uploaded tetrahedra: its levels are Bey refinements of the upload.
     let study = json!({"study": {"scene": solid, "refine": [0, 1], "k": "1/4",
                                  "reference": {"refine": 2, "k": "1/4"}}});
-    let r = post_json(a, "/jobs", &study);
-    assert_eq!(r.status, 202, "{}", r.text());
-    let study_job = r.json()["id"].as_str().unwrap().to_string();
-    let done = wait_status(
-        a,
-        &study_job,
-        &["succeeded", "failed"],
-        Duration::from_secs(300),
-    );
-    assert_eq!(done["status"], "succeeded", "{done}");
-    let table = get(a, &format!("/jobs/{study_job}/summary")).json();
-    let rows = table["rows"]
-        .as_array()
-        .unwrap_or_else(|| panic!("{table}"));
-    assert_eq!(rows.len(), 2, "{table}");
-    for row in rows {
+    let rows = study_rows(a, &study);
+    assert_eq!(rows.len(), 2, "{rows:?}");
+    for row in &rows {
         assert!(row["worst_residual"].as_f64().unwrap() <= 1e-10, "{row}");
     }
     assert!(
         rows[1]["err_w"].as_f64().unwrap() < rows[0]["err_w"].as_f64().unwrap(),
-        "{table}"
+        "{rows:?}"
     );
     // Each Bey refinement multiplies the free velocity DOFs by about 8 (3 per new node).
     let unknowns: Vec<u64> = rows

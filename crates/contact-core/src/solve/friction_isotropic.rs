@@ -55,62 +55,10 @@ use super::{SolveError, SolverReport, SolverSettings};
 use crate::problem::FrictionLaw;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
-use faer::{Accum, Conj, Mat, MatMut, MatRef, Par};
-use nalgebra::DMatrix;
+use faer::{Conj, Mat, MatMut, Par};
 
-/// The reduced problem's data.
-pub struct Reduced<'a> {
-    /// 2m × 2m, DOFs 2i and 2i + 1 the two tangential components at node i.
-    pub s: &'a DMatrix<f64>,
-    /// Length 2m, ordered as S.
-    pub b: &'a [f64],
-    /// ω_i, one per node (length m).
-    pub weights: &'a [f64],
-    pub law: &'a FrictionLaw,
-    /// Force scale of the relative residual; None: ‖b‖_∞. The velocity step passes the
-    /// scale of its full load so both residuals are relative to the same quantity.
-    pub scale: Option<f64>,
-}
-
-impl Reduced<'_> {
-    /// Number of contact nodes m.
-    fn m(&self) -> usize {
-        self.weights.len()
-    }
-
-    /// g = S x − b.
-    pub fn gradient(&self, x: &[f64]) -> Vec<f64> {
-        let mut g = vec![0.0; x.len()];
-        mul(self.s, x, &mut g);
-        g.iter_mut().zip(self.b).for_each(|(g, b)| *g -= b);
-        g
-    }
-
-    /// Φ(x).
-    pub fn energy(&self, x: &[f64]) -> f64 {
-        let g = self.gradient(x);
-        let quadratic: f64 = x
-            .iter()
-            .zip(&g)
-            .zip(self.b)
-            .map(|((x, g), b)| 0.5 * x * (g - b))
-            .sum();
-        quadratic + friction_energy(self, x)
-    }
-
-    /// Scale of the problem's forces, for relative residuals.
-    fn scale(&self) -> f64 {
-        let b = self.b.iter().fold(0.0f64, |s, v| s.max(v.abs()));
-        self.scale.unwrap_or(b).max(f64::MIN_POSITIVE)
-    }
-
-    /// Relative KKT residual: the largest violation of the stick/slip conditions above,
-    /// divided by the scale (given, or ‖b‖_∞).
-    pub fn residual(&self, x: &[f64]) -> f64 {
-        let g = self.gradient(x);
-        kkt_violation(&g, x, self.weights, self.law) / self.scale()
-    }
-}
+use super::reduced::mul;
+pub use super::reduced::Reduced;
 
 /// max over nodes of the distance of −g_i to ω_i ∂j(|·|)(x_i) (Clarke subdifferential):
 /// stick (x_i = 0): max(|g_i| − ω_i μ(0), 0); slip: |g_i + ω_i μ(|x_i|) x_i/|x_i||.
@@ -162,7 +110,7 @@ pub fn solve(
     settings: &SolverSettings,
     step: usize,
 ) -> Result<SolverReport, SolveError> {
-    let m = p.m();
+    let m = p.nodes();
     let n = 2 * m;
     assert!(
         p.s.nrows() == n && p.s.ncols() == n && p.b.len() == n && x.len() == n,
@@ -286,7 +234,7 @@ pub fn solve(
         }
         // Stalled: no better residual than before, and Φ decreasing by no more than its own
         // rounding (relative to the size of its terms).
-        let size = 0.5 * dot(x, &g).abs() + 1.5 * dot(x, p.b).abs() + friction_energy(p, x);
+        let size = 0.5 * dot(x, &g).abs() + 1.5 * dot(x, p.b).abs() + p.friction_energy(x);
         let noise = best.change >= -100.0 * f64::EPSILON * size;
         stalled = if residual >= lowest && noise {
             stalled + 1
@@ -499,7 +447,7 @@ fn energy_change(p: &Reduced, x: &[f64], g: &[f64], d: &[f64], sd: &[f64]) -> f6
         .zip(sd)
         .map(|((d, g), sd)| d * (g + 0.5 * sd))
         .sum();
-    let friction: f64 = (0..p.m())
+    let friction: f64 = (0..p.nodes())
         .filter(|&i| p.weights[i] != 0.0)
         .map(|i| {
             let xi = node(x, i);
@@ -558,26 +506,6 @@ fn potential_change(law: &FrictionLaw, r0: f64, r1: f64, dr: f64) -> f64 {
             }
         }
     }
-}
-
-/// out = S v, with faer's kernel on S's own storage (S is never copied).
-fn mul(s: &DMatrix<f64>, v: &[f64], out: &mut [f64]) {
-    let n = v.len();
-    faer::linalg::matmul::matmul(
-        MatMut::from_column_major_slice_mut(out, n, 1),
-        Accum::Replace,
-        MatRef::from_column_major_slice(s.as_slice(), n, n),
-        MatRef::from_column_major_slice(v, n, 1),
-        1.0,
-        Par::Seq,
-    );
-}
-
-/// Σ_i ω_i j(|x_i|).
-fn friction_energy(p: &Reduced, x: &[f64]) -> f64 {
-    (0..p.m())
-        .map(|i| p.weights[i] * p.law.potential(norm(node(x, i))))
-        .sum()
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {

@@ -19,55 +19,8 @@
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::linalg::dense::solve_principal;
 use crate::problem::FrictionLaw;
-use nalgebra::DMatrix;
 
-/// The reduced problem's data.
-pub struct Reduced<'a> {
-    pub s: &'a DMatrix<f64>,
-    pub b: &'a [f64],
-    pub weights: &'a [f64],
-    pub law: &'a FrictionLaw,
-    /// Force scale of the relative residual; None: ‖b‖_∞. The velocity step passes the
-    /// scale of its full load so both residuals are relative to the same quantity.
-    pub scale: Option<f64>,
-}
-
-impl Reduced<'_> {
-    fn m(&self) -> usize {
-        self.b.len()
-    }
-
-    /// g = S x − b.
-    pub fn gradient(&self, x: &[f64]) -> Vec<f64> {
-        let m = self.m();
-        (0..m)
-            .map(|i| (0..m).map(|j| self.s[(i, j)] * x[j]).sum::<f64>() - self.b[i])
-            .collect()
-    }
-
-    /// Φ(x).
-    pub fn energy(&self, x: &[f64]) -> f64 {
-        let g = self.gradient(x);
-        (0..self.m())
-            .map(|i| {
-                0.5 * x[i] * (g[i] - self.b[i]) + self.weights[i] * self.law.potential(x[i].abs())
-            })
-            .sum()
-    }
-
-    /// Scale of the problem's forces, for relative residuals.
-    fn scale(&self) -> f64 {
-        let b = self.b.iter().fold(0.0f64, |s, v| s.max(v.abs()));
-        self.scale.unwrap_or(b).max(f64::MIN_POSITIVE)
-    }
-
-    /// Relative KKT residual: max over nodes of the violation of the stick/slip conditions
-    /// above, divided by ‖b‖_∞.
-    pub fn residual(&self, x: &[f64]) -> f64 {
-        let g = self.gradient(x);
-        kkt_violation(&g, x, self.weights, self.law) / self.scale()
-    }
-}
+pub use super::reduced::Reduced;
 
 /// max_i of the distance of −g_i to ω_i ∂j(x_i) (Clarke subdifferential).
 pub fn kkt_violation(g: &[f64], x: &[f64], weights: &[f64], law: &FrictionLaw) -> f64 {
@@ -128,7 +81,7 @@ pub fn solve(
     settings: &SolverSettings,
     step: usize,
 ) -> Result<SolverReport, SolveError> {
-    let m = p.m();
+    let m = p.nodes();
     // Lipschitz bound of ∇ of the smooth part (Gershgorin) for the proximal-gradient fallback.
     let lip = (0..m)
         .map(|i| (0..m).map(|j| p.s[(i, j)].abs()).sum::<f64>())
@@ -194,7 +147,7 @@ pub fn solve(
 fn newton_candidate(p: &Reduced, x: &[f64], g: &[f64]) -> Option<Vec<f64>> {
     let mut slip = Vec::new();
     let mut sign = Vec::new();
-    for i in 0..p.m() {
+    for i in 0..p.nodes() {
         let z = p.s[(i, i)] * x[i] - g[i];
         if z.abs() > p.weights[i] * p.law.mu(0.0) {
             slip.push(i);
@@ -208,7 +161,7 @@ fn newton_candidate(p: &Reduced, x: &[f64], g: &[f64]) -> Option<Vec<f64>> {
 /// from `x`, with every other DOF stuck at 0. For Tresca μ' = 0 and this is the exact
 /// solution for that partition.
 fn newton_on_partition(p: &Reduced, x: &[f64], slip: &[usize], sign: &[f64]) -> Option<Vec<f64>> {
-    let mut y = vec![0.0; p.m()];
+    let mut y = vec![0.0; p.nodes()];
     for &i in slip {
         y[i] = x[i];
     }
@@ -236,6 +189,7 @@ fn newton_on_partition(p: &Reduced, x: &[f64], slip: &[usize], sign: &[f64]) -> 
 mod tests {
     use super::*;
 
+    use nalgebra::DMatrix;
     use proptest::prelude::RngExt;
     use proptest::test_runner::{RngAlgorithm, TestRng};
 

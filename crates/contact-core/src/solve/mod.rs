@@ -6,6 +6,7 @@ pub mod damage;
 pub mod friction_isotropic;
 pub mod friction_reduced;
 pub mod invariants;
+pub mod reduced;
 pub mod smallness;
 pub mod stepper;
 pub mod velocity;

@@ -1,4 +1,5 @@
 use super::*;
+use nalgebra::DMatrix;
 
 use proptest::prelude::RngExt;
 use proptest::test_runner::{RngAlgorithm, TestRng};
