@@ -77,6 +77,11 @@ fn whole_lifecycle_over_http() {
 
     let job = get(a, &format!("/jobs/{id}"));
     assert_eq!(job.json()["status"], "succeeded");
+    // The overrides show in the resource: runs of one preset are told apart.
+    assert_eq!(
+        job.json()["resolution"],
+        json!({"h": "1/8", "refine": null, "k": "1/8", "steps": 8, "t_end": 1})
+    );
     assert!(job.header("retry-after").is_none());
     let etag = job.header("etag").unwrap().to_string();
     assert_eq!(

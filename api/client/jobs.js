@@ -60,6 +60,21 @@ export function labelText(label) {
   return parts.join(' · ');
 }
 
+/**
+ * The label of a job submitted elsewhere (another browser, curl, Python), from the
+ * resolution the job resource carries: h (or the mesh's refinements), k (or N) and T.
+ */
+export function resourceLabel(job) {
+  const r = job.resolution;
+  if (!r) return null;
+  const label = {};
+  if (r.h != null) label.h = r.h;
+  if (r.refine != null) label.mesh = `refine ${r.refine}`;
+  label.k = r.k != null ? r.k : `T/${r.steps}`;
+  if (r.t_end != null) label.T = r.t_end;
+  return label;
+}
+
 export class JobList {
   /**
    * `root`: an empty <ul>. `onSelect(job)`: the user picked a job. `onUpdate(job)`: a job's
@@ -263,7 +278,7 @@ export class JobList {
     r.status.textContent = j.status;
     r.status.className = `status s-${j.status}`;
     r.progress.value = j.status === 'succeeded' ? 100 : p.percent ?? 0;
-    const label = labelText(labels[j.id]);
+    const label = labelText(labels[j.id] || resourceLabel(j));
     r.label.textContent = label;
     r.label.hidden = !label;
     r.detail.textContent = detail;

@@ -74,6 +74,16 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
         "worker": rec.worker,
         "last_checkpoint_step": rec.last_checkpoint_step,
         "scene_hash": rec.scene_hash,
+        "resolution": (!study).then(|| {
+            let (mesh, time) = (&rec.scene["mesh"], &rec.scene["time"]);
+            json!({
+                "h": mesh.get("h"),
+                "refine": mesh.get("refine"),
+                "k": time.get("k"),
+                "steps": progress.steps,
+                "t_end": time.get("t_end"),
+            })
+        }),
         "links": links,
     })
 }

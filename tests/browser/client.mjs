@@ -619,8 +619,16 @@ async function testStudyView() {
   }
   check(job.status === 'succeeded' && job.kind === 'study', `study ${job.status}`);
   const summary = await (await request.get(`${base}/jobs/${id}/summary`)).json();
+  // A simulation submitted elsewhere (not from this browser): its entry is labelled from the
+  // resolution in the job resource.
+  const elsewhere = await request.post(`${base}/jobs`, { data: { preset: 'paper-exp1', overrides: { h: '1/4', k: '1/8' } } });
+  const elsewhereId = (await elsewhere.json()).id;
   const page = await openPage(async () => {}, `#job=${id}`);
   await page.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 10_000 });
+  const elsewhereLabel = `#job-list li.job[data-id="${elsewhereId}"] .job-label`;
+  await page.waitForSelector(`${elsewhereLabel}:not([hidden])`, { timeout: 10_000 });
+  const elsewhereText = await page.textContent(elsewhereLabel);
+  check(elsewhereText === 'h 1/4 · k 1/8 · T 1', `a job submitted elsewhere is labelled from its resource ("${elsewhereText}")`);
   const rows = await page.$$eval('#study-table tbody tr', (trs) => trs.map((tr) => [...tr.cells].map((c) => c.textContent)));
   check(rows.length === 3, `${rows.length} table rows`);
   const order = Number(summary.rows[1].order_w).toFixed(3);
