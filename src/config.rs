@@ -44,6 +44,9 @@ pub struct Config {
     /// Time a client has to send a complete request head (slow or silent clients are
     /// disconnected).
     pub header_timeout: std::time::Duration,
+    /// Whether requests need an API key (see `crate::auth`); with `Required`, the node
+    /// refuses to start while the store has no active key.
+    pub auth: crate::auth::AuthMode,
 }
 
 impl Default for Config {
@@ -66,6 +69,7 @@ impl Default for Config {
             submit_rate: 10.0,
             submit_burst: 50,
             header_timeout: std::time::Duration::from_secs(30),
+            auth: crate::auth::AuthMode::Off,
         }
     }
 }
