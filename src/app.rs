@@ -1,10 +1,10 @@
 //! The router and the server: `app(state)` returns the Router (tests call it on an ephemeral
 //! port), `serve` runs it with the worker pool until shutdown.
 
+use crate::limits;
 use crate::problem::Problem;
-use crate::routes::{client, jobs, meshes, misc, results};
+use crate::routes::{auth, client, jobs, meshes, misc, results};
 use crate::state::AppState;
-use crate::{auth, limits};
 use axum::extract::DefaultBodyLimit;
 use axum::http::StatusCode;
 use axum::routing::{get, post};
@@ -48,10 +48,7 @@ pub fn app(state: AppState) -> Router {
         })
         .layer(DefaultBodyLimit::max(limit))
         .layer(middleware::from_fn_with_state(limiter, limits::rate_limit))
-        .layer(middleware::from_fn_with_state(
-            state.clone(),
-            auth::middleware::layer,
-        ))
+        .layer(middleware::from_fn_with_state(state.clone(), auth::layer))
         .layer(middleware::from_fn(limits::problem_json_errors))
         .with_state(state)
 }

@@ -7,7 +7,7 @@
 //! whole /64), which needs `ConnectInfo<SocketAddr>` (the accept loop in `server` attaches
 //! it to every request). A request without that information (a router driven in-process)
 //! is not rate-limited. With authentication on, a request with an API key is limited per
-//! key instead, by `crate::auth::middleware` (many users may share one address).
+//! key instead, by `crate::routes::auth` (many users may share one address).
 
 use super::problem::Problem;
 use axum::extract::{ConnectInfo, Request, State};
@@ -136,7 +136,7 @@ pub async fn rate_limit(
     req: Request,
     next: Next,
 ) -> Response {
-    // A request with an API key is limited per key instead (`crate::auth::middleware`).
+    // A request with an API key is limited per key instead (`crate::routes::auth`).
     let keyed = matches!(
         req.extensions().get::<crate::auth::Caller>(),
         Some(crate::auth::Caller::Key(_))

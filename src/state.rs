@@ -21,8 +21,10 @@ pub struct AppState {
     pub(crate) closing_tx: Arc<tokio::sync::watch::Sender<bool>>,
     /// Submission rate per client (see `limits`).
     pub limiter: Arc<RateLimiter>,
-    /// Keys, the per-key submission rate (see `auth`).
-    pub auth: Arc<crate::auth::middleware::AuthState>,
+    /// Whether requests need a key (see `auth`).
+    pub auth: crate::auth::AuthMode,
+    /// Submission rate per API key, with authentication on (see `routes::auth`).
+    pub key_limiter: Arc<RateLimiter<governor::clock::MonotonicClock, String>>,
 }
 
 impl AppState {
@@ -36,8 +38,8 @@ impl AppState {
 /// Blocking: with a PostgreSQL store, call it outside the async runtime's threads.
 pub fn start(config: Config) -> Result<AppState, String> {
     let limiter = Arc::new(RateLimiter::new(config.submit_rate, config.submit_burst));
-    let auth = Arc::new(crate::auth::middleware::AuthState::new(
-        config.auth,
+    let auth = config.auth;
+    let key_limiter = Arc::new(RateLimiter::per_key(
         config.submit_rate,
         config.submit_burst,
     ));
@@ -49,6 +51,7 @@ pub fn start(config: Config) -> Result<AppState, String> {
         closing_tx: Arc::new(tx),
         limiter,
         auth,
+        key_limiter,
     })
 }
 

@@ -6,12 +6,11 @@
 //! laptop's service always did.
 //!
 //! * [`keys`]: tokens (256 random bits, shown once, stored as SHA-256) and their check.
-//! * [`middleware`]: the layer that resolves the caller, refuses (401, 404, 429) and writes
-//!   the audit log.
 //! * [`quota`]: per-key quotas at submission and upload.
+//! * The layer in front of the routes that resolves the caller, refuses (401, 404, 429) and
+//!   writes the audit log is `crate::routes::auth`.
 
 pub mod keys;
-pub mod middleware;
 pub mod quota;
 
 use crate::store::owners::KeyRecord;

@@ -103,6 +103,14 @@ fn check_bytes(limit: Option<u64>, usage: &Usage, more: u64, what: &str) -> Resu
     }
 }
 
+/// RFC 3339 UTC time of a Unix time in whole seconds (a quota's reset).
+fn rfc3339(unix: f64) -> String {
+    jiff::Timestamp::from_second(unix as i64)
+        .unwrap_or(jiff::Timestamp::UNIX_EPOCH)
+        .strftime("%Y-%m-%dT%H:%M:%SZ")
+        .to_string()
+}
+
 /// The problem of a quota: `/problems/quota-exceeded` with a `quota` member.
 fn over(
     status: StatusCode,
@@ -118,7 +126,7 @@ fn over(
         "name": name,
         "limit": limit,
         "used": used,
-        "reset": reset.map(crate::routes::rfc3339),
+        "reset": reset.map(rfc3339),
     })));
     p
 }

@@ -458,7 +458,7 @@ pub async fn list(
     let limit = q.limit.map_or(50, |l| l.0);
     let cursor = q.cursor.map(|c| c.0);
     let asked = q.owner.clone();
-    let owner = crate::auth::middleware::list_scope(&caller, q.owner)?;
+    let owner = super::auth::list_scope(&caller, q.owner)?;
     let store = state.store().clone();
     let page =
         blocking(move || Ok(store.list_for(owner.as_deref(), status, cursor.as_deref(), limit)?))

@@ -46,7 +46,7 @@ pub async fn healthz(State(state): State<AppState>) -> Result<Json<Value>, Probl
         "store": if state.rt.config.store.is_some() { "postgres" } else { "sqlite" },
         "version": env!("CARGO_PKG_VERSION"),
     });
-    if let Some(w) = state.auth.mode.warning() {
+    if let Some(w) = state.auth.warning() {
         health["warning"] = json!(w);
     }
     Ok(Json(health))

@@ -228,7 +228,8 @@ pub trait Store: owners::Owners + Send + Sync + 'static {
     ) -> Result<Page, StoreError>;
     /// Claims the oldest queued job, or a running job whose lease expired (a dead worker's:
     /// its attempt counter is incremented), for `worker` until now + `lease_s`; fair
-    /// across owners: the oldest among the jobs of the owners with the fewest running.
+    /// across owners: the oldest job of the owner with the fewest running, and of those the
+    /// one served least recently.
     /// Jobs whose last `max_attempts` attempts all died without saving a new checkpoint are
     /// failed instead of claimed (dead letter); attempts that made progress do not count.
     fn claim(

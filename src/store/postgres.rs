@@ -8,7 +8,7 @@
 //!   checkpoint blob lives in its own table (`checkpoints`), so the heartbeats that rewrite a
 //!   job row every few seconds never copy it.
 //! * **Claiming is `SELECT … FOR UPDATE SKIP LOCKED`** on the oldest claimable row of the
-//!   owners with the fewest running jobs (fair across owners): workers of any number of processes never wait on each other's claims and never claim the same
+//!   owners with the fewest running jobs, least recently served first (fair across owners): workers of any number of processes never wait on each other's claims and never claim the same
 //!   row (the row lock is held until the claiming transaction commits). What becomes of the
 //!   claimed row (cancelled, dead letter, running) is both stores' one claim policy
 //!   (`super::claim`, see [`Store::claim`]).
@@ -138,6 +138,10 @@ const MIGRATIONS: &[&str] = &[
         PRIMARY KEY (owner, id)
     );
     CREATE INDEX mesh_owners_id ON mesh_owners (id);
+    CREATE TABLE owner_turns (
+        owner      text PRIMARY KEY,
+        last_claim float8 NOT NULL
+    );
     INSERT INTO mesh_owners (owner, id, created_at) SELECT '', id, created_at FROM meshes;
     ",
 ];
@@ -480,10 +484,11 @@ impl PgStore {
                                 WHERE status = 'running'
                                   AND COALESCE(lease_until, 0) >= {NOW_S}
                                 GROUP BY owner) r ON r.owner = j.owner
+                     LEFT JOIN owner_turns t ON t.owner = j.owner
                      WHERE j.status IN ('queued', 'running')
                        AND ((j.status = 'queued' AND NOT j.cancel_requested)
                             OR (j.status = 'running' AND COALESCE(j.lease_until, 0) < {NOW_S}))
-                     ORDER BY COALESCE(r.n, 0), j.seq LIMIT 1
+                     ORDER BY COALESCE(r.n, 0), COALESCE(t.last_claim, 0), j.seq LIMIT 1
                      FOR UPDATE OF j SKIP LOCKED"
                 )
                 .as_str(),
@@ -541,6 +546,14 @@ impl PgStore {
                 &[&id, &worker, &lease_s, &stalls],
             )?;
             let raw = raw_job(&raw)?;
+            tx.execute(
+                format!(
+                    "INSERT INTO owner_turns (owner, last_claim) VALUES ($1, {NOW_S})
+                     ON CONFLICT (owner) DO UPDATE SET last_claim = excluded.last_claim"
+                )
+                .as_str(),
+                &[&raw.owner],
+            )?;
             tx.commit()?;
             return Ok(Some(raw));
         }
@@ -679,8 +692,8 @@ impl Store for PgStore {
         into_page(raws, limit)
     }
 
-    /// `FOR UPDATE SKIP LOCKED` on the oldest claimable row among the owners with the fewest
-    /// running jobs; otherwise the rules of
+    /// `FOR UPDATE SKIP LOCKED` on the oldest claimable row of the owner with the fewest
+    /// running jobs and the oldest last claim (`owner_turns`); otherwise the rules of
     /// [`Store::claim`] (dead letter after `max_attempts` claims in a row without a new
     /// checkpoint, expired cancel-requested jobs become cancelled).
     fn claim(

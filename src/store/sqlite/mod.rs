@@ -184,6 +184,10 @@ const MIGRATIONS: &[&str] = &[
         UNIQUE (owner, id)
     );
     CREATE INDEX mesh_owners_id ON mesh_owners (id);
+    CREATE TABLE owner_turns (
+        owner      TEXT PRIMARY KEY NOT NULL,
+        last_claim REAL NOT NULL
+    );
     INSERT INTO mesh_owners (owner, id, created_at) SELECT '', id, created_at FROM meshes;
     ",
 ];
@@ -364,9 +368,10 @@ impl SqliteStore {
                      LEFT JOIN (SELECT owner, COUNT(*) AS n FROM jobs
                                 WHERE status = 'running' AND COALESCE(lease_until, 0) >= ?1
                                 GROUP BY owner) r ON r.owner = j.owner
+                     LEFT JOIN owner_turns t ON t.owner = j.owner
                      WHERE (j.status = 'queued' AND j.cancel_requested = 0)
                         OR (j.status = 'running' AND COALESCE(j.lease_until, 0) < ?1)
-                     ORDER BY COALESCE(r.n, 0), j.seq LIMIT 1",
+                     ORDER BY COALESCE(r.n, 0), COALESCE(t.last_claim, 0), j.seq LIMIT 1",
                     params![now],
                     |r| {
                         Ok((
@@ -411,6 +416,12 @@ impl SqliteStore {
                                 stalls = ?5, claim_step = checkpoint_step
                          WHERE id = ?1",
                         params![id, worker, now + lease_s, now, stalls],
+                    )?;
+                    tx.execute(
+                        "INSERT INTO owner_turns (owner, last_claim)
+                         SELECT owner, ?2 FROM jobs WHERE id = ?1
+                         ON CONFLICT (owner) DO UPDATE SET last_claim = excluded.last_claim",
+                        params![id, now],
                     )?;
                 }
             }
@@ -633,10 +644,11 @@ impl Store for SqliteStore {
 
     /// In one immediate transaction, takes a job that is either `queued` (and not
     /// cancel-requested) or `running` with an expired lease (`lease_until < now`: its
-    /// worker died or hung) — the oldest (lowest `seq`) of those whose owner has the fewest
-    /// jobs running, so that one owner's thousand queued jobs do not starve another's one
-    /// (with a single owner, as without authentication, simply the oldest) — and applies
-    /// the claim policy
+    /// worker died or hung) — fairly across owners: of the owners with the fewest jobs
+    /// running, the one whose last claim is the oldest (`owner_turns`), its oldest job
+    /// (lowest `seq`), so that one owner's thousand queued jobs do not starve another's one
+    /// even with a single worker (with a single owner, as without authentication, simply
+    /// the oldest job) — and applies the claim policy
     /// (`super::claim`, the same for both backends):
     ///
     /// * If that job was already claimed `max_attempts` times in a row without saving a

@@ -5,9 +5,9 @@
 //!
 //! Meshes are checked by their handlers, which answer with the owner's view of a mesh.
 
-use super::keys::{authenticate, bearer};
-use super::{AuthMode, Caller};
-use crate::limits::{is_submission, RateLimiter};
+use crate::auth::keys::{authenticate, bearer};
+use crate::auth::{AuthMode, Caller};
+use crate::limits::is_submission;
 use crate::problem::Problem;
 use crate::state::AppState;
 use axum::extract::{ConnectInfo, Request, State};
@@ -17,22 +17,6 @@ use axum::response::{IntoResponse, Response};
 use std::net::SocketAddr;
 use std::sync::Arc;
 use uuid::Uuid;
-
-/// What the layer keeps between requests.
-pub struct AuthState {
-    pub mode: AuthMode,
-    /// Submissions per key (the per-address limit's rate and burst).
-    pub limiter: RateLimiter<governor::clock::MonotonicClock, String>,
-}
-
-impl AuthState {
-    pub fn new(mode: AuthMode, rate: f64, burst: u32) -> AuthState {
-        AuthState {
-            mode,
-            limiter: RateLimiter::per_key(rate, burst),
-        }
-    }
-}
 
 /// Routes served without a key: the browser client (it asks for the key), the API
 /// description, the presets, and `/healthz` (bare liveness without an admin key).
@@ -71,9 +55,8 @@ pub fn unauthorized() -> Response {
 
 /// The middleware (see the module documentation).
 pub async fn layer(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
-    let auth = state.auth.clone();
     let path = req.uri().path().to_owned();
-    let caller = match auth.mode {
+    let caller = match state.auth {
         AuthMode::Off | AuthMode::OffExposed => Caller::Anonymous,
         AuthMode::Required => match resolve(&state, token_of(&req)).await {
             Ok(Some(c)) => c,
@@ -98,13 +81,14 @@ pub async fn layer(State(state): State<AppState>, mut req: Request, next: Next) 
     }
     if let Caller::Key(key) = &caller {
         if is_submission(&req) {
-            if let Err(wait) = auth.limiter.take(key.name.clone()) {
+            let limiter = &state.key_limiter;
+            if let Err(wait) = limiter.take(key.name.clone()) {
                 return Problem::new(
                     StatusCode::TOO_MANY_REQUESTS,
                     "too many requests",
                     format!(
                         "more than {} submissions per second (bursts of {}) with this key; retry in {wait} s",
-                        auth.limiter.rate, auth.limiter.burst
+                        limiter.rate, limiter.burst
                     ),
                 )
                 .with_type("/problems/rate-limited")
@@ -114,7 +98,7 @@ pub async fn layer(State(state): State<AppState>, mut req: Request, next: Next) 
         }
         if let Some(id) = job_id(&path).filter(|_| !caller.sees_all()) {
             let store = state.store().clone();
-            let owner = crate::routes::blocking(move || Ok(store.get(id)?.map(|r| r.owner))).await;
+            let owner = super::blocking(move || Ok(store.get(id)?.map(|r| r.owner))).await;
             match owner {
                 Ok(Some(owner)) if !caller.sees(&owner) => {
                     return Problem::not_found(format!("no job with id {id}")).into_response()
@@ -154,7 +138,7 @@ fn token_of(req: &Request) -> Option<String> {
 /// [`Caller::list_scope`]); 403 for a key that asks for another owner's.
 pub fn list_scope(caller: &Caller, asked: Option<String>) -> Result<Option<String>, Problem> {
     if let Some(name) = &asked {
-        super::keys::check_name(name).map_err(Problem::bad_request)?;
+        crate::auth::keys::check_name(name).map_err(Problem::bad_request)?;
     }
     caller
         .list_scope(asked)
@@ -167,7 +151,7 @@ async fn resolve(state: &AppState, token: Option<String>) -> Result<Option<Calle
         return Ok(None);
     };
     let store = state.store().clone();
-    let key = crate::routes::blocking(move || Ok(authenticate(&*store, &token)?)).await?;
+    let key = super::blocking(move || Ok(authenticate(&*store, &token)?)).await?;
     Ok(key.map(|k| Caller::Key(Arc::new(k))))
 }
 
