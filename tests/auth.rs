@@ -1,0 +1,631 @@
+//! API keys, owners and quotas against the real binary (`serve --auth required`), keys made
+//! with `contact-sim keys`:
+//!
+//! * `routes_by_caller_on_sqlite` / `routes_by_caller_on_postgres`: every route × {no key,
+//!   owner, other owner, admin, revoked key} with its exact status, on the embedded store and
+//!   on PostgreSQL with an API-only node and a worker node; another owner's 404 is the very
+//!   answer of a job or mesh that does not exist, a revoked key's 401 that of an unknown one;
+//!   idempotency keys and the identical-scene shortcut are per owner; a revocation is
+//!   refused at the next request; audit lines name who did what from where; no token appears
+//!   in any answer, log line, data file or database file.
+//! * `quotas_and_fair_claims`: per-key quotas (active jobs, stored bytes, compute per day)
+//!   answer their problem types; with one worker, an owner who floods 200 jobs does not
+//!   delay another owner's single job by more than the one job running.
+//! * `serve_refuses_to_start_exposed_without_a_decision`: a non-loopback address needs
+//!   `--auth`, and `--auth required` a key.
+
+mod service_support;
+
+use serde_json::{json, Value};
+use service_support::postgres::Postgres;
+use service_support::*;
+use std::net::SocketAddr;
+use std::path::Path;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+fn binary() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_contact-sim"));
+    c.env("RUST_LOG", "info");
+    c
+}
+
+/// `contact-sim keys ARGS… STORE…`; panics unless it succeeds. Returns (stdout, stderr).
+fn keys(store: &[&str], args: &[&str]) -> (String, String) {
+    let out = binary()
+        .arg("keys")
+        .args(args)
+        .args(store)
+        .output()
+        .unwrap();
+    let (o, e) = (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    );
+    assert!(out.status.success(), "keys {args:?}: {e}");
+    (o, e)
+}
+
+/// A new key's token (what `keys add` prints on stdout, alone).
+fn add_key(store: &[&str], args: &[&str]) -> String {
+    let mut all = vec!["add"];
+    all.extend_from_slice(args);
+    let (out, err) = keys(store, &all);
+    assert!(err.contains("contact_sim::audit"), "no audit line: {err}");
+    let token = out.trim().to_string();
+    assert!(token.starts_with("csk_") && token.len() == 47, "{out:?}");
+    token
+}
+
+/// The callers of the table, in its column order.
+const CALLERS: [&str; 5] = ["no key", "owner", "other", "admin", "revoked"];
+
+struct Tokens {
+    owner: String,
+    other: String,
+    admin: String,
+    revoked: String,
+}
+
+impl Tokens {
+    /// Makes alice, bob, root (admin) and carol (used once, then revoked by the caller).
+    fn make(store: &[&str]) -> Tokens {
+        Tokens {
+            owner: add_key(store, &["alice"]),
+            other: add_key(store, &["bob"]),
+            admin: add_key(store, &["root", "--admin"]),
+            revoked: add_key(store, &["carol"]),
+        }
+    }
+
+    fn of(&self, who: usize) -> Option<&str> {
+        match who {
+            1 => Some(&self.owner),
+            2 => Some(&self.other),
+            3 => Some(&self.admin),
+            4 => Some(&self.revoked),
+            _ => None,
+        }
+    }
+
+    fn all(&self) -> [&str; 4] {
+        [&self.owner, &self.other, &self.admin, &self.revoked]
+    }
+}
+
+/// One request with `token` as its bearer key.
+fn call(
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    token: Option<&str>,
+    headers: &[(&str, &str)],
+    body: &[u8],
+) -> Resp {
+    let auth = token.map(|t| format!("Bearer {t}"));
+    let mut h: Vec<(&str, &str)> = headers.to_vec();
+    if let Some(a) = &auth {
+        h.push(("Authorization", a));
+    }
+    try_http(addr, method, path, &h, body, Duration::from_secs(60))
+        .unwrap_or_else(|e| panic!("{method} {path}: {e}"))
+}
+
+const JSON: (&str, &str) = ("Content-Type", "application/json");
+const OCTET: (&str, &str) = ("Content-Type", "application/octet-stream");
+
+fn submit(addr: SocketAddr, token: &str, scene: &Value) -> Resp {
+    call(
+        addr,
+        "POST",
+        "/jobs",
+        Some(token),
+        &[JSON],
+        scene.to_string().as_bytes(),
+    )
+}
+
+fn wait_done(addr: SocketAddr, token: &str, id: &str) -> Value {
+    let t = Instant::now();
+    loop {
+        let j = call(addr, "GET", &format!("/jobs/{id}"), Some(token), &[], b"").json();
+        if ["succeeded", "failed", "cancelled"].contains(&j["status"].as_str().unwrap_or("")) {
+            return j;
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(120),
+            "job {id} stuck: {j}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn test_mesh(name: &str) -> Vec<u8> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("crates/contact-core/tests/meshes")
+        .join(name);
+    std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+fn ids(list: &Value, member: &str) -> Vec<String> {
+    list[member]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| j["id"].as_str().unwrap().to_string())
+        .collect()
+}
+
+/// Everything a caller was answered, for the token check.
+struct Answers(Vec<String>);
+
+/// Runs the route table against a service with authentication required; `revoke` revokes
+/// carol's key through the store (as an administrator would, on any node).
+fn route_table(addr: SocketAddr, t: &Tokens, revoke: &dyn Fn()) -> Answers {
+    let mut seen = Answers(Vec::new());
+    // Carol's key works until it is revoked; then it is refused at once.
+    assert_eq!(
+        call(addr, "GET", "/jobs", Some(&t.revoked), &[], b"").status,
+        200
+    );
+    revoke();
+
+    // Alice's resources: a succeeded job J, two more to delete, a mesh M and one more.
+    let scene = small_scene("auth-j");
+    let r = submit(addr, &t.owner, &scene);
+    assert_eq!(r.status, 202, "{}", r.text());
+    let j = r.json()["id"].as_str().unwrap().to_string();
+    let j2 = submit(addr, &t.owner, &small_scene("auth-j2")).json()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let j3 = submit(addr, &t.owner, &small_scene("auth-j3")).json()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    for id in [&j, &j2, &j3] {
+        assert_eq!(wait_done(addr, &t.owner, id)["status"], "succeeded");
+    }
+    let plate = test_mesh("plate-with-hole.msh");
+    let r = call(addr, "POST", "/meshes", Some(&t.owner), &[OCTET], &plate);
+    assert_eq!(r.status, 201, "{}", r.text());
+    let m = r.json()["id"].as_str().unwrap().to_string();
+    let plate2 = test_mesh("plate-with-hole-binary.msh");
+    let r = call(addr, "POST", "/meshes", Some(&t.owner), &[OCTET], &plate2);
+    assert_eq!(r.status, 201, "{}", r.text());
+    let m2 = r.json()["id"].as_str().unwrap().to_string();
+
+    let absent_job = uuid::Uuid::new_v4().to_string();
+    let absent_mesh = "0".repeat(64);
+    let read = [401, 200, 404, 200, 401];
+    let rows: Vec<(&str, String, [u16; 5])> = vec![
+        ("GET", "/jobs".into(), [401, 200, 200, 200, 401]),
+        ("GET", format!("/jobs/{j}"), read),
+        ("GET", format!("/jobs/{j}/events"), read),
+        ("GET", format!("/jobs/{j}/summary"), read),
+        ("GET", format!("/jobs/{j}/mesh"), read),
+        ("GET", format!("/jobs/{j}/fields?step=last"), read),
+        ("GET", format!("/jobs/{j}/fields/last.vtu"), read),
+        ("GET", format!("/jobs/{j}/result.pvd"), read),
+        ("GET", format!("/jobs/{j}/archive.tar"), read),
+        // A simulation has no report: 404 for its owner too.
+        (
+            "GET",
+            format!("/jobs/{j}/report.svg"),
+            [401, 404, 404, 404, 401],
+        ),
+        // Finished: 409 for whoever may see it.
+        (
+            "POST",
+            format!("/jobs/{j}/cancel"),
+            [401, 409, 404, 409, 401],
+        ),
+        ("GET", "/meshes".into(), [401, 200, 200, 200, 401]),
+        ("GET", format!("/meshes/{m}"), read),
+        ("GET", format!("/meshes/{m}/file"), read),
+        ("GET", "/metrics".into(), [401, 403, 403, 200, 401]),
+        ("GET", "/healthz".into(), [200; 5]),
+        ("GET", "/openapi.yaml".into(), [200; 5]),
+        ("GET", "/scene.schema.json".into(), [200; 5]),
+        ("GET", "/presets".into(), [200; 5]),
+        ("GET", "/".into(), [200; 5]),
+    ];
+    for (method, path, want) in &rows {
+        for (who, want) in want.iter().enumerate() {
+            let r = call(addr, method, path, t.of(who), &[], b"");
+            assert_eq!(
+                r.status,
+                *want,
+                "{method} {path} as {}: {}",
+                CALLERS[who],
+                r.text()
+            );
+            seen.0.push(format!("{:?} {}", r.headers, r.text()));
+            if r.status == 401 {
+                assert_eq!(
+                    r.header("www-authenticate"),
+                    Some("Bearer realm=\"contact-sim\"")
+                );
+                assert_eq!(r.header("content-type"), Some("application/problem+json"));
+            }
+            // Another owner's job or mesh answers exactly as one that does not exist.
+            if who == 2 && *want == 404 && (path.contains(&j) || path.contains(&m)) {
+                let ghost = path.replace(&j, &absent_job).replace(&m, &absent_mesh);
+                let g = call(addr, method, &ghost, t.of(who), &[], b"");
+                assert_eq!(g.status, 404);
+                assert_eq!(
+                    g.text().replace(&absent_job, &j).replace(&absent_mesh, &m),
+                    r.text(),
+                    "{method} {path}: another owner's answer differs from a missing one's"
+                );
+            }
+        }
+    }
+
+    // Unknown, revoked and malformed keys are answered alike.
+    let unknown = format!("csk_{}", "A".repeat(43));
+    let a = call(addr, "GET", "/jobs", Some(&unknown), &[], b"");
+    let b = call(addr, "GET", "/jobs", Some(&t.revoked), &[], b"");
+    let c = call(addr, "GET", "/jobs", Some("not-a-key"), &[], b"");
+    let d = call(addr, "GET", "/jobs", None, &[], b"");
+    for x in [&b, &c, &d] {
+        assert_eq!((x.status, x.text()), (a.status, a.text()));
+        assert_eq!(x.header("www-authenticate"), a.header("www-authenticate"));
+    }
+    assert_eq!(a.json()["type"], "/problems/unauthorized");
+
+    // Listings are per owner; an admin sees all and lists by owner.
+    let alice_jobs = ids(
+        &call(addr, "GET", "/jobs", Some(&t.owner), &[], b"").json(),
+        "jobs",
+    );
+    assert!(
+        alice_jobs.contains(&j) && alice_jobs.len() == 3,
+        "{alice_jobs:?}"
+    );
+    let bob_jobs = ids(
+        &call(addr, "GET", "/jobs", Some(&t.other), &[], b"").json(),
+        "jobs",
+    );
+    assert!(bob_jobs.is_empty(), "{bob_jobs:?}");
+    let by_owner = call(
+        addr,
+        "GET",
+        "/jobs?owner=alice&limit=2",
+        Some(&t.admin),
+        &[],
+        b"",
+    );
+    assert_eq!(ids(&by_owner.json(), "jobs").len(), 2);
+    assert!(by_owner.json()["next"]
+        .as_str()
+        .unwrap()
+        .contains("owner=alice"));
+    let r = call(addr, "GET", "/jobs?owner=alice", Some(&t.other), &[], b"");
+    assert_eq!(r.status, 403);
+    assert_eq!(
+        ids(
+            &call(addr, "GET", "/meshes", Some(&t.owner), &[], b"").json(),
+            "meshes"
+        )
+        .len(),
+        2
+    );
+    assert!(ids(
+        &call(addr, "GET", "/meshes", Some(&t.other), &[], b"").json(),
+        "meshes"
+    )
+    .is_empty());
+    assert_eq!(
+        ids(
+            &call(addr, "GET", "/meshes?owner=alice", Some(&t.admin), &[], b"").json(),
+            "meshes"
+        )
+        .len(),
+        2
+    );
+    // Health details and the warning-free admin view.
+    let h = call(addr, "GET", "/healthz", None, &[], b"").json();
+    assert_eq!(h, json!({"status": "ok"}));
+    let h = call(addr, "GET", "/healthz", Some(&t.admin), &[], b"").json();
+    assert!(
+        h.get("workers").is_some() && h.get("warning").is_none(),
+        "{h}"
+    );
+
+    // The identical-scene shortcut answers the owner with its job, never another owner.
+    let r = submit(addr, &t.owner, &scene);
+    assert_eq!(
+        (r.status, r.json()["id"].as_str().unwrap()),
+        (200, j.as_str())
+    );
+    let r = submit(addr, &t.other, &scene);
+    assert_eq!(r.status, 202);
+    let bobs = r.json()["id"].as_str().unwrap().to_string();
+    assert_ne!(bobs, j);
+    // Idempotency keys are per owner: the same key, two owners, two jobs.
+    let idem = |token: &str| {
+        let r = call(
+            addr,
+            "POST",
+            "/jobs",
+            Some(token),
+            &[JSON, ("Idempotency-Key", "shared-key")],
+            small_scene("auth-idem").to_string().as_bytes(),
+        );
+        assert_eq!(r.status, 202, "{}", r.text());
+        r.json()["id"].as_str().unwrap().to_string()
+    };
+    let (ia, ib) = (idem(&t.owner), idem(&t.other));
+    assert_ne!(ia, ib);
+    assert_eq!(idem(&t.owner), ia);
+    // A scene on another owner's mesh is refused as on a mesh that does not exist.
+    let mut on_mesh = contact_core::scene::presets::get("plate-with-hole").unwrap();
+    on_mesh["domain"] = json!({"mesh": m});
+    let r = submit(addr, &t.other, &on_mesh);
+    assert_eq!(r.status, 422, "{}", r.text());
+    on_mesh["domain"] = json!({"mesh": absent_mesh});
+    let ghost = submit(addr, &t.other, &on_mesh);
+    assert_eq!(ghost.text().replace(&absent_mesh, &m), r.text());
+    for id in [&bobs, &ia, &ib] {
+        wait_done(addr, &t.admin, id);
+    }
+
+    // Deletions: refused to others, done by the owner and by an admin.
+    for (who, want) in [(0, 401), (2, 404), (4, 401), (1, 204)] {
+        let r = call(addr, "DELETE", &format!("/jobs/{j2}"), t.of(who), &[], b"");
+        assert_eq!(
+            r.status,
+            want,
+            "DELETE job as {}: {}",
+            CALLERS[who],
+            r.text()
+        );
+        seen.0.push(r.text());
+    }
+    assert_eq!(
+        call(
+            addr,
+            "DELETE",
+            &format!("/jobs/{j3}"),
+            Some(&t.admin),
+            &[],
+            b""
+        )
+        .status,
+        204
+    );
+    assert_eq!(
+        call(
+            addr,
+            "GET",
+            &format!("/jobs/{j3}"),
+            Some(&t.owner),
+            &[],
+            b""
+        )
+        .status,
+        404
+    );
+    // Uploads: the same bytes are a mesh of bob's own (201: new to him), with his time.
+    for (who, want) in [(0, 401), (4, 401), (2, 201), (2, 200)] {
+        let r = call(addr, "POST", "/meshes", t.of(who), &[OCTET], &plate);
+        assert_eq!(
+            r.status,
+            want,
+            "POST /meshes as {}: {}",
+            CALLERS[who],
+            r.text()
+        );
+        seen.0.push(r.text());
+    }
+    let alice_m = call(
+        addr,
+        "GET",
+        &format!("/meshes/{m}"),
+        Some(&t.owner),
+        &[],
+        b"",
+    )
+    .json();
+    let bob_m = call(
+        addr,
+        "GET",
+        &format!("/meshes/{m}"),
+        Some(&t.other),
+        &[],
+        b"",
+    )
+    .json();
+    assert!(bob_m["created_at"].as_str() > alice_m["created_at"].as_str());
+    for (who, want) in [(0, 401), (4, 401), (1, 204), (1, 404)] {
+        let r = call(addr, "DELETE", &format!("/meshes/{m}"), t.of(who), &[], b"");
+        assert_eq!(
+            r.status,
+            want,
+            "DELETE mesh as {}: {}",
+            CALLERS[who],
+            r.text()
+        );
+    }
+    // Bob's record and the file stay his.
+    let r = call(
+        addr,
+        "GET",
+        &format!("/meshes/{m}/file"),
+        Some(&t.other),
+        &[],
+        b"",
+    );
+    assert_eq!((r.status, r.body.len()), (200, plate.len()));
+    // Another owner cannot delete alice's second mesh; an admin can.
+    assert_eq!(
+        call(
+            addr,
+            "DELETE",
+            &format!("/meshes/{m2}"),
+            Some(&t.other),
+            &[],
+            b""
+        )
+        .status,
+        404
+    );
+    assert_eq!(
+        call(
+            addr,
+            "DELETE",
+            &format!("/meshes/{m2}"),
+            Some(&t.admin),
+            &[],
+            b""
+        )
+        .status,
+        204
+    );
+    assert_eq!(
+        call(
+            addr,
+            "GET",
+            &format!("/meshes/{m2}"),
+            Some(&t.owner),
+            &[],
+            b""
+        )
+        .status,
+        404
+    );
+    seen
+}
+
+/// Every file under `dir` (recursively), as bytes.
+fn files(dir: &Path, out: &mut Vec<(std::path::PathBuf, Vec<u8>)>) {
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in rd.flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            files(&p, out);
+        } else if let Ok(b) = std::fs::read(&p) {
+            out.push((p, b));
+        }
+    }
+}
+
+/// No token in the answers, the logs, or any file of `dirs`.
+fn assert_no_tokens(t: &Tokens, answers: &Answers, logs: &[String], dirs: &[&Path]) {
+    let mut all = Vec::new();
+    for d in dirs {
+        files(d, &mut all);
+    }
+    assert!(!all.is_empty());
+    for token in t.all() {
+        // The random part alone, should anything strip the prefix.
+        let secret = &token[4..];
+        for a in &answers.0 {
+            assert!(!a.contains(secret), "a token in an answer: {a}");
+        }
+        for log in logs {
+            assert!(!log.contains(secret), "a token in a log");
+        }
+        for (path, bytes) in &all {
+            let found = bytes.windows(secret.len()).any(|w| w == secret.as_bytes());
+            assert!(!found, "a token in {}", path.display());
+        }
+    }
+}
+
+fn api_log(p: &Proc) -> String {
+    p.log.lock().unwrap().clone()
+}
+
+/// The audit lines of the API node: who, what, from where.
+fn assert_audited(api: &Proc) {
+    let log = api.log.lock().unwrap().clone();
+    let lines: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains("contact_sim::audit"))
+        .collect();
+    let has = |who: &str, action: &str| {
+        lines.iter().any(|l| {
+            l.contains(&format!("who=\"{who}\""))
+                && l.contains(action)
+                && l.contains("from=\"127.0.0.1:")
+        })
+    };
+    assert!(has("alice", "action=POST /jobs "), "{lines:#?}");
+    assert!(has("alice", "action=DELETE /jobs/"), "{lines:#?}");
+    assert!(has("root", "action=DELETE /meshes/"), "{lines:#?}");
+    assert!(has("bob", "action=POST /meshes"), "{lines:#?}");
+    assert!(
+        lines.iter().any(|l| l.contains("resource=\"/jobs/")),
+        "{lines:#?}"
+    );
+}
+
+#[test]
+fn routes_by_caller_on_sqlite() {
+    let dir = TempDir::new("auth-sqlite");
+    let d = dir.0.to_str().unwrap();
+    let store = ["--data-dir", d];
+    let t = Tokens::make(&store);
+    let api = Proc::start(
+        &dir.0,
+        &["--auth", "required", "--workers", "1", "--submit-rate", "0"],
+    );
+    let revoke = || {
+        keys(&store, &["revoke", "carol"]);
+    };
+    let answers = route_table(api.addr, &t, &revoke);
+    let (list, _) = keys(&store, &["list"]);
+    let list: Value = serde_json::from_str(&list).unwrap();
+    let carol = &list["keys"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|k| k["name"] == "carol")
+        .unwrap();
+    assert!(carol["revoked_at"].is_string() && carol["last_used_at"].is_string());
+    assert_audited(&api);
+    let log = api_log(&api);
+    api.terminate();
+    assert_no_tokens(&t, &answers, &[log], &[&dir.0]);
+}
+
+#[test]
+fn routes_by_caller_on_postgres() {
+    let Some(pg) = Postgres::start("auth") else {
+        return;
+    };
+    let url = pg.create_database("auth");
+    let dir = TempDir::new("auth-pg");
+    let store = ["--store", url.as_str()];
+    // The keys exist before the API node starts (it refuses to start without one).
+    let t = Tokens::make(&store);
+    let api = Proc::start(
+        &dir.0,
+        &[
+            "--store",
+            &url,
+            "--node",
+            "api",
+            "--workers",
+            "0",
+            "--auth",
+            "required",
+            "--submit-rate",
+            "0",
+        ],
+    );
+    let worker = Proc::worker(&dir.0, &["--store", &url, "--node", "w1", "--workers", "1"]);
+    let revoke = || {
+        keys(&store, &["revoke", "carol"]);
+    };
+    let answers = route_table(api.addr, &t, &revoke);
+    assert_audited(&api);
+    let logs = [api_log(&api), api_log(&worker)];
+    api.terminate();
+    worker.terminate();
+    assert_no_tokens(&t, &answers, &logs, &[&dir.0, pg.root()]);
+}
