@@ -629,3 +629,224 @@ fn routes_by_caller_on_postgres() {
     worker.terminate();
     assert_no_tokens(&t, &answers, &logs, &[&dir.0, pg.root()]);
 }
+
+/// RFC 3339 seconds of a job resource's time.
+fn secs(t: &Value) -> f64 {
+    let s = t.as_str().unwrap_or_else(|| panic!("no time: {t}"));
+    s.parse::<jiff::Timestamp>().unwrap().as_millisecond() as f64 / 1000.0
+}
+
+#[test]
+fn quotas_and_fair_claims() {
+    let dir = TempDir::new("auth-quota");
+    let d = dir.0.to_str().unwrap();
+    let store = ["--data-dir", d];
+    let alice = add_key(&store, &["alice"]);
+    let bob = add_key(&store, &["bob", "--max-active-jobs", "1"]);
+    let carol = add_key(&store, &["carol", "--max-stored-bytes", "1000"]);
+    let dave = add_key(&store, &["dave", "--max-compute-seconds", "0.000001"]);
+    let root = add_key(&store, &["root", "--admin"]);
+    let api = Proc::start(
+        &dir.0,
+        &["--auth", "required", "--workers", "1", "--submit-rate", "0"],
+    );
+    let a = api.addr;
+    let quota = |r: &Resp, status: u16, name: &str| {
+        assert_eq!(r.status, status, "{}", r.text());
+        let p = r.json();
+        assert_eq!(p["type"], "/problems/quota-exceeded", "{p}");
+        assert_eq!(p["quota"]["name"], name, "{p}");
+        p
+    };
+
+    // Compute per day: the first job runs (nothing used yet), and its worker-seconds then
+    // exceed the day's allowance until midnight UTC.
+    let r = submit(a, &dave, &small_scene("dave-1"));
+    assert_eq!(r.status, 202);
+    wait_done(a, &dave, r.json()["id"].as_str().unwrap());
+    let r = submit(a, &dave, &small_scene("dave-2"));
+    let p = quota(&r, 429, "compute_s_per_day");
+    assert_eq!(p["quota"]["limit"], 0.000001);
+    assert!(p["quota"]["used"].as_f64().unwrap() > 0.000001, "{p}");
+    let now = jiff::Timestamp::now().as_second();
+    let midnight = (now / 86_400 + 1) * 86_400;
+    assert_eq!(secs(&p["quota"]["reset"]) as i64, midnight, "{p}");
+    let wait: i64 = r.header("retry-after").unwrap().parse().unwrap();
+    assert!((wait - (midnight - now)).abs() <= 2, "Retry-After {wait}");
+    // Stored bytes: a size, 413, for a job's estimated results and for a mesh.
+    quota(
+        &submit(a, &carol, &small_scene("carol")),
+        413,
+        "stored_bytes",
+    );
+    let plate = test_mesh("plate-with-hole.msh");
+    let r = call(a, "POST", "/meshes", Some(&carol), &[OCTET], &plate);
+    quota(&r, 413, "stored_bytes");
+
+    fair_claims(a, &alice, &bob, &root, "SQLite");
+    let p = quota(&submit(a, &bob, &small_scene("bob-2")), 429, "active_jobs");
+    assert_eq!(p["quota"]["limit"], 1.0);
+}
+
+/// One worker; alice floods it with 200 jobs, then bob submits one, which must start
+/// when the job running at his submission ends (least recently served owner first).
+fn fair_claims(a: SocketAddr, alice: &str, bob: &str, root: &str, store: &str) {
+    let t = Instant::now();
+    let flood: Vec<String> = (0..200)
+        .map(|i| {
+            let r = submit(a, alice, &long_scene(&format!("flood-{i}"), 32, 300, 1));
+            assert_eq!(r.status, 202, "{}", r.text());
+            r.json()["id"].as_str().unwrap().to_string()
+        })
+        .collect();
+    let flooded_in = t.elapsed();
+    let r = submit(a, bob, &long_scene("bob", 32, 300, 1));
+    assert_eq!(r.status, 202);
+    let bobs = r.json()["id"].as_str().unwrap().to_string();
+    let job = loop {
+        let j = call(a, "GET", &format!("/jobs/{bobs}"), Some(bob), &[], b"").json();
+        if j["started_at"].is_string() {
+            break j;
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(120),
+            "bob's job never started: {j}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let (created, started) = (secs(&job["created_at"]), secs(&job["started_at"]));
+    let page = call(
+        a,
+        "GET",
+        "/jobs?owner=alice&limit=500",
+        Some(&root),
+        &[],
+        b"",
+    )
+    .json();
+    let alices = page["jobs"].as_array().unwrap();
+    assert_eq!(alices.len(), flood.len());
+    let started_meanwhile = alices
+        .iter()
+        .filter(|j| j["started_at"].is_string())
+        .filter(|j| (created..started).contains(&secs(&j["started_at"])))
+        .count();
+    let durations: Vec<f64> = alices
+        .iter()
+        .filter(|j| j["finished_at"].is_string())
+        .map(|j| secs(&j["finished_at"]) - secs(&j["started_at"]))
+        .collect();
+    let longest = durations.iter().cloned().fold(0.0, f64::max);
+    let queued = alices.iter().filter(|j| j["status"] == "queued").count();
+    eprintln!(
+        "fairness ({store}, 1 worker): 200 jobs submitted in {:.2} s; bob's job waited {:.3} s; \
+         alice's jobs took up to {longest:.3} s each, {} finished, {queued} still queued",
+        flooded_in.as_secs_f64(),
+        started - created,
+        durations.len()
+    );
+    // With one worker, nothing of alice's starts between bob's submission and his start:
+    // he waits for the job running when he submitted, at most (times are to the ms).
+    assert_eq!(started_meanwhile, 0);
+    assert!(
+        started - created <= longest + 0.01,
+        "waited {} s",
+        started - created
+    );
+    assert!(queued > 100, "the flood was not queued: {queued}");
+}
+
+#[test]
+fn serve_refuses_to_start_exposed_without_a_decision() {
+    let dir = TempDir::new("auth-refuse");
+    let d = dir.0.to_str().unwrap();
+    let serve = |args: &[&str]| {
+        binary()
+            .args(["serve", "--data-dir", d])
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let out = serve(&["--addr", "0.0.0.0:0"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--auth required"));
+    let out = serve(&["--addr", "127.0.0.1:0", "--auth", "required"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no active API key"));
+    // --auth off on every address: served, with the warning at start and on /healthz.
+    let mut child = binary()
+        .args([
+            "serve",
+            "--data-dir",
+            d,
+            "--addr",
+            "0.0.0.0:0",
+            "--auth",
+            "off",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufRead::lines(std::io::BufReader::new(child.stderr.take().unwrap()));
+    let mut head = String::new();
+    let port = loop {
+        let line = lines.next().expect("serve --auth off started").unwrap();
+        head += &line;
+        if let Some(rest) = line.split("listening on http://0.0.0.0:").nth(1) {
+            break rest
+                .split_whitespace()
+                .next()
+                .unwrap()
+                .parse::<u16>()
+                .unwrap();
+        }
+    };
+    assert!(
+        head.contains("authentication is off on a non-loopback address"),
+        "{head}"
+    );
+    let addr: SocketAddr = ([127, 0, 0, 1], port).into();
+    let h = get(addr, "/healthz").json();
+    assert!(
+        h["warning"]
+            .as_str()
+            .unwrap()
+            .contains("authentication is off"),
+        "{h}"
+    );
+    // Anonymous use as on a laptop: no key.
+    assert_eq!(get(addr, "/jobs").status, 200);
+    let _ = child.kill();
+    let _ = child.wait();
+}
+
+#[test]
+fn fair_claims_on_postgres() {
+    let Some(pg) = Postgres::start("auth-fair") else {
+        return;
+    };
+    let url = pg.create_database("fair");
+    let dir = TempDir::new("auth-fair");
+    let store = ["--store", url.as_str()];
+    let alice = add_key(&store, &["alice"]);
+    let bob = add_key(&store, &["bob"]);
+    let root = add_key(&store, &["root", "--admin"]);
+    let api = Proc::start(
+        &dir.0,
+        &[
+            "--store",
+            &url,
+            "--node",
+            "api",
+            "--workers",
+            "0",
+            "--auth",
+            "required",
+            "--submit-rate",
+            "0",
+        ],
+    );
+    let _worker = Proc::worker(&dir.0, &["--store", &url, "--node", "w1", "--workers", "1"]);
+    fair_claims(api.addr, &alice, &bob, &root, "PostgreSQL");
+}

@@ -57,21 +57,25 @@ pub enum KeysCommand {
 pub struct QuotaArgs {
     /// Queued plus running jobs at once.
     #[arg(long = "max-active-jobs", value_parser = limit)]
-    pub active_jobs: Option<Option<f64>>,
+    pub active_jobs: Option<Limit>,
     /// Bytes stored: estimated results of the key's jobs plus its meshes.
     #[arg(long = "max-stored-bytes", value_parser = limit)]
-    pub stored_bytes: Option<Option<f64>>,
+    pub stored_bytes: Option<Limit>,
     /// Worker-seconds of compute per UTC day.
     #[arg(long = "max-compute-seconds", value_parser = limit)]
-    pub compute_s: Option<Option<f64>>,
+    pub compute_s: Option<Limit>,
 }
 
-fn limit(s: &str) -> Result<Option<f64>, String> {
+/// A quota flag's value: a limit, or none.
+#[derive(Clone, Copy)]
+pub struct Limit(Option<f64>);
+
+fn limit(s: &str) -> Result<Limit, String> {
     if s == "none" {
-        return Ok(None);
+        return Ok(Limit(None));
     }
     match s.parse::<f64>() {
-        Ok(v) if v.is_finite() && v >= 0.0 => Ok(Some(v)),
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(Limit(Some(v))),
         _ => Err(format!("{s:?}: a number ≥ 0, or none")),
     }
 }
@@ -79,11 +83,11 @@ fn limit(s: &str) -> Result<Option<f64>, String> {
 impl QuotaArgs {
     /// `base` with the quotas given replaced.
     fn apply(&self, base: Quotas) -> Quotas {
-        let whole = |v: Option<f64>| v.map(|x| x.min(u64::MAX as f64) as u64);
+        let whole = |v: Limit| v.0.map(|x| x.min(u64::MAX as f64) as u64);
         Quotas {
             active_jobs: self.active_jobs.map_or(base.active_jobs, whole),
             stored_bytes: self.stored_bytes.map_or(base.stored_bytes, whole),
-            compute_s_per_day: self.compute_s.unwrap_or(base.compute_s_per_day),
+            compute_s_per_day: self.compute_s.map_or(base.compute_s_per_day, |l| l.0),
         }
     }
 }
