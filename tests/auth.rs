@@ -850,3 +850,218 @@ fn fair_claims_on_postgres() {
     let _worker = Proc::worker(&dir.0, &["--store", &url, "--node", "w1", "--workers", "1"]);
     fair_claims(api.addr, &alice, &bob, &root, "PostgreSQL");
 }
+
+/// The p-th percentile of sorted values.
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    let i = ((p / 100.0) * (sorted.len().max(1) - 1) as f64).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}
+
+/// The hostile-input fuzz (tests/hostile.rs) in short, with authentication on: random and
+/// malformed `Authorization` headers on every route are 401 (or a public route's answer),
+/// random bodies and mutated scenes with a valid key are 4xx; never a 5xx, never a token
+/// in an answer.
+#[test]
+fn fuzz_with_keys() {
+    let dir = TempDir::new("auth-fuzz");
+    let d = dir.0.to_str().unwrap();
+    let store = ["--data-dir", d];
+    let key = add_key(&store, &["fuzzer"]);
+    let api = Proc::start(
+        &dir.0,
+        &[
+            "--auth",
+            "required",
+            "--workers",
+            "1",
+            "--max-nodes",
+            "2000",
+            "--submit-rate",
+            "0",
+        ],
+    );
+    let a = api.addr;
+    let mut rng = Rng::seeded(0xa17_0001);
+    let routes = [
+        ("GET", "/jobs"),
+        ("POST", "/jobs"),
+        ("GET", "/meshes"),
+        ("POST", "/meshes"),
+        ("GET", "/metrics"),
+        ("GET", "/jobs/00000000-0000-0000-0000-000000000000/events"),
+        ("DELETE", "/jobs/00000000-0000-0000-0000-000000000000"),
+        ("GET", "/nope"),
+    ];
+    let timeout = Duration::from_secs(20);
+    let mut statuses = std::collections::BTreeMap::<u16, usize>::new();
+    for i in 0..600 {
+        let (method, path) = *rng.pick(&routes);
+        let header: String = match i % 6 {
+            0 => {
+                let n = rng.below(200);
+                String::from_utf8_lossy(&rng.bytes(n)).into_owned()
+            }
+            1 => format!("Bearer {}", String::from_utf8_lossy(&rng.bytes(47))),
+            2 => format!("Bearer csk_{}", "A".repeat(rng.below(100))),
+            3 => format!("Basic {key}"),
+            4 => format!("Bearer {}", &key[..rng.below(key.len())]),
+            _ => format!("Bearer {key}x"),
+        };
+        // Header values a client library refuses (control bytes) go on a raw socket.
+        let printable: String = header
+            .chars()
+            .filter(|c| c.is_ascii_graphic() || *c == ' ')
+            .collect();
+        let r = raw_request(
+            a,
+            method,
+            path,
+            &[("Authorization", &printable)],
+            b"",
+            timeout,
+        )
+        .unwrap_or_else(|e| panic!("{method} {path} {printable:?}: {e}"));
+        *statuses.entry(r.status).or_default() += 1;
+        assert_eq!(r.status, 401, "{method} {path} {printable:?}: {}", r.text());
+        assert!(!r.text().contains(&key[4..]));
+    }
+    // With the key: random bodies and mutated scenes are refused with a 4xx.
+    let base = small_scene("fuzz").to_string().into_bytes();
+    for i in 0..600 {
+        let body = if i % 2 == 0 {
+            let n = rng.below(400);
+            rng.bytes(n)
+        } else {
+            let mut b = base.clone();
+            for _ in 0..1 + rng.below(3) {
+                let at = rng.below(b.len());
+                b[at] = *rng.pick(b"{}[]\",:0-e");
+            }
+            b
+        };
+        let r = call(a, "POST", "/jobs", Some(&key), &[JSON], &body);
+        *statuses.entry(r.status).or_default() += 1;
+        assert!(r.status < 500, "{}: {}", r.status, r.text());
+        assert!(
+            r.status >= 400 || r.status == 202 || r.status == 200,
+            "{}",
+            r.status
+        );
+    }
+    eprintln!("fuzz with keys: 1,200 requests, statuses {statuses:?}");
+    assert_eq!(call(a, "GET", "/healthz", None, &[], b"").status, 200);
+}
+
+/// The load test (tests/load.rs) in short, with authentication on: 8 clients, each its own
+/// key, submit, poll, list and check health for 8 s while the one worker is busy. Every
+/// request checks its key in the store: GET latency must stay within the load test's bound.
+#[test]
+fn load_with_keys() {
+    const CLIENTS: usize = 8;
+    let dir = TempDir::new("auth-load");
+    let d = dir.0.to_str().unwrap();
+    let store = ["--data-dir", d];
+    let tokens: Vec<String> = (0..CLIENTS)
+        .map(|i| add_key(&store, &[&format!("user{i}")]))
+        .collect();
+    let api = Proc::start(
+        &dir.0,
+        &[
+            "--auth",
+            "required",
+            "--workers",
+            "1",
+            "--submit-rate",
+            "0",
+            "--queue-capacity",
+            "100000",
+        ],
+    );
+    let a = api.addr;
+    let deadline = Instant::now() + Duration::from_secs(8);
+    let handles: Vec<_> = tokens
+        .into_iter()
+        .enumerate()
+        .map(|(n, token)| {
+            std::thread::spawn(move || {
+                let mut rng = Rng::seeded(0x10ad + n as u64);
+                let (mut gets, mut mine, mut k) = (Vec::new(), Vec::<String>::new(), 0);
+                while Instant::now() < deadline {
+                    let roll = rng.below(100);
+                    if roll < 15 || mine.is_empty() {
+                        k += 1;
+                        let r = submit(a, &token, &small_scene(&format!("load-{n}-{k}")));
+                        assert_eq!(r.status, 202, "{}", r.text());
+                        mine.push(r.json()["id"].as_str().unwrap().to_string());
+                        continue;
+                    }
+                    let path = match roll {
+                        15..=64 => format!("/jobs/{}", rng.pick(&mine)),
+                        65..=84 => "/jobs?limit=20".to_string(),
+                        _ => "/healthz".to_string(),
+                    };
+                    let t = Instant::now();
+                    let r = call(a, "GET", &path, Some(&token), &[], b"");
+                    gets.push(t.elapsed().as_secs_f64() * 1e3);
+                    assert_eq!(r.status, 200, "{path}: {}", r.text());
+                    if path.starts_with("/jobs?") {
+                        // Only this key's jobs.
+                        for j in ids(&r.json(), "jobs") {
+                            assert!(mine.contains(&j), "client {n} sees job {j}");
+                        }
+                    }
+                }
+                gets
+            })
+        })
+        .collect();
+    let mut gets: Vec<f64> = handles
+        .into_iter()
+        .flat_map(|h| h.join().expect("client"))
+        .collect();
+    gets.sort_by(f64::total_cmp);
+    let (p50, p99) = (percentile(&gets, 50.0), percentile(&gets, 99.0));
+    eprintln!(
+        "load with keys: {} GETs by {CLIENTS} keys, p50 {p50:.1} ms, p99 {p99:.1} ms, max {:.1} ms",
+        gets.len(),
+        gets.last().unwrap()
+    );
+    assert!(gets.len() > 200, "{} GETs", gets.len());
+    assert!(p99 < 250.0, "GET p99 {p99:.1} ms");
+}
+
+/// With keys, the submission rate is counted per key, not per address: two keys on one
+/// address have a burst each.
+#[test]
+fn submission_rate_is_per_key() {
+    let dir = TempDir::new("auth-rate");
+    let d = dir.0.to_str().unwrap();
+    let store = ["--data-dir", d];
+    let (k1, k2) = (add_key(&store, &["k1"]), add_key(&store, &["k2"]));
+    let api = Proc::start(
+        &dir.0,
+        &[
+            "--auth",
+            "required",
+            "--workers",
+            "0",
+            "--submit-rate",
+            "0.01",
+            "--submit-burst",
+            "2",
+        ],
+    );
+    let a = api.addr;
+    for i in 0..2 {
+        assert_eq!(submit(a, &k1, &small_scene(&format!("r1-{i}"))).status, 202);
+    }
+    let r = submit(a, &k1, &small_scene("r1-2"));
+    assert_eq!(r.status, 429, "{}", r.text());
+    assert_eq!(r.json()["type"], "/problems/rate-limited");
+    assert!(r.header("retry-after").is_some());
+    for i in 0..2 {
+        assert_eq!(submit(a, &k2, &small_scene(&format!("r2-{i}"))).status, 202);
+    }
+    // Reads are not submissions.
+    assert_eq!(call(a, "GET", "/jobs", Some(&k1), &[], b"").status, 200);
+}
