@@ -719,7 +719,7 @@ fn fair_claims(a: SocketAddr, alice: &str, bob: &str, root: &str, store: &str) {
         a,
         "GET",
         "/jobs?owner=alice&limit=500",
-        Some(&root),
+        Some(root),
         &[],
         b"",
     )
