@@ -645,6 +645,7 @@ fn quotas_and_fair_claims() {
     let bob = add_key(&store, &["bob", "--max-active-jobs", "1"]);
     let carol = add_key(&store, &["carol", "--max-stored-bytes", "1000"]);
     let dave = add_key(&store, &["dave", "--max-compute-seconds", "0.000001"]);
+    let erin = add_key(&store, &["erin", "--max-active-jobs", "1"]);
     let root = add_key(&store, &["root", "--admin"]);
     let api = Proc::start(
         &dir.0,
@@ -686,6 +687,27 @@ fn quotas_and_fair_claims() {
     fair_claims(a, &alice, &bob, &root, "SQLite");
     let p = quota(&submit(a, &bob, &small_scene("bob-2")), 429, "active_jobs");
     assert_eq!(p["quota"]["limit"], 1.0);
+    // At the limit, a retry with its Idempotency-Key still gets its job back (the worker is
+    // busy with alice's flood: erin's job stays queued meanwhile).
+    let keyed = |name: &str, key: &str| {
+        call(
+            a,
+            "POST",
+            "/jobs",
+            Some(&erin),
+            &[JSON, ("Idempotency-Key", key)],
+            small_scene(name).to_string().as_bytes(),
+        )
+    };
+    let first = keyed("erin-1", "e1");
+    assert_eq!(first.status, 202, "{}", first.text());
+    let again = keyed("erin-1", "e1");
+    assert_eq!(
+        (again.status, again.json()["id"].clone()),
+        (202, first.json()["id"].clone())
+    );
+    assert_eq!(again.json()["owner"], "erin");
+    quota(&keyed("erin-2", "e2"), 429, "active_jobs");
 }
 
 /// One worker; alice floods it with 200 jobs, then bob submits one, which must start

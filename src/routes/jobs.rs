@@ -50,7 +50,7 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
         links["pvd"] = json!(format!("{base}/result.pvd"));
         links["archive"] = json!(format!("{base}/archive.tar"));
     }
-    json!({
+    let mut view = json!({
         "id": id,
         "kind": if study { "study" } else { "simulation" },
         "scene": if study {
@@ -77,7 +77,11 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
         "last_checkpoint_step": rec.last_checkpoint_step,
         "scene_hash": rec.scene_hash,
         "links": links,
-    })
+    });
+    if !rec.owner.is_empty() {
+        view["owner"] = json!(rec.owner);
+    }
+    view
 }
 
 fn json_response(status: StatusCode, body: &Value) -> Response {
@@ -357,7 +361,14 @@ pub async fn submit(
                 return Ok(Enqueued::Existing(done));
             }
         }
-        crate::auth::quota::check_submission(store.as_ref(), &caller, stored_bytes)?;
+        // A retry with an Idempotency-Key gets its job back whatever the quotas say now.
+        let retry = match &key {
+            Some(k) => store.find_by_idempotency_key(owner, k)?.is_some(),
+            None => false,
+        };
+        if !retry {
+            crate::auth::quota::check_submission(store.as_ref(), &caller, stored_bytes)?;
+        }
         let queued = store
             .counts()?
             .into_iter()

@@ -264,6 +264,12 @@ pub trait Store: owners::Owners + Send + Sync + 'static {
     fn find_succeeded_by_hash(&self, scene_hash: &str) -> Result<Option<JobRecord>, StoreError> {
         self.find_succeeded_for("", scene_hash)
     }
+    /// `owner`'s job submitted with this idempotency key, if any.
+    fn find_by_idempotency_key(
+        &self,
+        owner: &str,
+        key: &str,
+    ) -> Result<Option<JobRecord>, StoreError>;
     /// [`Store::find_succeeded_by_hash`] among `owner`'s jobs only: another owner's job id
     /// is never handed out.
     fn find_succeeded_for(

@@ -863,6 +863,16 @@ impl Store for PgStore {
         status_counts(rows)
     }
 
+    fn find_by_idempotency_key(
+        &self,
+        owner: &str,
+        key: &str,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        self.read(|c| select_one(c, "owner = $1 AND idempotency_key = $2", &[&owner, &key]))?
+            .map(RawJob::into_record)
+            .transpose()
+    }
+
     fn find_succeeded_for(
         &self,
         owner: &str,

@@ -785,6 +785,18 @@ impl Store for SqliteStore {
 
     /// The succeeded job with this scene hash that finished last (ties: the newest), None
     /// if there is none.
+    fn find_by_idempotency_key(
+        &self,
+        owner: &str,
+        key: &str,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        select_one(
+            &self.lock(),
+            "owner = ?1 AND idempotency_key = ?2",
+            params![owner, key],
+        )
+    }
+
     fn find_succeeded_for(
         &self,
         owner: &str,
