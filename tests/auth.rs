@@ -201,6 +201,13 @@ fn route_table(addr: SocketAddr, t: &Tokens, revoke: &dyn Fn()) -> Answers {
     let rows: Vec<(&str, String, [u16; 5])> = vec![
         ("GET", "/jobs".into(), [401, 200, 200, 200, 401]),
         ("GET", format!("/jobs/{j}"), read),
+        // The id percent-encoded, as the router's extractor decodes it.
+        ("GET", format!("/jobs/{}", j.replace('-', "%2D")), read),
+        (
+            "GET",
+            format!("/jobs/{}/summary", j.replace('-', "%2d")),
+            read,
+        ),
         ("GET", format!("/jobs/{j}/events"), read),
         ("GET", format!("/jobs/{j}/summary"), read),
         ("GET", format!("/jobs/{j}/mesh"), read),

@@ -29,11 +29,15 @@ fn is_public(path: &str) -> bool {
 }
 
 /// The job id of a `/jobs/{id}` or `/jobs/{id}/…` path (None for others, and for ids that
-/// are not UUIDs: those are unknown jobs to the handler already).
+/// are not UUIDs: those are unknown jobs to the handler already). Percent-decoded as the
+/// handlers' `Path` extractor decodes it: `%2D` for `-` must not slip past the owner check.
 fn job_id(path: &str) -> Option<Uuid> {
     let rest = path.strip_prefix("/jobs/")?;
     let id = rest.split('/').next()?;
-    Uuid::parse_str(id).ok()
+    let id = percent_encoding::percent_decode_str(id)
+        .decode_utf8()
+        .ok()?;
+    Uuid::parse_str(&id).ok()
 }
 
 /// 401: no key, or one that is unknown or revoked (the same answer for all three).
@@ -197,6 +201,8 @@ mod tests {
         let id = Uuid::new_v4();
         assert_eq!(job_id(&format!("/jobs/{id}")), Some(id));
         assert_eq!(job_id(&format!("/jobs/{id}/fields/a.vtu")), Some(id));
+        let encoded = id.to_string().replace('-', "%2D").replacen('a', "%61", 1);
+        assert_eq!(job_id(&format!("/jobs/{encoded}/events")), Some(id));
         assert_eq!(job_id("/jobs/nope/events"), None);
         assert_eq!(job_id("/jobs"), None);
         assert_eq!(job_id(&format!("/meshes/{id}")), None);
