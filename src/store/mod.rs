@@ -9,6 +9,10 @@
 //! records the uploaded mesh its scene uses, so that a mesh is not deleted under a job that
 //! still needs it.
 //!
+//! Jobs and meshes have owners (the API key that created them, empty without
+//! authentication); keys, quotas, measured use and mesh ownership are [`owners::Owners`],
+//! which every store implements too. Claims are fair across owners.
+//!
 //! All methods are blocking (call them from worker threads or `spawn_blocking`).
 
 mod claim;
