@@ -3,7 +3,7 @@
 
 use crate::limits;
 use crate::problem::Problem;
-use crate::routes::{client, jobs, meshes, misc, results};
+use crate::routes::{auth, client, jobs, meshes, misc, results};
 use crate::state::AppState;
 use axum::extract::DefaultBodyLimit;
 use axum::http::StatusCode;
@@ -48,6 +48,7 @@ pub fn app(state: AppState) -> Router {
         })
         .layer(DefaultBodyLimit::max(limit))
         .layer(middleware::from_fn_with_state(limiter, limits::rate_limit))
+        .layer(middleware::from_fn_with_state(state.clone(), auth::layer))
         .layer(middleware::from_fn(limits::problem_json_errors))
         .with_state(state)
 }

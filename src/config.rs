@@ -46,6 +46,9 @@ pub struct Config {
     pub header_timeout: std::time::Duration,
     /// Certificate and key of HTTPS (`--tls-cert`, `--tls-key`); None: plain HTTP.
     pub tls: Option<crate::tls::ServerTls>,
+    /// Whether requests need an API key (see `crate::auth`); with `Required`, the node
+    /// refuses to start while the store has no active key.
+    pub auth: crate::auth::AuthMode,
 }
 
 impl Default for Config {
@@ -69,6 +72,7 @@ impl Default for Config {
             submit_burst: 50,
             header_timeout: std::time::Duration::from_secs(30),
             tls: None,
+            auth: crate::auth::AuthMode::Off,
         }
     }
 }

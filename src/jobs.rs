@@ -300,11 +300,13 @@ impl Runtime {
         self.running.fetch_add(1, Ordering::SeqCst);
         let keeper =
             super::lease::Keeper::start(self.store.clone(), id, worker, self.config.lease_s);
+        let started = Instant::now();
         let outcome = if is_study(&job.scene) {
             self.execute_study(&job, worker, &cancel)
         } else {
             self.execute(&job, worker, &cancel)
         };
+        self.charge(&job.owner, started.elapsed().as_secs_f64());
         let final_status = match outcome {
             Ok(Outcome::Succeeded) => Some((JobStatus::Succeeded, None)),
             Ok(Outcome::Cancelled) => Some((JobStatus::Cancelled, None)),
@@ -341,6 +343,19 @@ impl Runtime {
             );
         }
         self.channels.lock().unwrap().remove(&id);
+    }
+
+    /// Adds an attempt's worker-seconds to its owner's compute of the day (the quota of
+    /// `crate::auth::quota`); the anonymous owner has no quota and is not counted.
+    fn charge(&self, owner: &str, seconds: f64) {
+        if owner.is_empty() {
+            return;
+        }
+        let day = crate::store::owners::day_of(crate::store::now());
+        // Not retried: an addition whose outcome is unknown must not be counted twice.
+        if let Err(e) = self.store.add_compute(owner, day, seconds) {
+            tracing::warn!("cannot count {seconds:.1} s of compute for {owner}: {e}");
+        }
     }
 
     /// Renews the lease; `Some` if the job is no longer this worker's to compute: cancelled

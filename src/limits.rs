@@ -6,7 +6,8 @@
 //! Clients are told apart by peer IP address (IPv6 by /64 prefix: one host usually owns a
 //! whole /64), which needs `ConnectInfo<SocketAddr>` (the accept loop in `server` attaches
 //! it to every request). A request without that information (a router driven in-process)
-//! is not rate-limited.
+//! is not rate-limited. With authentication on, a request with an API key is limited per
+//! key instead, by `crate::routes::auth` (many users may share one address).
 
 use super::problem::Problem;
 use axum::extract::{ConnectInfo, Request, State};
@@ -31,32 +32,35 @@ const PRUNE_AT: usize = 10_000;
 /// this slow (governor counts time in u64 nanoseconds, about 584 years).
 const LONGEST_REFILL: Duration = Duration::from_secs(100 * 365 * 86_400);
 
-type Keyed<C> = governor::RateLimiter<
-    IpAddr,
-    HashMapStateStore<IpAddr>,
-    C,
-    NoOpMiddleware<<C as Clock>::Instant>,
->;
+type Keyed<C, K> =
+    governor::RateLimiter<K, HashMapStateStore<K>, C, NoOpMiddleware<<C as Clock>::Instant>>;
 
 /// Submissions per client: `burst` at once, one more every 1/`rate` seconds (a token
-/// bucket, as governor's GCRA keyed by client address).
-pub struct RateLimiter<C: Clock = MonotonicClock> {
-    rate: f64,
-    burst: u32,
+/// bucket, as governor's GCRA keyed by client address, or by API key: `K`).
+pub struct RateLimiter<C: Clock = MonotonicClock, K: std::hash::Hash + Eq + Clone = IpAddr> {
+    pub(crate) rate: f64,
+    pub(crate) burst: u32,
     /// None: disabled.
-    keyed: Option<Keyed<C>>,
+    keyed: Option<Keyed<C, K>>,
 }
 
 impl RateLimiter {
     /// `rate` ≤ 0 (or not finite) disables the limiter; `burst` is at least 1.
     pub fn new(rate: f64, burst: u32) -> RateLimiter {
-        RateLimiter::with_clock(rate, burst, MonotonicClock)
+        RateLimiter::<MonotonicClock, IpAddr>::with_clock(rate, burst, MonotonicClock)
     }
 }
 
-impl<C: Clock> RateLimiter<C> {
+impl RateLimiter<MonotonicClock, String> {
+    /// [`RateLimiter::new`] keyed by API key name (see `crate::auth`).
+    pub fn per_key(rate: f64, burst: u32) -> RateLimiter<MonotonicClock, String> {
+        RateLimiter::<MonotonicClock, String>::with_clock(rate, burst, MonotonicClock)
+    }
+}
+
+impl<C: Clock, K: std::hash::Hash + Eq + Clone> RateLimiter<C, K> {
     /// [`RateLimiter::new`] reading the time from `clock`.
-    pub fn with_clock(rate: f64, burst: u32, clock: C) -> RateLimiter<C> {
+    pub fn with_clock(rate: f64, burst: u32, clock: C) -> RateLimiter<C, K> {
         let rate = if rate.is_finite() { rate.max(0.0) } else { 0.0 };
         let burst = NonZeroU32::new(burst.max(1)).expect("at least 1");
         let keyed = (rate > 0.0)
@@ -87,7 +91,7 @@ impl<C: Clock> RateLimiter<C> {
 
     /// Takes one submission of `client`'s allowance; on refusal, the whole seconds until
     /// the next one is allowed (at least 1).
-    pub fn take(&self, client: IpAddr) -> Result<(), u32> {
+    pub fn take(&self, client: K) -> Result<(), u32> {
         let Some(keyed) = &self.keyed else {
             return Ok(());
         };
@@ -122,7 +126,7 @@ pub fn client_key(addr: IpAddr) -> IpAddr {
 }
 
 /// Whether a request submits work: any POST except a cancellation.
-fn is_submission(req: &Request) -> bool {
+pub(crate) fn is_submission(req: &Request) -> bool {
     req.method() == Method::POST && !req.uri().path().ends_with("/cancel")
 }
 
@@ -132,7 +136,12 @@ pub async fn rate_limit(
     req: Request,
     next: Next,
 ) -> Response {
-    if limiter.enabled() && is_submission(&req) {
+    // A request with an API key is limited per key instead (`crate::routes::auth`).
+    let keyed = matches!(
+        req.extensions().get::<crate::auth::Caller>(),
+        Some(crate::auth::Caller::Key(_))
+    );
+    if limiter.enabled() && is_submission(&req) && !keyed {
         if let Some(ConnectInfo(peer)) = req.extensions().get::<ConnectInfo<SocketAddr>>() {
             if let Err(wait) = limiter.take(client_key(peer.ip())) {
                 return Problem::new(

@@ -19,5 +19,6 @@ fn main() -> ExitCode {
         Command::Study(args) => cli::study::main(args),
         Command::Bench(args) => cli::bench::main(args),
         Command::Stress(args) => cli::stress::main(args),
+        Command::Keys(args) => cli::keys::main(args),
     }
 }

@@ -16,6 +16,7 @@
 //! Everything here blocks (store, files, parsing): call it from worker threads or the
 //! blocking pool, never on the async runtime's threads.
 
+use crate::auth::Caller;
 use crate::problem::Problem;
 use crate::store::meshes::{is_mesh_id, mesh_id, MeshBlobs};
 use crate::store::{MeshDeletion, MeshRecord, Store, StoreError};
@@ -44,6 +45,23 @@ pub fn mesh_ref(doc: &Value) -> Option<String> {
         .as_str()
         .filter(|s| is_mesh_id(s))
         .map(str::to_string)
+}
+
+/// Refuses a job document whose uploaded mesh is not the caller's (422 at `domain.mesh`,
+/// the answer for a mesh that does not exist), before anything reads it. Blocking.
+pub fn check_owner(doc: &Value, store: &dyn Store, caller: &Caller) -> Result<(), Problem> {
+    let Some(id) = mesh_ref(doc) else {
+        return Ok(());
+    };
+    if caller.sees_all() || store.owned_mesh(caller.owner(), &id)?.is_some() {
+        return Ok(());
+    }
+    let pointer = if doc.get("study").is_some() {
+        "/study/scene/domain/mesh"
+    } else {
+        "/domain/mesh"
+    };
+    Err(Problem::invalid_field(pointer, unknown_mesh(&id)))
 }
 
 /// The sentence for a `domain.mesh` the service does not know.
@@ -121,6 +139,42 @@ impl Meshes {
             self.blobs.write(&id, bytes).map_err(io)?;
         }
         Ok((record, new))
+    }
+
+    /// [`Meshes::upload`] for `owner` (`""`: anonymous): the mesh becomes theirs too. The
+    /// record is the owner's view and `new` says whether it is new to them.
+    pub fn upload_for(&self, owner: &str, bytes: &[u8]) -> Result<(MeshRecord, bool), Problem> {
+        // Released by its last owner between the upload and the ownership: upload again.
+        for _ in 0..3 {
+            let (rec, new) = self.upload(bytes)?;
+            match self.store.add_mesh_owner(owner, &rec.id)? {
+                None => continue,
+                Some(_) if owner.is_empty() => return Ok((rec, new)),
+                Some(new_to_owner) => {
+                    let view = self.store.owned_mesh(owner, &rec.id)?.unwrap_or(rec);
+                    return Ok((view, new_to_owner));
+                }
+            }
+        }
+        Err(Problem::internal(
+            "the mesh was deleted while being uploaded, three times in a row",
+        ))
+    }
+
+    /// Ends `owner`'s ownership of mesh `id` (see `Owners::release_mesh`); the file and the
+    /// cached copy go when nobody else has the mesh.
+    pub fn release(&self, owner: &str, id: &str) -> Result<MeshDeletion, Problem> {
+        if !is_mesh_id(id) {
+            return Ok(MeshDeletion::Absent);
+        }
+        let (outcome, orphan) = self.store.release_mesh(owner, id)?;
+        if orphan {
+            self.blobs
+                .remove(id)
+                .map_err(|e| Problem::internal(format!("mesh file {id}: {e}")))?;
+            self.cache.lock().unwrap().retain(|(k, _)| k != id);
+        }
+        Ok(outcome)
     }
 
     pub fn get(&self, id: &str) -> Result<Option<MeshRecord>, StoreError> {

@@ -18,6 +18,10 @@ pub struct Problem {
     /// What is wrong where: one entry per offending field of the request body.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub errors: Option<Vec<FieldError>>,
+    /// The quota a request went over: its name, limit, use and when it resets (see
+    /// `crate::auth::quota`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub quota: Option<Box<serde_json::Value>>,
     /// Seconds after which a retry may succeed (the `Retry-After` header, not a member).
     #[serde(skip)]
     pub retry_after: Option<u32>,
@@ -39,6 +43,7 @@ impl Problem {
             status: status.as_u16(),
             detail: detail.into(),
             errors: None,
+            quota: None,
             retry_after: None,
         }
     }

@@ -21,6 +21,10 @@ pub struct AppState {
     pub(crate) closing_tx: Arc<tokio::sync::watch::Sender<bool>>,
     /// Submission rate per client (see `limits`).
     pub limiter: Arc<RateLimiter>,
+    /// Whether requests need a key (see `auth`).
+    pub auth: crate::auth::AuthMode,
+    /// Submission rate per API key, with authentication on (see `routes::auth`).
+    pub key_limiter: Arc<RateLimiter<governor::clock::MonotonicClock, String>>,
 }
 
 impl AppState {
@@ -34,6 +38,11 @@ impl AppState {
 /// Blocking: with a PostgreSQL store, call it outside the async runtime's threads.
 pub fn start(config: Config) -> Result<AppState, String> {
     let limiter = Arc::new(RateLimiter::new(config.submit_rate, config.submit_burst));
+    let auth = config.auth;
+    let key_limiter = Arc::new(RateLimiter::per_key(
+        config.submit_rate,
+        config.submit_burst,
+    ));
     let rt = open_runtime(config)?;
     let (tx, rx) = tokio::sync::watch::channel(false);
     Ok(AppState {
@@ -41,6 +50,8 @@ pub fn start(config: Config) -> Result<AppState, String> {
         closing: rx,
         closing_tx: Arc::new(tx),
         limiter,
+        auth,
+        key_limiter,
     })
 }
 
@@ -69,6 +80,19 @@ pub fn open_runtime(config: Config) -> Result<Arc<Runtime>, String> {
             MeshBlobs::shared(&config.data_dir).map_err(|e| e.to_string())?,
         ),
     };
+    if config.auth == crate::auth::AuthMode::Required
+        && !store
+            .keys()
+            .map_err(|e| e.to_string())?
+            .iter()
+            .any(|k| k.revoked_at.is_none())
+    {
+        return Err(
+            "--auth required, but the store has no active API key: create one with \
+                    contact-sim keys add NAME --admin (same --data-dir or --store)"
+                .into(),
+        );
+    }
     let meshes = Arc::new(Meshes::new(store.clone(), blobs));
     store
         .release_worker_leases(&format!("{}-", config.node))

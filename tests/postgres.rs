@@ -54,9 +54,9 @@ fn pg_store_migrations_and_reconnection() {
     let store = PgStore::connect(&pg.url()).unwrap();
 
     // Migrations: applied once, idempotent at the next connect.
-    assert_eq!(store.schema_version().unwrap(), 2);
+    assert_eq!(store.schema_version().unwrap(), 3);
     let again = PgStore::connect(&pg.url()).unwrap();
-    assert_eq!(again.schema_version().unwrap(), 2);
+    assert_eq!(again.schema_version().unwrap(), 3);
 
     let job = NewJob {
         scene: json!({"name": "job"}),

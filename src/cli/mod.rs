@@ -2,6 +2,7 @@
 //! command, each with its flags and what it does. `main.rs` parses and dispatches.
 
 pub mod bench;
+pub mod keys;
 pub mod logging;
 pub mod mesh_files;
 pub mod node;
@@ -55,6 +56,8 @@ pub enum Command {
     /// slender beam, load jumps) run with every invariant checked, or refused with a reason.
     /// Exit code 1 if any case does not do what it must.
     Stress(stress::StressArgs),
+    /// API keys of the service: add (prints the token once), list, revoke, set-quota.
+    Keys(keys::KeysArgs),
 }
 
 impl Default for Command {

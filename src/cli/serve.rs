@@ -56,6 +56,11 @@ pub struct ServeArgs {
     /// The PEM private key of --tls-cert.
     #[arg(long = "tls-key", value_name = "PEM", requires = "tls_cert")]
     pub tls_key: Option<std::path::PathBuf>,
+    /// Whether requests need an API key (contact-sim keys add): required, or off. Without
+    /// the flag, off when every listening address is loopback; on any other address the
+    /// node refuses to start without it.
+    #[arg(long, value_parser = ["required", "off"])]
+    pub auth: Option<String>,
 }
 
 impl Default for ServeArgs {
@@ -72,6 +77,10 @@ impl ServeArgs {
     /// positive number keeps the default.
     pub fn config(self) -> Result<Config, String> {
         let base = self.node.config()?;
+        let addrs: Vec<std::net::SocketAddr> = std::net::ToSocketAddrs::to_socket_addrs(&self.addr)
+            .map_err(|e| format!("--addr {}: {e}", self.addr))?
+            .collect();
+        let auth = contact_sim::auth::AuthMode::resolve(self.auth.as_deref(), &addrs)?;
         let header_timeout = if self.header_timeout.is_finite() && self.header_timeout > 0.0 {
             std::time::Duration::from_secs_f64(self.header_timeout.min(1e6))
         } else {
@@ -92,6 +101,7 @@ impl ServeArgs {
                 (Some(cert), Some(key)) => Some(contact_sim::tls::ServerTls::load(cert, key)?),
                 _ => None,
             },
+            auth,
             ..base
         })
     }
@@ -115,6 +125,9 @@ fn serve(addr: &str, config: Config) -> ExitCode {
         Ok(rt) => rt,
         Err(e) => return fatal(&format!("cannot start the async runtime: {e}")),
     };
+    if let Some(w) = config.auth.warning() {
+        tracing::warn!("{w}");
+    }
     if config.workers == 0 && config.store.is_none() {
         tracing::warn!(
             "--workers 0 with the embedded store: jobs are accepted but nothing runs them \

@@ -3,6 +3,7 @@
 
 use super::query::{Cursor, Limit, Params};
 use super::{blocking, load_job, parse_id, rfc3339};
+use crate::auth::Caller;
 use crate::jobs::{is_study, JobEvent};
 use crate::problem::Problem;
 use crate::state::AppState;
@@ -12,6 +13,7 @@ use axum::extract::{Path, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
+use axum::Extension;
 use contact_core::scene::{self, canonical, hex_sha256, presets, Overrides};
 use contact_core::solve::SolverSettings;
 use contact_core::study;
@@ -48,7 +50,7 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
         links["pvd"] = json!(format!("{base}/result.pvd"));
         links["archive"] = json!(format!("{base}/archive.tar"));
     }
-    json!({
+    let mut view = json!({
         "id": id,
         "kind": if study { "study" } else { "simulation" },
         "scene": if study {
@@ -85,7 +87,11 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
             })
         }),
         "links": links,
-    })
+    });
+    if !rec.owner.is_empty() {
+        view["owner"] = json!(rec.owner);
+    }
+    view
 }
 
 fn json_response(status: StatusCode, body: &Value) -> Response {
@@ -169,13 +175,14 @@ fn map_override_pointers(mut p: Problem) -> Problem {
     p
 }
 
-/// Per-job limits (nodes, steps, stored bytes), reported at the field that sets them.
+/// Per-job limits (nodes, steps, stored bytes), reported at the field that sets them; the
+/// estimated stored bytes (what the owner's quota counts).
 fn check_limits(
     p: &contact_core::problem::Problem,
     state: &AppState,
     is_preset: bool,
     doc: &Value,
-) -> Result<(), Problem> {
+) -> Result<u64, Problem> {
     let cfg = &state.rt.config;
     let nodes = p.n_nodes();
     let (mut hptr, kptr) = if is_preset {
@@ -236,7 +243,7 @@ fn check_limits(
             format!("the selected output stores about {} MB, more than this server's limit of {} MB; store fewer steps (output.every) or fields", (per_step * stored) >> 20, cfg.max_stored_bytes >> 20),
         ));
     }
-    Ok(())
+    Ok(per_step * stored)
 }
 
 /// A study's runs against the per-job limits: the reference (its largest run) must fit the
@@ -270,9 +277,10 @@ fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), Proble
     Ok(())
 }
 
-/// The document to store and its number of time steps, or why it is refused (422 at the
-/// offending field). Blocking.
-fn validated(doc: Value, state: &AppState) -> Result<(Value, usize), Problem> {
+/// The document to store, its number of time steps and its estimated stored bytes (a
+/// study's summary counts as nothing), or why it is refused (422 at the offending field).
+/// Blocking.
+fn validated(doc: Value, state: &AppState) -> Result<(Value, usize, u64), Problem> {
     match doc.get("study") {
         Some(study) => {
             if let Some(k) = doc
@@ -287,7 +295,7 @@ fn validated(doc: Value, state: &AppState) -> Result<(Value, usize), Problem> {
             let (plan, expanded) = study::parse_with(study, "/study", &*state.rt.meshes)
                 .map_err(|e| Problem::invalid_scene(&e))?;
             check_study_limits(&plan, state)?;
-            Ok((json!({ "study": expanded }), study::total_steps(&plan)))
+            Ok((json!({ "study": expanded }), study::total_steps(&plan), 0))
         }
         None => {
             let (scene_doc, is_preset) = expand(doc)?;
@@ -302,15 +310,16 @@ fn validated(doc: Value, state: &AppState) -> Result<(Value, usize), Problem> {
                     });
                 }
             };
-            check_limits(&problem, state, is_preset, &scene_doc)?;
+            let bytes = check_limits(&problem, state, is_preset, &scene_doc)?;
             let steps = problem.steps;
-            Ok((scene_doc, steps))
+            Ok((scene_doc, steps, bytes))
         }
     }
 }
 
 pub async fn submit(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     headers: HeaderMap,
     body: Bytes,
 ) -> Result<Response, Problem> {
@@ -326,9 +335,15 @@ pub async fn submit(
     }
     let doc: Value = crate::json_body::parse(&body)?;
     crate::limits::check_depth(&doc, state.rt.config.max_json_depth)?;
-    // Validation meshes the body (and reads an uploaded mesh): on the blocking pool.
+    // Validation meshes the body (and reads an uploaded mesh): on the blocking pool. Another
+    // owner's mesh is unknown before it is read (nothing about it may leak).
     let st = state.clone();
-    let (scene_doc, steps) = blocking(move || validated(doc, &st)).await?;
+    let who = caller.clone();
+    let (scene_doc, steps, stored_bytes) = blocking(move || {
+        crate::meshes::check_owner(&doc, st.store().as_ref(), &who)?;
+        validated(doc, &st)
+    })
+    .await?;
     let hash = scene_hash(&scene_doc);
     let mesh = crate::meshes::mesh_ref(&scene_doc);
     let key = match headers.get("idempotency-key") {
@@ -347,11 +362,21 @@ pub async fn submit(
     let store = state.store().clone();
     let capacity = state.rt.config.queue_capacity;
     let outcome = blocking(move || {
+        let owner = caller.owner();
         if key.is_none() {
-            // An identical scene already computed by this version: answer from the store.
-            if let Some(done) = store.find_succeeded_by_hash(&hash)? {
+            // An identical scene already computed by this version for this owner: answer
+            // from the store.
+            if let Some(done) = store.find_succeeded_for(owner, &hash)? {
                 return Ok(Enqueued::Existing(done));
             }
+        }
+        // A retry with an Idempotency-Key gets its job back whatever the quotas say now.
+        let retry = match &key {
+            Some(k) => store.find_by_idempotency_key(owner, k)?.is_some(),
+            None => false,
+        };
+        if !retry {
+            crate::auth::quota::check_submission(store.as_ref(), &caller, stored_bytes)?;
         }
         let queued = store
             .counts()?
@@ -366,14 +391,15 @@ pub async fn submit(
             )
             .retry_after(5));
         }
-        Ok(store.enqueue(NewJob {
+        let job = NewJob {
             scene: scene_doc,
             scene_hash: hash,
             steps,
             idempotency_key: key,
             request_hash,
             mesh,
-        })?)
+        };
+        Ok(store.enqueue_for(owner, stored_bytes, job)?)
     })
     .await?;
     let (status, rec) = match outcome {
@@ -423,6 +449,8 @@ pub struct ListQuery {
     cursor: Option<Cursor>,
     /// Jobs per page, 1..=500 (default 50).
     limit: Option<Limit>,
+    /// Only this owner's jobs (an admin's choice; a key sees only its own anyway).
+    owner: Option<String>,
 }
 
 /// `status`: a job status by name.
@@ -443,17 +471,25 @@ impl TryFrom<String> for StatusParam {
 
 pub async fn list(
     State(state): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Params(q): Params<ListQuery>,
 ) -> Result<Response, Problem> {
     let status = q.status.map(|s| s.0);
     let limit = q.limit.map_or(50, |l| l.0);
     let cursor = q.cursor.map(|c| c.0);
+    let asked = q.owner.clone();
+    let owner = super::auth::list_scope(&caller, q.owner)?;
     let store = state.store().clone();
-    let page = blocking(move || Ok(store.list(status, cursor.as_deref(), limit)?)).await?;
+    let page =
+        blocking(move || Ok(store.list_for(owner.as_deref(), status, cursor.as_deref(), limit)?))
+            .await?;
     let next = page.next.map(|c| {
         let mut url = format!("/jobs?cursor={c}&limit={limit}");
         if let Some(s) = status {
             url += &format!("&status={}", s.as_str());
+        }
+        if let Some(o) = &asked {
+            url += &format!("&owner={o}");
         }
         url
     });

@@ -57,13 +57,17 @@ pub async fn preset(Path(name): Path<String>) -> Result<Json<Value>, Problem> {
 pub async fn healthz(State(state): State<AppState>) -> Result<Json<Value>, Problem> {
     let store = state.store().clone();
     super::blocking(move || Ok(store.counts()?)).await?;
-    Ok(Json(json!({
+    let mut health = json!({
         "status": "ok",
         "workers": state.rt.config.workers,
         "node": state.rt.config.node,
         "store": if state.rt.config.store.is_some() { "postgres" } else { "sqlite" },
         "version": env!("CARGO_PKG_VERSION"),
-    })))
+    });
+    if let Some(w) = state.auth.warning() {
+        health["warning"] = json!(w);
+    }
+    Ok(Json(health))
 }
 
 pub async fn metrics(State(state): State<AppState>) -> Result<Response, Problem> {

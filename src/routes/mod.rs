@@ -1,5 +1,6 @@
 //! HTTP handlers, one file per resource family.
 
+pub mod auth;
 pub mod client;
 pub mod jobs;
 pub mod meshes;

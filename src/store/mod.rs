@@ -9,10 +9,16 @@
 //! records the uploaded mesh its scene uses, so that a mesh is not deleted under a job that
 //! still needs it.
 //!
+//! Jobs and meshes have owners (the API key that created them, empty without
+//! authentication); keys, quotas, measured use and mesh ownership are [`owners::Owners`],
+//! which every store implements too. Claims are fair across owners.
+//!
 //! All methods are blocking (call them from worker threads or `spawn_blocking`).
 
 mod claim;
 pub mod meshes;
+pub mod owners;
+mod pg_owners;
 pub mod postgres;
 pub mod postgres_tls;
 pub mod results;
@@ -101,6 +107,10 @@ pub struct JobRecord {
     pub worker: Option<String>,
     pub lease_until: Option<f64>,
     pub last_checkpoint_step: Option<usize>,
+    /// The name of the key that submitted it; empty when submitted anonymously
+    /// (authentication off). See [`owners`].
+    #[serde(default)]
+    pub owner: String,
 }
 
 /// What `enqueue` needs.
@@ -188,9 +198,21 @@ pub struct Page {
     pub next: Option<String>,
 }
 
-pub trait Store: Send + Sync + 'static {
-    /// Adds a queued job (or returns the existing one for a known idempotency key).
-    fn enqueue(&self, job: NewJob) -> Result<Enqueued, StoreError>;
+pub trait Store: owners::Owners + Send + Sync + 'static {
+    /// Adds a queued job (or returns the existing one for a known idempotency key), as
+    /// the anonymous owner.
+    fn enqueue(&self, job: NewJob) -> Result<Enqueued, StoreError> {
+        self.enqueue_for("", 0, job)
+    }
+    /// [`Store::enqueue`] for `owner`, whose idempotency keys are its own (two owners
+    /// using the same key get two jobs); `stored_bytes` is the job's estimated result
+    /// size, counted against the owner's quota while the job exists.
+    fn enqueue_for(
+        &self,
+        owner: &str,
+        stored_bytes: u64,
+        job: NewJob,
+    ) -> Result<Enqueued, StoreError>;
     fn get(&self, id: Uuid) -> Result<Option<JobRecord>, StoreError>;
     /// Newest first; optional status filter; `cursor` from a previous page.
     fn list(
@@ -198,9 +220,21 @@ pub trait Store: Send + Sync + 'static {
         status: Option<JobStatus>,
         cursor: Option<&str>,
         limit: usize,
+    ) -> Result<Page, StoreError> {
+        self.list_for(None, status, cursor, limit)
+    }
+    /// [`Store::list`] of one owner's jobs (None: everybody's).
+    fn list_for(
+        &self,
+        owner: Option<&str>,
+        status: Option<JobStatus>,
+        cursor: Option<&str>,
+        limit: usize,
     ) -> Result<Page, StoreError>;
     /// Claims the oldest queued job, or a running job whose lease expired (a dead worker's:
-    /// its attempt counter is incremented), for `worker` until now + `lease_s`.
+    /// its attempt counter is incremented), for `worker` until now + `lease_s`; fair
+    /// across owners: the oldest job of the owner with the fewest running, and of those the
+    /// one served least recently.
     /// Jobs whose last `max_attempts` attempts all died without saving a new checkpoint are
     /// failed instead of claimed (dead letter); attempts that made progress do not count.
     fn claim(
@@ -231,8 +265,23 @@ pub trait Store: Send + Sync + 'static {
     /// Number of jobs per status.
     fn counts(&self) -> Result<Vec<(JobStatus, usize)>, StoreError>;
     /// Latest finished job with this scene hash that succeeded (repeat requests answered
-    /// from the store).
-    fn find_succeeded_by_hash(&self, scene_hash: &str) -> Result<Option<JobRecord>, StoreError>;
+    /// from the store), among the anonymous owner's.
+    fn find_succeeded_by_hash(&self, scene_hash: &str) -> Result<Option<JobRecord>, StoreError> {
+        self.find_succeeded_for("", scene_hash)
+    }
+    /// `owner`'s job submitted with this idempotency key, if any.
+    fn find_by_idempotency_key(
+        &self,
+        owner: &str,
+        key: &str,
+    ) -> Result<Option<JobRecord>, StoreError>;
+    /// [`Store::find_succeeded_by_hash`] among `owner`'s jobs only: another owner's job id
+    /// is never handed out.
+    fn find_succeeded_for(
+        &self,
+        owner: &str,
+        scene_hash: &str,
+    ) -> Result<Option<JobRecord>, StoreError>;
     /// Makes the running jobs of workers whose name starts with `worker_prefix` claimable
     /// at once (their lease is set to 0). A restarted node calls this at start with its own
     /// worker-name prefix: its previous process's workers are dead, so there is no point

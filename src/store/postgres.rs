@@ -7,8 +7,8 @@
 //!   cancelled`) with `attempt`, `worker_id`, `lease_until` and `last_checkpoint_step`; the
 //!   checkpoint blob lives in its own table (`checkpoints`), so the heartbeats that rewrite a
 //!   job row every few seconds never copy it.
-//! * **Claiming is `SELECT … FOR UPDATE SKIP LOCKED`** on the oldest claimable row: workers
-//!   of any number of processes never wait on each other's claims and never claim the same
+//! * **Claiming is `SELECT … FOR UPDATE SKIP LOCKED`** on the oldest claimable row of the
+//!   owners with the fewest running jobs, least recently served first (fair across owners): workers of any number of processes never wait on each other's claims and never claim the same
 //!   row (the row lock is held until the claiming transaction commits). What becomes of the
 //!   claimed row (cancelled, dead letter, running) is both stores' one claim policy
 //!   (`super::claim`, see [`Store::claim`]).
@@ -105,6 +105,47 @@ const MIGRATIONS: &[&str] = &[
     ALTER TABLE jobs ADD COLUMN mesh text;
     CREATE INDEX jobs_mesh ON jobs (mesh) WHERE mesh IS NOT NULL;
     ",
+    // Version 3: owners (see `super::owners`): a job's owner and estimated stored bytes,
+    // idempotency keys unique per owner; API keys by token hash, compute per owner and UTC
+    // day, and the owners of meshes.
+    "
+    ALTER TABLE jobs ADD COLUMN owner text NOT NULL DEFAULT '';
+    ALTER TABLE jobs ADD COLUMN stored_bytes bigint NOT NULL DEFAULT 0;
+    ALTER TABLE jobs DROP CONSTRAINT jobs_idempotency_key_key;
+    ALTER TABLE jobs ADD CONSTRAINT jobs_owner_idempotency_key UNIQUE (owner, idempotency_key);
+    CREATE INDEX jobs_owner_status ON jobs (owner, status, seq);
+
+    CREATE TABLE api_keys (
+        name             text PRIMARY KEY,
+        token_hash       text NOT NULL UNIQUE,
+        admin            boolean NOT NULL DEFAULT false,
+        created_at       float8 NOT NULL,
+        last_used_at     float8,
+        revoked_at       float8,
+        max_active_jobs  bigint,
+        max_stored_bytes bigint,
+        max_compute_s    float8
+    );
+    CREATE TABLE usage (
+        owner     text NOT NULL,
+        day       bigint NOT NULL,
+        compute_s float8 NOT NULL DEFAULT 0,
+        PRIMARY KEY (owner, day)
+    );
+    CREATE TABLE mesh_owners (
+        seq        bigint GENERATED ALWAYS AS IDENTITY UNIQUE,
+        owner      text NOT NULL,
+        id         text NOT NULL,
+        created_at float8 NOT NULL,
+        PRIMARY KEY (owner, id)
+    );
+    CREATE INDEX mesh_owners_id ON mesh_owners (id);
+    CREATE TABLE owner_turns (
+        owner      text PRIMARY KEY,
+        last_claim float8 NOT NULL
+    );
+    INSERT INTO mesh_owners (owner, id, created_at) SELECT '', id, created_at FROM meshes;
+    ",
 ];
 
 /// Columns of a [`MeshRecord`] (plus `seq`), in the order [`raw_mesh`] reads them.
@@ -122,10 +163,10 @@ const CHANNEL: &str = "contact_sim_jobs";
 /// Columns of a [`JobRecord`] (plus `seq`), in the order [`raw_job`] reads them.
 const COLS: &str = "id, status, scene, scene_hash, idempotency_key, request_hash, created_at, \
      started_at, finished_at, step, steps, last_residual, error, cancel_requested, attempt, \
-     worker_id, lease_until, last_checkpoint_step, seq";
+     worker_id, lease_until, last_checkpoint_step, seq, owner";
 
 /// The database server's time in Unix seconds.
-const NOW_S: &str = "extract(epoch from clock_timestamp())::float8";
+pub(super) const NOW_S: &str = "extract(epoch from clock_timestamp())::float8";
 
 /// Longest a statement may run (ms): every one here is a few indexed row operations or one
 /// checkpoint blob.
@@ -155,10 +196,11 @@ fn raw_job(r: &Row) -> Result<RawJob, postgres::Error> {
         lease_until: r.try_get(16)?,
         checkpoint_step: r.try_get(17)?,
         seq: r.try_get(18)?,
+        owner: r.try_get(19)?,
     })
 }
 
-fn raw_mesh(r: &Row) -> Result<RawMesh, postgres::Error> {
+pub(super) fn raw_mesh(r: &Row) -> Result<RawMesh, postgres::Error> {
     Ok(RawMesh {
         id: r.try_get(0)?,
         bytes: r.try_get(1)?,
@@ -169,7 +211,7 @@ fn raw_mesh(r: &Row) -> Result<RawMesh, postgres::Error> {
 }
 
 /// The mesh row `id`; `lock` is appended to the query (`""`, `FOR SHARE`, `FOR UPDATE`).
-fn select_mesh(
+pub(super) fn select_mesh(
     c: &mut impl GenericClient,
     id: &str,
     lock: &str,
@@ -207,7 +249,7 @@ pub fn describe(e: &postgres::Error) -> String {
     text
 }
 
-fn classify(e: postgres::Error) -> StoreError {
+pub(super) fn classify(e: postgres::Error) -> StoreError {
     if super::postgres_tls::is_tls_refusal(&e) {
         // Not transient: waiting does not make a certificate trusted.
         StoreError::Db(super::postgres_tls::explain(&describe(&e)))
@@ -222,7 +264,7 @@ fn classify(e: postgres::Error) -> StoreError {
 
 /// Reads at most one job matching `where_clause` (a constant SQL fragment from this file,
 /// never user input; values go through `params`).
-fn select_one(
+pub(super) fn select_one(
     c: &mut impl GenericClient,
     where_clause: &str,
     params: &[&(dyn postgres::types::ToSql + Sync)],
@@ -344,7 +386,7 @@ impl PgStore {
 
     /// Runs `f` on the connection, connecting first if there is none. A connection-level
     /// failure drops the connection and is [`StoreError::Unavailable`].
-    fn run<T>(
+    pub(super) fn run<T>(
         &self,
         f: impl FnOnce(&mut Client) -> Result<T, StoreError>,
     ) -> Result<T, StoreError> {
@@ -362,7 +404,7 @@ impl PgStore {
     }
 
     /// Like [`Self::run`] for a closure whose only errors are the database's.
-    fn exec<T>(
+    pub(super) fn exec<T>(
         &self,
         f: impl FnOnce(&mut Client) -> Result<T, postgres::Error>,
     ) -> Result<T, StoreError> {
@@ -371,7 +413,7 @@ impl PgStore {
 
     /// A read-only operation: retried once on a fresh connection if the first connection
     /// turned out to be dead (e.g. the first call after a database restart).
-    fn read<T>(
+    pub(super) fn read<T>(
         &self,
         f: impl Fn(&mut Client) -> Result<T, postgres::Error>,
     ) -> Result<T, StoreError> {
@@ -456,14 +498,19 @@ impl PgStore {
         loop {
             let Some(row) = tx.query_opt(
                 format!(
-                    "SELECT id, attempt, cancel_requested, stalls,
-                            COALESCE(last_checkpoint_step, -1) > COALESCE(claim_step, -1)
-                     FROM jobs
-                     WHERE status IN ('queued', 'running')
-                       AND ((status = 'queued' AND NOT cancel_requested)
-                            OR (status = 'running' AND COALESCE(lease_until, 0) < {NOW_S}))
-                     ORDER BY seq LIMIT 1
-                     FOR UPDATE SKIP LOCKED"
+                    "SELECT j.id, j.attempt, j.cancel_requested, j.stalls,
+                            COALESCE(j.last_checkpoint_step, -1) > COALESCE(j.claim_step, -1)
+                     FROM jobs j
+                     LEFT JOIN (SELECT owner, count(*) AS n FROM jobs
+                                WHERE status = 'running'
+                                  AND COALESCE(lease_until, 0) >= {NOW_S}
+                                GROUP BY owner) r ON r.owner = j.owner
+                     LEFT JOIN owner_turns t ON t.owner = j.owner
+                     WHERE j.status IN ('queued', 'running')
+                       AND ((j.status = 'queued' AND NOT j.cancel_requested)
+                            OR (j.status = 'running' AND COALESCE(j.lease_until, 0) < {NOW_S}))
+                     ORDER BY COALESCE(r.n, 0), COALESCE(t.last_claim, 0), j.seq LIMIT 1
+                     FOR UPDATE OF j SKIP LOCKED"
                 )
                 .as_str(),
                 &[],
@@ -520,6 +567,14 @@ impl PgStore {
                 &[&id, &worker, &lease_s, &stalls],
             )?;
             let raw = raw_job(&raw)?;
+            tx.execute(
+                format!(
+                    "INSERT INTO owner_turns (owner, last_claim) VALUES ($1, {NOW_S})
+                     ON CONFLICT (owner) DO UPDATE SET last_claim = excluded.last_claim"
+                )
+                .as_str(),
+                &[&raw.owner],
+            )?;
             tx.commit()?;
             return Ok(Some(raw));
         }
@@ -530,14 +585,24 @@ impl Store for PgStore {
     /// As [`super::sqlite::SqliteStore`]'s: one transaction looks up the idempotency key
     /// and inserts; a concurrent insert with the same key (unique constraint) is answered
     /// with the job that won. Notifies the worker nodes at commit.
-    fn enqueue(&self, job: NewJob) -> Result<Enqueued, StoreError> {
+    fn enqueue_for(
+        &self,
+        owner: &str,
+        stored_bytes: u64,
+        job: NewJob,
+    ) -> Result<Enqueued, StoreError> {
         let scene = json_text(&job.scene)?;
         let steps = to_i64(job.steps, "steps")?;
+        let stored_bytes = i64::try_from(stored_bytes).unwrap_or(i64::MAX);
         let raw = self.run(|c| {
             let mut tx = c.transaction().map_err(classify)?;
             if let Some(key) = &job.idempotency_key {
-                if let Some(existing) =
-                    select_one(&mut tx, "idempotency_key = $1", &[key]).map_err(classify)?
+                if let Some(existing) = select_one(
+                    &mut tx,
+                    "owner = $1 AND idempotency_key = $2",
+                    &[&owner, key],
+                )
+                .map_err(classify)?
                 {
                     return Ok(Some((false, existing)));
                 }
@@ -558,9 +623,10 @@ impl Store for PgStore {
                 .query_opt(
                     format!(
                         "INSERT INTO jobs (id, status, scene, scene_hash, idempotency_key,
-                                           request_hash, created_at, steps, mesh)
-                         VALUES ($1, 'queued', $2, $3, $4, $5, {NOW_S}, $6, $7)
-                         ON CONFLICT (idempotency_key) DO NOTHING
+                                           request_hash, created_at, steps, mesh, owner,
+                                           stored_bytes)
+                         VALUES ($1, 'queued', $2, $3, $4, $5, {NOW_S}, $6, $7, $8, $9)
+                         ON CONFLICT (owner, idempotency_key) DO NOTHING
                          RETURNING {COLS}"
                     )
                     .as_str(),
@@ -572,6 +638,8 @@ impl Store for PgStore {
                         &job.request_hash,
                         &steps,
                         &job.mesh,
+                        &owner,
+                        &stored_bytes,
                     ],
                 )
                 .map_err(classify)?;
@@ -581,9 +649,10 @@ impl Store for PgStore {
                     // Lost a race for the key: the winner's row is committed now.
                     tx.rollback().map_err(classify)?;
                     let key = job.idempotency_key.as_ref().expect("conflict needs a key");
-                    let existing = select_one(c, "idempotency_key = $1", &[key])
-                        .map_err(classify)?
-                        .ok_or_else(|| StoreError::Db("idempotency key vanished".into()))?;
+                    let existing =
+                        select_one(c, "owner = $1 AND idempotency_key = $2", &[&owner, key])
+                            .map_err(classify)?
+                            .ok_or_else(|| StoreError::Db("idempotency key vanished".into()))?;
                     return Ok(Some((false, existing)));
                 }
             };
@@ -612,8 +681,9 @@ impl Store for PgStore {
     }
 
     /// Newest first by `seq`, with the SQLite store's opaque cursors.
-    fn list(
+    fn list_for(
         &self,
+        owner: Option<&str>,
         status: Option<JobStatus>,
         cursor: Option<&str>,
         limit: usize,
@@ -630,10 +700,11 @@ impl Store for PgStore {
                 format!(
                     "SELECT {COLS} FROM jobs
                      WHERE ($1::text IS NULL OR status = $1) AND seq < $2
+                       AND ($4::text IS NULL OR owner = $4)
                      ORDER BY seq DESC LIMIT $3"
                 )
                 .as_str(),
-                &[&status, &before, &fetch],
+                &[&status, &before, &fetch, &owner],
             )?
             .iter()
             .map(raw_job)
@@ -642,7 +713,8 @@ impl Store for PgStore {
         into_page(raws, limit)
     }
 
-    /// `FOR UPDATE SKIP LOCKED` on the oldest claimable row; otherwise the rules of
+    /// `FOR UPDATE SKIP LOCKED` on the oldest claimable row of the owner with the fewest
+    /// running jobs and the oldest last claim (`owner_turns`); otherwise the rules of
     /// [`Store::claim`] (dead letter after `max_attempts` claims in a row without a new
     /// checkpoint, expired cancel-requested jobs become cancelled).
     fn claim(
@@ -812,13 +884,28 @@ impl Store for PgStore {
         status_counts(rows)
     }
 
-    fn find_succeeded_by_hash(&self, scene_hash: &str) -> Result<Option<JobRecord>, StoreError> {
+    fn find_by_idempotency_key(
+        &self,
+        owner: &str,
+        key: &str,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        self.read(|c| select_one(c, "owner = $1 AND idempotency_key = $2", &[&owner, &key]))?
+            .map(RawJob::into_record)
+            .transpose()
+    }
+
+    fn find_succeeded_for(
+        &self,
+        owner: &str,
+        scene_hash: &str,
+    ) -> Result<Option<JobRecord>, StoreError> {
         self.read(|c| {
             let sql = format!(
-                "SELECT {COLS} FROM jobs WHERE scene_hash = $1 AND status = 'succeeded'
+                "SELECT {COLS} FROM jobs
+                 WHERE scene_hash = $1 AND status = 'succeeded' AND owner = $2
                  ORDER BY finished_at DESC, seq DESC LIMIT 1"
             );
-            c.query_opt(sql.as_str(), &[&scene_hash])?
+            c.query_opt(sql.as_str(), &[&scene_hash, &owner])?
                 .map(|r| raw_job(&r))
                 .transpose()
         })?
@@ -917,6 +1004,7 @@ impl Store for PgStore {
             )?;
             if user.is_none() {
                 tx.execute("DELETE FROM meshes WHERE id = $1", &[&id])?;
+                tx.execute("DELETE FROM mesh_owners WHERE id = $1", &[&id])?;
             }
             tx.commit()?;
             Ok(Some(user))

@@ -64,6 +64,7 @@ pub(super) struct RawJob {
     pub(super) lease_until: Option<f64>,
     pub(super) checkpoint_step: Option<i64>,
     pub(super) seq: i64,
+    pub(super) owner: String,
 }
 
 impl RawJob {
@@ -109,6 +110,7 @@ impl RawJob {
             worker: self.worker,
             lease_until: self.lease_until,
             last_checkpoint_step,
+            owner: self.owner,
         })
     }
 }

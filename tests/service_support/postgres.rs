@@ -10,7 +10,7 @@ use super::{try_http, Proc, Resp};
 use serde_json::Value;
 use std::collections::HashMap;
 use std::net::{SocketAddr, TcpListener};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -158,6 +158,11 @@ impl Postgres {
             crt.display(),
             key.display()
         );
+    }
+
+    /// The server's directory (its data files and log).
+    pub fn root(&self) -> &Path {
+        &self.dir
     }
 
     fn data_dir(&self) -> PathBuf {

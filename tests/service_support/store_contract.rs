@@ -8,6 +8,7 @@
 //! are either long (60 s or more: valid throughout the case) or zero (expired as soon as the
 //! clock has moved on, see [`expire`]).
 
+use contact_sim::store::owners::{KeyAdded, Quotas};
 use contact_sim::store::{
     now, parse_cursor, Enqueued, JobRecord, JobStatus, MeshDeletion, NewJob, Progress, Store,
     StoreError,
@@ -82,6 +83,16 @@ const CASES: &[(&str, Case)] = &[
         "concurrent_mesh_deletes_and_submissions_agree",
         concurrent_mesh_deletes_and_submissions_agree,
     ),
+    (
+        "keys_by_hash_revoked_and_rotated",
+        keys_by_hash_revoked_and_rotated,
+    ),
+    ("jobs_are_scoped_by_owner", jobs_are_scoped_by_owner),
+    (
+        "claims_are_fair_across_owners",
+        claims_are_fair_across_owners,
+    ),
+    ("meshes_have_owners", meshes_have_owners),
 ];
 
 /// Runs every case on its own fixture from `fresh` (given the case's name) and fails naming
@@ -871,4 +882,224 @@ fn concurrent_mesh_deletes_and_submissions_agree(f: &Fixture) {
             f.store.request_cancel(j.id).unwrap();
         }
     }
+}
+
+// Owners (`contact_sim::store::owners`): keys, jobs and meshes per owner, fair claims.
+
+fn keys_by_hash_revoked_and_rotated(f: &Fixture) {
+    let store = &*f.store;
+    let quotas = Quotas {
+        active_jobs: Some(3),
+        stored_bytes: None,
+        compute_s_per_day: Some(60.5),
+    };
+    let KeyAdded::Added(k) = store.add_key("alice", "h1", false, quotas).unwrap() else {
+        panic!("not added");
+    };
+    assert_eq!(
+        (k.name.as_str(), k.admin, k.quotas),
+        ("alice", false, quotas)
+    );
+    assert_eq!(
+        store
+            .add_key("alice", "h2", true, Quotas::default())
+            .unwrap(),
+        KeyAdded::Exists
+    );
+    let (found, hash) = store.key_by_hash("h1").unwrap().unwrap();
+    assert_eq!((found.name.as_str(), hash.as_str()), ("alice", "h1"));
+    assert!(store.key_by_hash("h2").unwrap().is_none());
+    // Another node sees the key, and its revocation.
+    let other = (f.connect)();
+    assert!(other.key_by_hash("h1").unwrap().is_some());
+    store.touch_key("alice", 1234.5).unwrap();
+    assert_eq!(other.keys().unwrap()[0].last_used_at, Some(1234.5));
+    assert!(store.revoke_key("alice").unwrap());
+    assert!(!store.revoke_key("alice").unwrap());
+    assert!(other.key_by_hash("h1").unwrap().is_none());
+    // Rotation: a revoked name gets a new key; the old token stays refused.
+    let KeyAdded::Added(k) = store
+        .add_key("alice", "h3", true, Quotas::default())
+        .unwrap()
+    else {
+        panic!("not rotated");
+    };
+    assert!(k.admin && k.revoked_at.is_none() && k.last_used_at.is_none());
+    assert!(store.key_by_hash("h1").unwrap().is_none());
+    assert!(store.key_by_hash("h3").unwrap().is_some());
+    assert!(store.set_quotas("alice", quotas).unwrap());
+    assert!(!store.set_quotas("nobody", quotas).unwrap());
+    assert_eq!(store.keys().unwrap()[0].quotas, quotas);
+}
+
+fn owned(store: &dyn Store, owner: &str, n: usize, key: Option<&str>, bytes: u64) -> Enqueued {
+    let job = NewJob {
+        idempotency_key: key.map(str::to_string),
+        request_hash: Some("body".into()),
+        ..new_job(n)
+    };
+    store.enqueue_for(owner, bytes, job).unwrap()
+}
+
+fn jobs_are_scoped_by_owner(f: &Fixture) {
+    let store = &*f.store;
+    let Enqueued::New(a1) = owned(store, "a", 1, Some("k"), 100) else {
+        panic!("not new");
+    };
+    // The same idempotency key: another owner's is another job, the owner's own the same.
+    let Enqueued::New(b1) = owned(store, "b", 1, Some("k"), 7) else {
+        panic!("b's key is its own");
+    };
+    assert_ne!(a1.id, b1.id);
+    assert_eq!(
+        owned(store, "a", 1, Some("k"), 100),
+        Enqueued::Existing(a1.clone())
+    );
+    assert_eq!(
+        store.find_by_idempotency_key("a", "k").unwrap().unwrap().id,
+        a1.id
+    );
+    assert!(store.find_by_idempotency_key("c", "k").unwrap().is_none());
+    let Enqueued::New(a2) = owned(store, "a", 2, None, 50) else {
+        panic!("not new");
+    };
+    assert_eq!(
+        (a2.owner.as_str(), store.get(a2.id).unwrap().unwrap().owner),
+        ("a", "a".into())
+    );
+    assert_eq!(
+        ids_of(&store.list_for(Some("a"), None, None, 10).unwrap().jobs),
+        vec![a2.id, a1.id]
+    );
+    assert_eq!(
+        ids_of(&store.list_for(Some("b"), None, None, 10).unwrap().jobs),
+        vec![b1.id]
+    );
+    assert_eq!(store.list(None, None, 10).unwrap().jobs.len(), 3);
+    let page = store
+        .list_for(Some("a"), Some(JobStatus::Queued), None, 1)
+        .unwrap();
+    assert_eq!(ids_of(&page.jobs), vec![a2.id]);
+    let rest = store
+        .list_for(Some("a"), None, page.next.as_deref(), 1)
+        .unwrap();
+    assert_eq!(ids_of(&rest.jobs), vec![a1.id]);
+    // Usage: unfinished jobs, stored bytes, compute of a day.
+    let u = store.usage("a", 7).unwrap();
+    assert_eq!(
+        (u.active_jobs, u.stored_bytes, u.compute_s_today),
+        (2, 150, 0.0)
+    );
+    store.add_compute("a", 7, 1.5).unwrap();
+    store.add_compute("a", 7, 2.0).unwrap();
+    store.add_compute("a", 8, 100.0).unwrap();
+    assert_eq!(store.usage("a", 7).unwrap().compute_s_today, 3.5);
+    // The identical-scene shortcut: only the owner's own succeeded job.
+    let claimed = store.claim("w", 60.0, 3).unwrap().unwrap();
+    store
+        .finish(claimed.id, JobStatus::Succeeded, None)
+        .unwrap();
+    let hash = &claimed.scene_hash;
+    assert_eq!(
+        store
+            .find_succeeded_for(&claimed.owner, hash)
+            .unwrap()
+            .unwrap()
+            .id,
+        claimed.id
+    );
+    let stranger = if claimed.owner == "a" { "b" } else { "a" };
+    if store.find_succeeded_for(stranger, hash).unwrap().is_some() {
+        panic!("another owner's job was found by hash");
+    }
+    assert!(store.find_succeeded_by_hash(hash).unwrap().is_none());
+    let u = store.usage(&claimed.owner, 7).unwrap();
+    assert!(u.active_jobs <= 1);
+}
+
+fn claims_are_fair_across_owners(f: &Fixture) {
+    let store = &*f.store;
+    let flood: Vec<Uuid> = (0..5)
+        .map(|n| match owned(store, "a", n, None, 0) {
+            Enqueued::New(j) => j.id,
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    let Enqueued::New(b) = owned(store, "b", 9, None, 0) else {
+        panic!("not new");
+    };
+    // Nobody was served yet: the oldest job.
+    let first = store.claim("w", 60.0, 3).unwrap().unwrap();
+    assert_eq!(first.id, flood[0]);
+    // a has one running: b's job, though younger than a's four.
+    assert_eq!(store.claim("w2", 60.0, 3).unwrap().unwrap().id, b.id);
+    store.finish(first.id, JobStatus::Succeeded, None).unwrap();
+    store.finish(b.id, JobStatus::Succeeded, None).unwrap();
+    // One worker: after a, b; after b, a again (least recently served first).
+    let Enqueued::New(b2) = owned(store, "b", 10, None, 0) else {
+        panic!("not new");
+    };
+    let next = store.claim("w", 60.0, 3).unwrap().unwrap();
+    assert_eq!(next.id, flood[1], "a was served before b's last claim");
+    store.finish(next.id, JobStatus::Succeeded, None).unwrap();
+    assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, b2.id);
+}
+
+fn meshes_have_owners(f: &Fixture) {
+    let store = &*f.store;
+    let (id, summary) = mesh(1);
+    assert_eq!(
+        store.add_mesh_owner("a", &id).unwrap(),
+        None,
+        "no such mesh yet"
+    );
+    store.add_mesh(&id, 100, &summary).unwrap();
+    assert_eq!(store.add_mesh_owner("a", &id).unwrap(), Some(true));
+    assert_eq!(store.add_mesh_owner("a", &id).unwrap(), Some(false));
+    assert_eq!(store.add_mesh_owner("b", &id).unwrap(), Some(true));
+    assert!(store.owned_mesh("c", &id).unwrap().is_none());
+    let (va, vb) = (
+        store.owned_mesh("a", &id).unwrap().unwrap(),
+        store.owned_mesh("b", &id).unwrap().unwrap(),
+    );
+    assert_eq!((va.bytes, vb.summary.clone()), (100, summary.clone()));
+    assert!(vb.created_at >= va.created_at);
+    assert_eq!(
+        store.list_owned_meshes("a", None, 10).unwrap().meshes.len(),
+        1
+    );
+    assert!(store
+        .list_owned_meshes("c", None, 10)
+        .unwrap()
+        .meshes
+        .is_empty());
+    assert_eq!(store.usage("a", 0).unwrap().stored_bytes, 100);
+    // b's queued job keeps b's ownership; a's release leaves the mesh to b.
+    let job = NewJob {
+        mesh: Some(id.clone()),
+        ..new_job(1)
+    };
+    let Enqueued::New(j) = store.enqueue_for("b", 0, job).unwrap() else {
+        panic!("not new");
+    };
+    assert_eq!(
+        store.release_mesh("a", &id).unwrap(),
+        (MeshDeletion::Deleted, false)
+    );
+    assert_eq!(
+        store.release_mesh("a", &id).unwrap(),
+        (MeshDeletion::Absent, false)
+    );
+    assert!(matches!(
+        store.release_mesh("b", &id).unwrap(),
+        (MeshDeletion::InUse(_), false)
+    ));
+    assert!(store.get_mesh(&id).unwrap().is_some());
+    store.request_cancel(j.id).unwrap();
+    // The last owner's release removes the mesh: its file is the caller's to remove.
+    assert_eq!(
+        store.release_mesh("b", &id).unwrap(),
+        (MeshDeletion::Deleted, true)
+    );
+    assert!(store.get_mesh(&id).unwrap().is_none());
 }

@@ -109,6 +109,87 @@ const MIGRATIONS: &[&str] = &[
     ALTER TABLE jobs ADD COLUMN mesh TEXT;
     CREATE INDEX jobs_mesh ON jobs (mesh) WHERE mesh IS NOT NULL;
     ",
+    // Version 4: owners (see `super::owners`). A job's owner and estimated stored bytes;
+    // idempotency keys unique per owner, which takes rebuilding the table (SQLite cannot
+    // drop a column's UNIQUE constraint); the checkpoint blob moves to the end of the row.
+    // API keys by token hash, compute per owner and UTC day, and the owners of meshes.
+    "
+    CREATE TABLE jobs_v4 (
+        id               TEXT PRIMARY KEY NOT NULL,
+        seq              INTEGER NOT NULL UNIQUE,
+        status           TEXT NOT NULL
+                         CHECK (status IN ('queued', 'running', 'succeeded', 'failed', 'cancelled')),
+        scene            TEXT NOT NULL,
+        scene_hash       TEXT NOT NULL,
+        owner            TEXT NOT NULL DEFAULT '',
+        idempotency_key  TEXT,
+        request_hash     TEXT,
+        created_at       REAL NOT NULL,
+        started_at       REAL,
+        finished_at      REAL,
+        step             INTEGER NOT NULL DEFAULT 0,
+        steps            INTEGER NOT NULL DEFAULT 0,
+        last_residual    REAL,
+        error            TEXT,
+        cancel_requested INTEGER NOT NULL DEFAULT 0,
+        attempt          INTEGER NOT NULL DEFAULT 0,
+        worker           TEXT,
+        lease_until      REAL,
+        checkpoint_step  INTEGER,
+        claim_step       INTEGER,
+        stalls           INTEGER NOT NULL DEFAULT 0,
+        mesh             TEXT,
+        stored_bytes     INTEGER NOT NULL DEFAULT 0,
+        checkpoint       BLOB,
+        UNIQUE (owner, idempotency_key)
+    );
+    INSERT INTO jobs_v4 (id, seq, status, scene, scene_hash, idempotency_key, request_hash,
+                         created_at, started_at, finished_at, step, steps, last_residual, error,
+                         cancel_requested, attempt, worker, lease_until, checkpoint_step,
+                         claim_step, stalls, mesh, checkpoint)
+        SELECT id, seq, status, scene, scene_hash, idempotency_key, request_hash,
+               created_at, started_at, finished_at, step, steps, last_residual, error,
+               cancel_requested, attempt, worker, lease_until, checkpoint_step,
+               claim_step, stalls, mesh, checkpoint
+        FROM jobs;
+    DROP TABLE jobs;
+    ALTER TABLE jobs_v4 RENAME TO jobs;
+    CREATE INDEX jobs_status_seq ON jobs (status, seq);
+    CREATE INDEX jobs_scene_hash ON jobs (scene_hash);
+    CREATE INDEX jobs_mesh ON jobs (mesh) WHERE mesh IS NOT NULL;
+    CREATE INDEX jobs_owner_status ON jobs (owner, status, seq);
+
+    CREATE TABLE api_keys (
+        name             TEXT PRIMARY KEY NOT NULL,
+        token_hash       TEXT NOT NULL UNIQUE,
+        admin            INTEGER NOT NULL DEFAULT 0,
+        created_at       REAL NOT NULL,
+        last_used_at     REAL,
+        revoked_at       REAL,
+        max_active_jobs  INTEGER,
+        max_stored_bytes INTEGER,
+        max_compute_s    REAL
+    );
+    CREATE TABLE usage (
+        owner     TEXT NOT NULL,
+        day       INTEGER NOT NULL,
+        compute_s REAL NOT NULL DEFAULT 0,
+        PRIMARY KEY (owner, day)
+    );
+    CREATE TABLE mesh_owners (
+        seq        INTEGER PRIMARY KEY AUTOINCREMENT,
+        owner      TEXT NOT NULL,
+        id         TEXT NOT NULL,
+        created_at REAL NOT NULL,
+        UNIQUE (owner, id)
+    );
+    CREATE INDEX mesh_owners_id ON mesh_owners (id);
+    CREATE TABLE owner_turns (
+        owner      TEXT PRIMARY KEY NOT NULL,
+        last_claim REAL NOT NULL
+    );
+    INSERT INTO mesh_owners (owner, id, created_at) SELECT '', id, created_at FROM meshes;
+    ",
 ];
 
 /// Columns of a [`MeshRecord`] (plus `seq`), in the order [`RawMesh::from_row`] reads them.
@@ -118,7 +199,7 @@ const MESH_COLS: &str = "id, bytes, created_at, summary, seq";
 /// The checkpoint blob is deliberately absent.
 const COLS: &str = "id, status, scene, scene_hash, idempotency_key, request_hash, created_at, \
      started_at, finished_at, step, steps, last_residual, error, cancel_requested, attempt, \
-     worker, lease_until, checkpoint_step, seq";
+     worker, lease_until, checkpoint_step, seq, owner";
 
 impl From<rusqlite::Error> for StoreError {
     fn from(e: rusqlite::Error) -> StoreError {
@@ -155,6 +236,7 @@ impl RawJob {
             lease_until: r.get(16)?,
             checkpoint_step: r.get(17)?,
             seq: r.get(18)?,
+            owner: r.get(19)?,
         })
     }
 }
@@ -280,12 +362,16 @@ impl SqliteStore {
         loop {
             let candidate: Option<(String, Candidate)> = tx
                 .query_row(
-                    "SELECT id, attempt, cancel_requested != 0, stalls,
-                            COALESCE(checkpoint_step, -1) > COALESCE(claim_step, -1)
-                     FROM jobs
-                     WHERE (status = 'queued' AND cancel_requested = 0)
-                        OR (status = 'running' AND COALESCE(lease_until, 0) < ?1)
-                     ORDER BY seq LIMIT 1",
+                    "SELECT j.id, j.attempt, j.cancel_requested != 0, j.stalls,
+                            COALESCE(j.checkpoint_step, -1) > COALESCE(j.claim_step, -1)
+                     FROM jobs j
+                     LEFT JOIN (SELECT owner, COUNT(*) AS n FROM jobs
+                                WHERE status = 'running' AND COALESCE(lease_until, 0) >= ?1
+                                GROUP BY owner) r ON r.owner = j.owner
+                     LEFT JOIN owner_turns t ON t.owner = j.owner
+                     WHERE (j.status = 'queued' AND j.cancel_requested = 0)
+                        OR (j.status = 'running' AND COALESCE(j.lease_until, 0) < ?1)
+                     ORDER BY COALESCE(r.n, 0), COALESCE(t.last_claim, 0), j.seq LIMIT 1",
                     params![now],
                     |r| {
                         Ok((
@@ -330,6 +416,12 @@ impl SqliteStore {
                                 stalls = ?5, claim_step = checkpoint_step
                          WHERE id = ?1",
                         params![id, worker, now + lease_s, now, stalls],
+                    )?;
+                    tx.execute(
+                        "INSERT INTO owner_turns (owner, last_claim)
+                         SELECT owner, ?2 FROM jobs WHERE id = ?1
+                         ON CONFLICT (owner) DO UPDATE SET last_claim = excluded.last_claim",
+                        params![id, now],
                     )?;
                 }
             }
@@ -429,13 +521,23 @@ impl Store for SqliteStore {
     /// a different request; the API answers 409/422). The look-up and the insert share one
     /// immediate transaction, so two concurrent submissions with the same key cannot both
     /// insert (the UNIQUE constraint would stop the second one anyway).
-    fn enqueue(&self, job: NewJob) -> Result<Enqueued, StoreError> {
+    fn enqueue_for(
+        &self,
+        owner: &str,
+        stored_bytes: u64,
+        job: NewJob,
+    ) -> Result<Enqueued, StoreError> {
         let scene = json_text(&job.scene)?;
         let steps = to_i64(job.steps, "steps")?;
+        let stored_bytes = i64::try_from(stored_bytes).unwrap_or(i64::MAX);
         let mut conn = self.lock();
         let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
         if let Some(key) = &job.idempotency_key {
-            if let Some(existing) = select_one(&tx, "idempotency_key = ?1", params![key])? {
+            if let Some(existing) = select_one(
+                &tx,
+                "owner = ?1 AND idempotency_key = ?2",
+                params![owner, key],
+            )? {
                 return Ok(if existing.request_hash == job.request_hash {
                     Enqueued::Existing(existing)
                 } else {
@@ -458,8 +560,9 @@ impl Store for SqliteStore {
         let id = Uuid::new_v4();
         tx.execute(
             "INSERT INTO jobs (id, seq, status, scene, scene_hash, idempotency_key, request_hash,
-                               created_at, step, steps, cancel_requested, attempt, mesh)
-             VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6, ?7, 0, ?8, 0, 0, ?9)",
+                               created_at, step, steps, cancel_requested, attempt, mesh, owner,
+                               stored_bytes)
+             VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6, ?7, 0, ?8, 0, 0, ?9, ?10, ?11)",
             params![
                 id.to_string(),
                 seq,
@@ -469,7 +572,9 @@ impl Store for SqliteStore {
                 job.request_hash,
                 now(),
                 steps,
-                job.mesh
+                job.mesh,
+                owner,
+                stored_bytes
             ],
         )?;
         let record = select_by_id(&tx, id)?
@@ -491,8 +596,10 @@ impl Store for SqliteStore {
     /// requests never duplicate or skip a job that exists throughout. An unparsable cursor
     /// yields an empty page (validate cursors with [`parse_cursor`] first to report 400).
     /// `limit` is at least 1 (0 is treated as 1). `next` is None on the last page.
-    fn list(
+    /// `owner` (when given) narrows the page to that owner's jobs.
+    fn list_for(
         &self,
+        owner: Option<&str>,
         status: Option<JobStatus>,
         cursor: Option<&str>,
         limit: usize,
@@ -504,20 +611,30 @@ impl Store for SqliteStore {
             });
         };
         let conn = self.lock();
-        let raws: Vec<RawJob> = match status {
-            Some(s) => {
+        let status = status.map(JobStatus::as_str);
+        let raws: Vec<RawJob> = match (status, owner) {
+            (Some(s), None) => {
                 let mut stmt = conn.prepare_cached(&format!(
                     "SELECT {COLS} FROM jobs WHERE status = ?1 AND seq < ?2
                      ORDER BY seq DESC LIMIT ?3"
                 ))?;
-                let rows = stmt.query_map(params![s.as_str(), before, fetch], RawJob::from_row)?;
+                let rows = stmt.query_map(params![s, before, fetch], RawJob::from_row)?;
                 rows.collect::<rusqlite::Result<_>>()?
             }
-            None => {
+            (None, None) => {
                 let mut stmt = conn.prepare_cached(&format!(
                     "SELECT {COLS} FROM jobs WHERE seq < ?1 ORDER BY seq DESC LIMIT ?2"
                 ))?;
                 let rows = stmt.query_map(params![before, fetch], RawJob::from_row)?;
+                rows.collect::<rusqlite::Result<_>>()?
+            }
+            (s, Some(o)) => {
+                let mut stmt = conn.prepare_cached(&format!(
+                    "SELECT {COLS} FROM jobs
+                     WHERE owner = ?1 AND (?2 IS NULL OR status = ?2) AND seq < ?3
+                     ORDER BY seq DESC LIMIT ?4"
+                ))?;
+                let rows = stmt.query_map(params![o, s, before, fetch], RawJob::from_row)?;
                 rows.collect::<rusqlite::Result<_>>()?
             }
         };
@@ -525,9 +642,13 @@ impl Store for SqliteStore {
         into_page(raws, limit)
     }
 
-    /// In one immediate transaction, takes the oldest job (lowest `seq`) that is either
-    /// `queued` (and not cancel-requested) or `running` with an expired lease
-    /// (`lease_until < now`: its worker died or hung), and applies the claim policy
+    /// In one immediate transaction, takes a job that is either `queued` (and not
+    /// cancel-requested) or `running` with an expired lease (`lease_until < now`: its
+    /// worker died or hung) — fairly across owners: of the owners with the fewest jobs
+    /// running, the one whose last claim is the oldest (`owner_turns`), its oldest job
+    /// (lowest `seq`), so that one owner's thousand queued jobs do not starve another's one
+    /// even with a single worker (with a single owner, as without authentication, simply
+    /// the oldest job) — and applies the claim policy
     /// (`super::claim`, the same for both backends):
     ///
     /// * If that job was already claimed `max_attempts` times in a row without saving a
@@ -664,14 +785,31 @@ impl Store for SqliteStore {
 
     /// The succeeded job with this scene hash that finished last (ties: the newest), None
     /// if there is none.
-    fn find_succeeded_by_hash(&self, scene_hash: &str) -> Result<Option<JobRecord>, StoreError> {
+    fn find_by_idempotency_key(
+        &self,
+        owner: &str,
+        key: &str,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        select_one(
+            &self.lock(),
+            "owner = ?1 AND idempotency_key = ?2",
+            params![owner, key],
+        )
+    }
+
+    fn find_succeeded_for(
+        &self,
+        owner: &str,
+        scene_hash: &str,
+    ) -> Result<Option<JobRecord>, StoreError> {
         let conn = self.lock();
         let sql = format!(
-            "SELECT {COLS} FROM jobs WHERE scene_hash = ?1 AND status = 'succeeded'
+            "SELECT {COLS} FROM jobs
+             WHERE scene_hash = ?1 AND status = 'succeeded' AND owner = ?2
              ORDER BY finished_at DESC, seq DESC LIMIT 1"
         );
         let raw = conn
-            .query_row(&sql, params![scene_hash], RawJob::from_row)
+            .query_row(&sql, params![scene_hash, owner], RawJob::from_row)
             .optional()?;
         raw.map(RawJob::into_record).transpose()
     }
@@ -739,10 +877,12 @@ impl Store for SqliteStore {
             return Ok(MeshDeletion::InUse(Box::new(job)));
         }
         tx.execute("DELETE FROM meshes WHERE id = ?1", params![id])?;
+        tx.execute("DELETE FROM mesh_owners WHERE id = ?1", params![id])?;
         tx.commit()?;
         Ok(MeshDeletion::Deleted)
     }
 }
 
+mod owners;
 #[cfg(test)]
 mod tests;
