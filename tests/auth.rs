@@ -610,21 +610,7 @@ fn routes_by_caller_on_postgres() {
     let store = ["--store", url.as_str()];
     // The keys exist before the API node starts (it refuses to start without one).
     let t = Tokens::make(&store);
-    let api = Proc::start(
-        &dir.0,
-        &[
-            "--store",
-            &url,
-            "--node",
-            "api",
-            "--workers",
-            "0",
-            "--auth",
-            "required",
-            "--submit-rate",
-            "0",
-        ],
-    );
+    let api = api_node(&dir.0, &url);
     let worker = Proc::worker(&dir.0, &["--store", &url, "--node", "w1", "--workers", "1"]);
     let revoke = || {
         keys(&store, &["revoke", "carol"]);
@@ -861,21 +847,7 @@ fn fair_claims_on_postgres() {
     let alice = add_key(&store, &["alice"]);
     let bob = add_key(&store, &["bob"]);
     let root = add_key(&store, &["root", "--admin"]);
-    let api = Proc::start(
-        &dir.0,
-        &[
-            "--store",
-            &url,
-            "--node",
-            "api",
-            "--workers",
-            "0",
-            "--auth",
-            "required",
-            "--submit-rate",
-            "0",
-        ],
-    );
+    let api = api_node(&dir.0, &url);
     let _worker = Proc::worker(&dir.0, &["--store", &url, "--node", "w1", "--workers", "1"]);
     fair_claims(api.addr, &alice, &bob, &root, "PostgreSQL");
 }
@@ -1093,4 +1065,23 @@ fn submission_rate_is_per_key() {
     }
     // Reads are not submissions.
     assert_eq!(call(a, "GET", "/jobs", Some(&k1), &[], b"").status, 200);
+}
+
+/// An API node on the PostgreSQL store `url` (no workers, keys required, no rate limit).
+fn api_node(dir: &std::path::Path, url: &str) -> Proc {
+    Proc::start(
+        dir,
+        &[
+            "--store",
+            url,
+            "--node",
+            "api",
+            "--workers",
+            "0",
+            "--auth",
+            "required",
+            "--submit-rate",
+            "0",
+        ],
+    )
 }
