@@ -21,6 +21,38 @@ pub struct Quotas {
     pub compute_s_per_day: Option<f64>,
 }
 
+impl Quotas {
+    /// From the store's columns max_active_jobs, max_stored_bytes, max_compute_s (NULL is
+    /// unlimited; a negative count, which no writer stores, reads as 0).
+    pub(super) fn from_columns(
+        active: Option<i64>,
+        stored: Option<i64>,
+        compute: Option<f64>,
+    ) -> Quotas {
+        let count = |v: Option<i64>| v.map(|x| x.max(0) as u64);
+        Quotas {
+            active_jobs: count(active),
+            stored_bytes: count(stored),
+            compute_s_per_day: compute,
+        }
+    }
+
+    /// The values of those columns (counts beyond i64 saturate).
+    pub(super) fn columns(&self) -> (Option<i64>, Option<i64>, Option<f64>) {
+        let count = |v: Option<u64>| v.map(|x| i64::try_from(x).unwrap_or(i64::MAX));
+        (
+            count(self.active_jobs),
+            count(self.stored_bytes),
+            self.compute_s_per_day,
+        )
+    }
+}
+
+/// Columns of a [`KeyRecord`] in both stores, in the order their `key_from_row` reads them,
+/// then the token hash.
+pub(super) const KEY_COLS: &str = "name, admin, created_at, last_used_at, revoked_at, \
+     max_active_jobs, max_stored_bytes, max_compute_s, token_hash";
+
 /// An API key as stored (never its token).
 #[derive(Debug, Clone, PartialEq)]
 pub struct KeyRecord {

@@ -3,20 +3,15 @@
 
 use postgres::Row;
 
-use super::owners::{KeyAdded, KeyRecord, Owners, Quotas, Usage};
+use super::owners::{KeyAdded, KeyRecord, Owners, Quotas, Usage, KEY_COLS};
 use super::postgres::{raw_mesh, select_mesh, select_one, PgStore, NOW_S};
 use super::row::{into_mesh_page, page_bounds, RawMesh, UNFINISHED};
 use super::{MeshDeletion, MeshPage, MeshRecord, StoreError};
-
-/// Columns of a [`KeyRecord`], in the order [`key_from_row`] reads them, then the hash.
-const KEY_COLS: &str = "name, admin, created_at, last_used_at, revoked_at, max_active_jobs, \
-     max_stored_bytes, max_compute_s, token_hash";
 
 /// An owner's view of a mesh: its ownership's time and sequence number.
 const OWNED_MESH_COLS: &str = "m.id, m.bytes, o.created_at, m.summary, o.seq";
 
 fn key_from_row(r: &Row) -> Result<(KeyRecord, String), postgres::Error> {
-    let to_u64 = |v: Option<i64>| v.map(|x| x.max(0) as u64);
     Ok((
         KeyRecord {
             name: r.try_get(0)?,
@@ -24,18 +19,10 @@ fn key_from_row(r: &Row) -> Result<(KeyRecord, String), postgres::Error> {
             created_at: r.try_get(2)?,
             last_used_at: r.try_get(3)?,
             revoked_at: r.try_get(4)?,
-            quotas: Quotas {
-                active_jobs: to_u64(r.try_get(5)?),
-                stored_bytes: to_u64(r.try_get(6)?),
-                compute_s_per_day: r.try_get(7)?,
-            },
+            quotas: Quotas::from_columns(r.try_get(5)?, r.try_get(6)?, r.try_get(7)?),
         },
         r.try_get(8)?,
     ))
-}
-
-fn limit_i64(v: Option<u64>) -> Option<i64> {
-    v.map(|x| i64::try_from(x).unwrap_or(i64::MAX))
 }
 
 impl Owners for PgStore {
@@ -48,11 +35,7 @@ impl Owners for PgStore {
         admin: bool,
         quotas: Quotas,
     ) -> Result<KeyAdded, StoreError> {
-        let (active, stored) = (
-            limit_i64(quotas.active_jobs),
-            limit_i64(quotas.stored_bytes),
-        );
-        let compute = quotas.compute_s_per_day;
+        let (active, stored, compute) = quotas.columns();
         self.exec(|c| {
             let mut tx = c.transaction()?;
             let row = tx.query_opt(
@@ -106,11 +89,7 @@ impl Owners for PgStore {
     }
 
     fn set_quotas(&self, name: &str, quotas: Quotas) -> Result<bool, StoreError> {
-        let (active, stored) = (
-            limit_i64(quotas.active_jobs),
-            limit_i64(quotas.stored_bytes),
-        );
-        let compute = quotas.compute_s_per_day;
+        let (active, stored, compute) = quotas.columns();
         let n = self.exec(|c| {
             c.execute(
                 "UPDATE api_keys SET max_active_jobs = $2, max_stored_bytes = $3,

@@ -4,16 +4,11 @@
 use rusqlite::{params, OptionalExtension, Row, TransactionBehavior};
 
 use super::{select_mesh, SqliteStore};
-use crate::store::owners::{KeyAdded, KeyRecord, Owners, Quotas, Usage};
+use crate::store::owners::{KeyAdded, KeyRecord, Owners, Quotas, Usage, KEY_COLS};
 use crate::store::row::{into_mesh_page, page_bounds, RawMesh, UNFINISHED};
 use crate::store::{now, MeshDeletion, MeshPage, MeshRecord, StoreError};
 
-/// Columns of a [`KeyRecord`], in the order [`key_from_row`] reads them, then the hash.
-const KEY_COLS: &str = "name, admin, created_at, last_used_at, revoked_at, max_active_jobs, \
-     max_stored_bytes, max_compute_s, token_hash";
-
 fn key_from_row(r: &Row<'_>) -> rusqlite::Result<(KeyRecord, String)> {
-    let to_u64 = |v: Option<i64>| v.map(|x| x.max(0) as u64);
     Ok((
         KeyRecord {
             name: r.get(0)?,
@@ -21,18 +16,10 @@ fn key_from_row(r: &Row<'_>) -> rusqlite::Result<(KeyRecord, String)> {
             created_at: r.get(2)?,
             last_used_at: r.get(3)?,
             revoked_at: r.get(4)?,
-            quotas: Quotas {
-                active_jobs: to_u64(r.get(5)?),
-                stored_bytes: to_u64(r.get(6)?),
-                compute_s_per_day: r.get(7)?,
-            },
+            quotas: Quotas::from_columns(r.get(5)?, r.get(6)?, r.get(7)?),
         },
         r.get(8)?,
     ))
-}
-
-fn limit_i64(v: Option<u64>) -> Option<i64> {
-    v.map(|x| i64::try_from(x).unwrap_or(i64::MAX))
 }
 
 impl Owners for SqliteStore {
@@ -43,6 +30,7 @@ impl Owners for SqliteStore {
         admin: bool,
         quotas: Quotas,
     ) -> Result<KeyAdded, StoreError> {
+        let (active, stored, compute) = quotas.columns();
         let mut conn = self.lock();
         let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
         let revoked: Option<Option<f64>> = tx
@@ -62,15 +50,7 @@ impl Owners for SqliteStore {
              ON CONFLICT (name) DO UPDATE SET token_hash = ?2, admin = ?3, created_at = ?4,
                  last_used_at = NULL, revoked_at = NULL, max_active_jobs = ?5,
                  max_stored_bytes = ?6, max_compute_s = ?7",
-            params![
-                name,
-                token_hash,
-                admin,
-                now(),
-                limit_i64(quotas.active_jobs),
-                limit_i64(quotas.stored_bytes),
-                quotas.compute_s_per_day
-            ],
+            params![name, token_hash, admin, now(), active, stored, compute],
         )?;
         let (rec, _) = tx.query_row(
             &format!("SELECT {KEY_COLS} FROM api_keys WHERE name = ?1"),
@@ -99,15 +79,11 @@ impl Owners for SqliteStore {
     }
 
     fn set_quotas(&self, name: &str, quotas: Quotas) -> Result<bool, StoreError> {
+        let (active, stored, compute) = quotas.columns();
         let n = self.lock().execute(
             "UPDATE api_keys SET max_active_jobs = ?2, max_stored_bytes = ?3, max_compute_s = ?4
              WHERE name = ?1",
-            params![
-                name,
-                limit_i64(quotas.active_jobs),
-                limit_i64(quotas.stored_bytes),
-                quotas.compute_s_per_day
-            ],
+            params![name, active, stored, compute],
         )?;
         Ok(n > 0)
     }
