@@ -28,6 +28,9 @@ pub struct Config {
     pub max_nodes: usize,
     pub max_steps: usize,
     pub max_stored_bytes: u64,
+    /// Predicted peak memory a job may need, in bytes (None: no limit); enforced at
+    /// submission and when a worker prepares the job ([`contact_core::memory`]).
+    pub max_job_memory: Option<u64>,
     /// Request body limit in bytes.
     pub max_body_bytes: usize,
     /// Body limit of a mesh upload (`POST /meshes`) in bytes; the reader's own limit
@@ -64,6 +67,7 @@ impl Default for Config {
             max_nodes: 300_000,
             max_steps: 100_000,
             max_stored_bytes: 2 << 30,
+            max_job_memory: None,
             max_body_bytes: 1 << 20,
             max_mesh_bytes: 64 << 20,
             study_threads: 2,

@@ -431,7 +431,10 @@ impl Runtime {
         let id = job.id;
         let steps = problem.steps;
         let output = problem.output;
-        let settings = SolverSettings::default();
+        let settings = SolverSettings {
+            memory_limit: self.config.max_job_memory,
+            ..SolverSettings::default()
+        };
         let mut sim = Simulation::<D>::new(problem, settings).map_err(|e| solve_problem(&e))?;
         let mut estimator = match sim.problem.error_estimate {
             true => Some(ErrorEstimator::new(&sim, settings).map_err(|e| solve_problem(&e))?),
@@ -716,6 +719,13 @@ fn solve_problem(e: &SolveError) -> Problem {
             p.detail = e.to_string();
             p
         }
+        SolveError::Memory(m) => Problem::field(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "the job does not fit the memory limit",
+            m.pointer(),
+            m.to_string(),
+        )
+        .with_type("/problems/memory"),
         _ => failure("simulation failed", &e.to_string()).with_type("/problems/solver"),
     }
 }

@@ -31,6 +31,11 @@ pub struct NodeArgs {
     /// hung) before a job is failed as abandoned instead of being run again.
     #[arg(long = "max-attempts", default_value_t = Config::default().max_attempts)]
     pub max_attempts: u32,
+    /// Per-job memory limit in bytes (suffixes K, M, G, T): a job whose predicted peak
+    /// exceeds it on every allowed linear path is refused at submission (422). Default: 80 %
+    /// of physical memory divided by the workers.
+    #[arg(long = "max-job-memory", value_parser = contact_core::memory::parse_bytes)]
+    pub max_job_memory: Option<u64>,
 }
 
 impl NodeArgs {
@@ -47,9 +52,13 @@ impl NodeArgs {
             return Err("--max-attempts 0: must be at least 1".into());
         }
         let defaults = Config::default();
+        let workers = self.workers.unwrap_or(defaults.workers);
         Ok(Config {
             data_dir: self.data_dir,
-            workers: self.workers.unwrap_or(defaults.workers),
+            workers,
+            max_job_memory: self
+                .max_job_memory
+                .or_else(|| contact_core::memory::default_limit(workers)),
             node: node_name(self.node, self.store.is_some()),
             store: self.store,
             lease_s: seconds,

@@ -37,6 +37,13 @@ pub struct RunArgs {
     /// Relative optimality residual of the sub-problem solvers.
     #[arg(long, default_value_t = SolverSettings::default().tolerance)]
     pub tol: f64,
+    /// Linear solver path, overriding the scene's `solver.linear`: auto, direct or multigrid.
+    #[arg(long = "linear-solver", value_parser = ["auto", "direct", "multigrid"])]
+    pub linear_solver: Option<String>,
+    /// Per-job memory limit in bytes (suffixes K, M, G, T): the run is refused before any
+    /// numeric work if its predicted peak exceeds it. Default: 80 % of physical memory.
+    #[arg(long = "max-job-memory", value_parser = contact_core::memory::parse_bytes)]
+    pub max_job_memory: Option<u64>,
 }
 
 pub fn main(args: RunArgs) -> ExitCode {
@@ -58,6 +65,12 @@ pub fn main(args: RunArgs) -> ExitCode {
         t_end: to_value(args.t_end),
     };
     scene::apply_overrides(&mut doc, &overrides);
+    if let (Some(path), Some(top)) = (&args.linear_solver, doc.as_object_mut()) {
+        let solver = top.entry("solver").or_insert_with(|| serde_json::json!({}));
+        if let Some(s) = solver.as_object_mut() {
+            s.insert("linear".into(), Value::String(path.clone()));
+        }
+    }
     // Mesh files are looked up next to the scene file (the working directory for a preset).
     let dir = args
         .scene
@@ -83,8 +96,20 @@ pub fn main(args: RunArgs) -> ExitCode {
     }
     let settings = SolverSettings {
         tolerance: args.tol,
+        memory_limit: args
+            .max_job_memory
+            .or_else(|| contact_core::memory::default_limit(1)),
         ..Default::default()
     };
+    if let Err(e) = contact_core::memory::choose(&problem, settings.memory_limit) {
+        eprintln!(
+            "{}",
+            pretty(
+                &serde_json::json!({"title": "the run does not fit the memory limit", "errors": [{"pointer": e.pointer(), "message": e.to_string()}]})
+            )
+        );
+        return ExitCode::from(2);
+    }
     let bar = progress::bar(problem.steps as u64, "steps");
     let (result, io_error) = match problem.dim() {
         2 => run_writing::<2>(problem, settings, fields_dir.as_deref(), &bar),

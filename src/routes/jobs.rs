@@ -207,6 +207,13 @@ fn check_limits(
             ),
         ));
     }
+    if let Err(e) = contact_core::memory::choose(p, cfg.max_job_memory) {
+        let ptr = match e.pointer() {
+            "/mesh" => hptr,
+            other => other,
+        };
+        return Err(Problem::invalid_field(ptr, e.to_string()));
+    }
     if p.steps > cfg.max_steps {
         return Err(Problem::invalid_field(
             kptr,

@@ -18,6 +18,7 @@ pub mod expr;
 pub mod fem;
 pub mod laws;
 pub mod linalg;
+pub mod memory;
 pub mod mesh;
 pub mod msh;
 pub mod output;

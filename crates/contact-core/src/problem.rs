@@ -227,6 +227,9 @@ pub struct Problem {
     /// Friction law on Γ3 (ignored when there is no contact part).
     pub friction: FrictionLaw,
     pub smallness: SmallnessPolicy,
+    /// The path of the linear solves (`solver.linear`): `Auto` is decided per job from the
+    /// predicted memory ([`crate::memory`]).
+    pub linear: crate::linalg::LinearPath,
     /// None: ζ ≡ 1, no damage solve.
     pub damage: Option<Damage>,
     /// Initial displacement u_0(x, y).

@@ -5,8 +5,10 @@ pub mod assembly;
 pub mod dofs;
 pub mod element;
 pub mod loads;
+pub mod multilevel;
 pub mod norms;
 pub mod prolongation;
+pub mod rigid_modes;
 
 pub use dofs::{DofMap, Slot};
 pub use element::Geometry;

@@ -1,10 +1,20 @@
-//! Sparse storage and the cached sparse Cholesky factorisation (faer), plus small dense helpers.
+//! The linear algebra of the scheme: sparse storage, the linear-solver layer
+//! ([`solver::LinearSolver`]: the direct factor, or conjugate gradients preconditioned by a
+//! multigrid V-cycle), and small dense helpers. One algorithm per file: the cached sparse
+//! Cholesky ([`cholesky`]), conjugate gradients ([`pcg`]), the multigrid hierarchy with its
+//! coarsening and smoother ([`multigrid`]), sparse products ([`galerkin`]), the Schur
+//! complement onto Γ3 ([`schur`]).
 
 pub mod cholesky;
 pub mod csr;
 pub mod dense;
+pub mod galerkin;
+pub mod multigrid;
+pub mod pcg;
 pub mod schur;
+pub mod solver;
 
 pub use cholesky::Cholesky;
 pub use csr::Csr;
 pub use schur::{schur_complement, SchurPath};
+pub use solver::{LinearPath, LinearSolver};

@@ -14,6 +14,7 @@
 //! nnz(L) = 1.8·10⁷) that is 4·10⁸ against 8·10¹⁰ (`contact-sim bench --schur`).
 
 use super::cholesky::Cholesky;
+use super::solver::{LinearSolver, NotConverged};
 use super::Csr;
 use nalgebra::DMatrix;
 
@@ -49,6 +50,43 @@ pub fn schur_complement(
     // Symmetrise against rounding so the dense Cholesky sees an exactly symmetric matrix.
     let st = s.transpose();
     ((s + st) * 0.5, path)
+}
+
+/// Relative max-norm residual of each solve of [`schur_by_solves`].
+pub const SCHUR_COLUMN_TOLERANCE: f64 = 1e-13;
+
+/// S of `k` onto its last n − `lead` unknowns with any solver of K_II (the multigrid path):
+/// column c is K_CC e_c − K_CI K_II⁻¹ K_IC e_c, each solve to [`SCHUR_COLUMN_TOLERANCE`]
+/// relative to its right-hand side; symmetrised. An m × m dense result: only where it fits.
+pub fn schur_by_solves(
+    k: &Csr,
+    lead: usize,
+    k_ii: &mut LinearSolver,
+) -> Result<DMatrix<f64>, NotConverged> {
+    let (n, m) = (k.nrows, k.nrows - lead);
+    let k_ci = k.block(lead..n, 0..lead);
+    let mut s = DMatrix::zeros(m, m);
+    let (mut rhs, mut sol, mut col) = (vec![0.0; lead], vec![0.0; lead], vec![0.0; m]);
+    for c in 0..m {
+        rhs.iter_mut().for_each(|v| *v = 0.0);
+        // Column c of K_IC is row c of K_CI (K is symmetric).
+        for p in k_ci.indptr[c]..k_ci.indptr[c + 1] {
+            rhs[k_ci.indices[p]] = k_ci.values[p];
+        }
+        let scale = rhs.iter().fold(f64::MIN_POSITIVE, |a, v| a.max(v.abs()));
+        sol.iter_mut().for_each(|v| *v = 0.0);
+        k_ii.solve(&rhs, &mut sol, SCHUR_COLUMN_TOLERANCE * scale)
+            .map_err(|e| NotConverged {
+                iterations: e.iterations,
+                residual: e.residual / scale,
+            })?;
+        k_ci.mul_vec(&sol, &mut col);
+        for r in 0..m {
+            s[(r, c)] = k.get(lead + r, lead + c) - col[r];
+        }
+    }
+    let st = s.transpose();
+    Ok((s + st) * 0.5)
 }
 
 /// L_CC of K ordered `interior_order` (of K_II) then C: the rows and columns ≥ lead of the
@@ -163,6 +201,27 @@ mod tests {
             (&s1 - &s2).amax() < 1e-12 * s2.amax(),
             "{}",
             (&s1 - &s2).amax()
+        );
+        // Column by column with any solver of K_II (the multigrid path's way): a direct one
+        // and multigrid-preconditioned CG give the same S.
+        let block = k.block(0..lead, 0..lead);
+        let mut direct = LinearSolver::direct(&block).unwrap();
+        let s3 = schur_by_solves(&k, lead, &mut direct).unwrap();
+        assert!((&s3 - &s2).amax() < 1e-12 * s2.amax());
+        let mut mg = LinearSolver::multigrid(
+            std::sync::Arc::new(block),
+            crate::linalg::multigrid::Blocks::scalar(lead),
+            crate::linalg::multigrid::Coarsening::Aggregation {
+                nullspace: vec![1.0; lead],
+                k: 1,
+            },
+        )
+        .unwrap();
+        let s4 = schur_by_solves(&k, lead, &mut mg).unwrap();
+        assert!(
+            (&s4 - &s2).amax() < 1e-10 * s2.amax(),
+            "{}",
+            (&s4 - &s2).amax()
         );
         assert_eq!(s1, s1.transpose());
         // S⁻¹ is the C block of K⁻¹.

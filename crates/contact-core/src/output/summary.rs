@@ -43,6 +43,18 @@ pub struct MeshInfo {
     /// How the reduced friction problem on Γ3 is solved: "none" (no Γ3), or "dense Schur
     /// complement" (S formed by substitutions, semismooth Newton on it).
     pub contact_solver: &'static str,
+    /// How the linear systems are solved: "direct (Cholesky)", "multigrid (smoothed
+    /// aggregation, 4 levels)", "multigrid (geometric, 3 levels)".
+    pub linear_solver: String,
+}
+
+/// The run's memory: predicted before any numeric work ([`crate::memory`]) and measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct MemoryInfo {
+    pub predicted_bytes: u64,
+    /// The process's peak resident bytes at the end of the run (VmHWM; on a node running
+    /// several jobs at once, an upper bound of this job's own).
+    pub peak_bytes: Option<u64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -79,6 +91,10 @@ pub struct SolverStats {
     pub damage_max_iterations: usize,
     pub damage_max_residual: f64,
     pub damage_refactorizations: usize,
+    /// Most conjugate-gradient iterations of one step's velocity and damage solves
+    /// (multigrid path; 0 on the direct path).
+    pub velocity_max_krylov_iterations: usize,
+    pub damage_max_krylov_iterations: usize,
     /// Steps in which some Γ3 node slipped (the non-smooth solver was exercised).
     pub steps_with_slip: usize,
     /// Steps in which a sub-problem solver used ≥ 80 % of its iteration limit.
@@ -105,6 +121,7 @@ pub struct Summary {
     pub final_: Option<FinalNorms>,
     pub stats: SolverStats,
     pub timing: Timing,
+    pub memory: MemoryInfo,
     pub warnings: Vec<String>,
     /// Estimated discretisation error (scenes with `error_estimate: true`).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -129,9 +146,14 @@ impl Summary {
             stats.velocity_max_iterations =
                 stats.velocity_max_iterations.max(s.velocity.iterations);
             stats.velocity_max_residual = stats.velocity_max_residual.max(s.velocity.residual);
+            stats.velocity_max_krylov_iterations = stats
+                .velocity_max_krylov_iterations
+                .max(s.velocity.krylov_iterations);
             if let Some(d) = s.damage {
                 stats.damage_max_iterations = stats.damage_max_iterations.max(d.iterations);
                 stats.damage_max_residual = stats.damage_max_residual.max(d.residual);
+                stats.damage_max_krylov_iterations =
+                    stats.damage_max_krylov_iterations.max(d.krylov_iterations);
             }
             stats.steps_with_slip += (s.slip_nodes > 0) as usize;
             let near = |r: Option<crate::solve::SolverReport>| {
@@ -184,6 +206,7 @@ impl Summary {
                 } else {
                     "none"
                 },
+                linear_solver: sim.linear_solver(),
             },
             time: TimeInfo {
                 t_end: p.t_end,
@@ -221,6 +244,10 @@ impl Summary {
                 } else {
                     solve_s / steps.len() as f64
                 },
+            },
+            memory: MemoryInfo {
+                predicted_bytes: sim.predicted_bytes,
+                peak_bytes: crate::memory::peak_bytes(),
             },
             warnings,
             error_estimate: None,

@@ -17,6 +17,7 @@ pub(super) const TOP_FIELDS: &[&str] = &[
     "initial",
     "output",
     "error_estimate",
+    "solver",
 ];
 pub(super) const DOMAIN_FIELDS: &[&str] = &[
     "width",
@@ -57,3 +58,4 @@ pub(super) const OUTPUT_FIELDS: &[&str] = &["every", "last", "fields"];
 pub(super) const OUTPUT_FIELD_NAMES: &[&str] = &["u", "w", "zeta", "sigma", "von_mises", "contact"];
 pub(super) const PATTERNS: &[&str] = &["diagonal", "anti_diagonal", "cross"];
 pub(super) const SMALLNESS: &[&str] = &["refuse", "warn"];
+pub(super) const SOLVER_FIELDS: &[&str] = &["linear"];

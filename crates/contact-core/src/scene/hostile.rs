@@ -502,6 +502,7 @@ fn known_keys() -> Vec<&'static str> {
         SOURCE_FIELDS,
         INITIAL_FIELDS,
         OUTPUT_FIELDS,
+        SOLVER_FIELDS,
     ]
     .concat();
     for (_, f) in PART_VARIANTS

@@ -57,13 +57,14 @@ use std::sync::Arc;
 
 use serde_json::Value;
 
+use crate::linalg::LinearPath;
 use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::{Body, OutputSpec, Problem, SmallnessPolicy};
 use boundary::boundary;
 use damage::damage;
 use domain::domain;
 use domain::Shape;
-use fields::{SMALLNESS, TOP_FIELDS};
+use fields::{SMALLNESS, SOLVER_FIELDS, TOP_FIELDS};
 use formulas::check_samples;
 use friction::friction;
 use loads::{vector_section, INITIAL, LOADS};
@@ -185,6 +186,10 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
             })
         }
     };
+    let linear = match top.get("solver") {
+        None => Some(LinearPath::Auto),
+        Some(v) => solver(cx, v, "/solver"),
+    };
     let damage = match top.get("damage") {
         None => Some(None),
         Some(v) => damage(cx, v, "/damage", &mut sampled).map(Some),
@@ -257,6 +262,7 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
         material: material?,
         friction: friction?,
         smallness: smallness?,
+        linear: linear?,
         damage: damage?,
         u0: u0?,
         output: output?,
@@ -269,6 +275,22 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
         }
     }
     Some(problem)
+}
+
+/// The `solver` section: `{"linear": "auto" | "direct" | "multigrid"}`.
+fn solver(cx: &mut Cx, v: &Value, ptr: &str) -> Option<LinearPath> {
+    let m = object(cx, v, ptr, "the solver choice", SOLVER_FIELDS)?;
+    match m.get("linear") {
+        None => Some(LinearPath::Auto),
+        Some(l) => choice(
+            cx,
+            l,
+            &format!("{ptr}/linear"),
+            "linear solver",
+            LinearPath::NAMES,
+        )
+        .and_then(|i| LinearPath::parse(LinearPath::NAMES[i])),
+    }
 }
 
 /// The run's label: 1 to [`MAX_NAME_LEN`] characters, no control characters.

@@ -10,12 +10,23 @@
 //! previous step is the warm start, so a step whose active set does not change costs one
 //! triangular solve pair.
 //!
+//! On the multigrid path the masked system is solved by conjugate gradients instead,
+//! preconditioned by the V-cycle B of the whole H restricted to the free nodes
+//! (diag(B_FF, I): a principal block of an SPD matrix is SPD), warm-started from the previous
+//! ζ; the hierarchy is built once per run, whatever the active set.
+//!
 //! KKT conditions (checked as the residual): with λ = Hζ − g,
 //!   0 < ζ_i < 1 ⇒ λ_i = 0;  ζ_i = 0 ⇒ λ_i ≥ 0;  ζ_i = 1 ⇒ λ_i ≤ 0.
 
 use super::{SolveError, SolverReport, SolverSettings};
-use crate::linalg::{Cholesky, Csr};
+use crate::linalg::multigrid::VCycle;
+use crate::linalg::pcg::{self, PcgWork, Preconditioner};
+use crate::linalg::{Cholesky, Csr, LinearSolver};
 use faer::sparse::SparseColMat;
+
+/// Conjugate gradients on the multigrid path solve each masked system to this fraction of
+/// the step's tolerance (max norm, relative to ‖g‖∞).
+const KRYLOV_FRACTION: f64 = 0.01;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Bound {
@@ -24,25 +35,92 @@ pub enum Bound {
     Upper,
 }
 
-pub struct DamageStep {
-    h: Csr,
-    diag: Vec<f64>,
+/// The direct path: H's factor on a fixed pattern, refactored with the active rows and
+/// columns replaced by the identity.
+struct Factored {
     /// Lower triangle of H in faer's CSC form; its values are refilled with the masked H.
     lower: SparseColMat<usize, f64>,
     /// (row, col) of each stored entry of `lower`.
     entries: Vec<(usize, usize)>,
     lower_values: Vec<f64>,
     chol: Cholesky,
-    /// Active set the current factor was computed for.
+}
+
+/// The multigrid path: the masked H explicitly, and CG with the V-cycle of H.
+struct Iterative {
+    masked: Csr,
+    vcycle: VCycle,
+    work: PcgWork,
+    buffer: Vec<f64>,
+}
+
+enum Linear {
+    Direct(Box<Factored>),
+    Multigrid(Box<Iterative>),
+}
+
+/// diag(B_FF, I) for the V-cycle B of H and the free set F.
+struct MaskedVCycle<'a> {
+    vcycle: &'a mut VCycle,
+    active: &'a [Bound],
+    buffer: &'a mut Vec<f64>,
+}
+
+impl Preconditioner for MaskedVCycle<'_> {
+    fn apply(&mut self, r: &[f64], z: &mut [f64]) {
+        for ((b, &r), a) in self.buffer.iter_mut().zip(r).zip(self.active) {
+            *b = if *a == Bound::Free { r } else { 0.0 };
+        }
+        self.vcycle.apply(self.buffer, z);
+        for ((z, &r), a) in z.iter_mut().zip(r).zip(self.active) {
+            if *a != Bound::Free {
+                *z = r;
+            }
+        }
+    }
+}
+
+pub struct DamageStep {
+    h: Csr,
+    diag: Vec<f64>,
+    linear: Linear,
+    /// Active set the current factor (or masked operator) was made for.
     factored: Vec<Bound>,
     /// Warm start for the next solve.
     active: Vec<Bound>,
-    /// Numeric factorisations done so far (for the summary).
+    /// Numeric factorisations done so far (for the summary; 0 on the multigrid path).
     pub refactorizations: usize,
+    /// Krylov iterations of the last solve (multigrid path).
+    krylov: usize,
 }
 
 impl DamageStep {
+    /// The direct path.
     pub fn new(h: Csr) -> Result<Self, SolveError> {
+        Self::with_solver(h, None)
+    }
+
+    /// The step on a given solver of H: a direct one is replaced by the masked factor; a
+    /// multigrid one preconditions CG on the masked systems.
+    pub fn with_solver(h: Csr, solver: Option<LinearSolver>) -> Result<Self, SolveError> {
+        let n = h.nrows;
+        if let Some(LinearSolver::Multigrid(k)) = solver {
+            let vcycle = k.into_vcycle();
+            return Ok(DamageStep {
+                diag: h.diagonal(),
+                linear: Linear::Multigrid(Box::new(Iterative {
+                    masked: h.clone(),
+                    vcycle,
+                    work: PcgWork::new(n),
+                    buffer: vec![0.0; n],
+                })),
+                h,
+                factored: vec![Bound::Free; n],
+                active: vec![Bound::Free; n],
+                refactorizations: 0,
+                krylov: 0,
+            });
+        }
         let lower = h.lower_csc();
         let (sym, vals) = lower.as_ref().parts();
         let mut entries = Vec::with_capacity(vals.len());
@@ -56,25 +134,67 @@ impl DamageStep {
             what: "damage",
             source,
         })?;
-        let n = h.nrows;
         Ok(DamageStep {
             diag: h.diagonal(),
             h,
-            lower,
-            entries,
-            lower_values,
-            chol,
+            linear: Linear::Direct(Box::new(Factored {
+                lower,
+                entries,
+                lower_values,
+                chol,
+            })),
             factored: vec![Bound::Free; n],
             active: vec![Bound::Free; n],
             refactorizations: 1,
+            krylov: 0,
         })
     }
 
-    /// Refactor H with the rows/columns of `active` replaced by the identity.
+    /// Krylov iterations of the last solve (0 on the direct path).
+    pub fn krylov_iterations(&self) -> usize {
+        self.krylov
+    }
+
+    /// "direct (Cholesky)" or the multigrid hierarchy's description.
+    pub fn describe(&self) -> String {
+        match &self.linear {
+            Linear::Direct(_) => "direct (Cholesky)".into(),
+            Linear::Multigrid(it) => {
+                let h = it.vcycle.hierarchy();
+                format!("multigrid ({}, {} levels)", h.kind(), h.n_levels())
+            }
+        }
+    }
+
+    /// Refactor H (direct path) or remake the masked H (multigrid path) with the rows and
+    /// columns of `active` replaced by the identity.
     fn factor_for(&mut self, active: &[Bound]) -> Result<(), SolveError> {
+        let f = match &mut self.linear {
+            Linear::Direct(f) => f,
+            Linear::Multigrid(it) => {
+                let h = &self.h;
+                for r in 0..h.nrows {
+                    for p in h.indptr[r]..h.indptr[r + 1] {
+                        let c = h.indices[p];
+                        it.masked.values[p] =
+                            if active[r] != Bound::Free || active[c] != Bound::Free {
+                                if r == c {
+                                    1.0
+                                } else {
+                                    0.0
+                                }
+                            } else {
+                                h.values[p]
+                            };
+                    }
+                }
+                self.factored.copy_from_slice(active);
+                return Ok(());
+            }
+        };
         {
-            let vals = self.lower.val_mut();
-            for (k, &(r, c)) in self.entries.iter().enumerate() {
+            let vals = f.lower.val_mut();
+            for (k, &(r, c)) in f.entries.iter().enumerate() {
                 vals[k] = if active[r] != Bound::Free || active[c] != Bound::Free {
                     if r == c {
                         1.0
@@ -82,12 +202,12 @@ impl DamageStep {
                         0.0
                     }
                 } else {
-                    self.lower_values[k]
+                    f.lower_values[k]
                 };
             }
         }
-        self.chol
-            .refactor(self.lower.as_ref())
+        f.chol
+            .refactor(f.lower.as_ref())
             .map_err(|source| SolveError::Factor {
                 what: "damage",
                 source,
@@ -109,7 +229,13 @@ impl DamageStep {
         let n = g.len();
         let scale = g.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
         // Hysteresis against rounding at degenerate nodes (bound active with zero multiplier).
-        let eps = 1e-13;
+        let eps = match self.linear {
+            Linear::Direct(_) => 1e-13,
+            // Iterative solves leave ζ accurate to about KRYLOV_FRACTION·tolerance: the
+            // hysteresis must exceed that or degenerate nodes flip back and forth.
+            Linear::Multigrid(_) => 0.1 * settings.tolerance,
+        };
+        self.krylov = 0;
         let mut active = self.active.clone();
         let mut rhs = vec![0.0; n];
         let mut lambda = vec![0.0; n];
@@ -133,8 +259,7 @@ impl DamageStep {
                     _ => fixed[i],
                 };
             }
-            self.chol.solve_in_place(&mut rhs);
-            zeta.copy_from_slice(&rhs);
+            self.solve_masked(&active, &rhs, zeta, scale, settings, step)?;
             self.h.mul_vec(zeta, &mut lambda);
             lambda.iter_mut().zip(g).for_each(|(l, g)| *l -= g);
             // New active set from ζ − λ/d, keeping degenerate nodes where they are.
@@ -182,6 +307,7 @@ impl DamageStep {
                 return Ok(SolverReport {
                     iterations: it,
                     residual,
+                    krylov_iterations: self.krylov,
                 });
             }
             active = next;
@@ -193,6 +319,66 @@ impl DamageStep {
             residual: kkt_residual(&self.h, g, zeta),
             tolerance: settings.tolerance,
         })
+    }
+
+    /// ζ ← (masked H)⁻¹ rhs: a substitution pair, or CG from ζ's current values (the
+    /// previous iterate, active entries at their bounds).
+    fn solve_masked(
+        &mut self,
+        active: &[Bound],
+        rhs: &[f64],
+        zeta: &mut [f64],
+        scale: f64,
+        settings: &SolverSettings,
+        step: usize,
+    ) -> Result<(), SolveError> {
+        match &mut self.linear {
+            Linear::Direct(f) => {
+                zeta.copy_from_slice(rhs);
+                f.chol.solve_in_place(zeta);
+                Ok(())
+            }
+            Linear::Multigrid(it) => {
+                for ((z, a), r) in zeta.iter_mut().zip(active).zip(rhs) {
+                    if *a != Bound::Free {
+                        *z = *r;
+                    }
+                }
+                let Iterative {
+                    masked,
+                    vcycle,
+                    work,
+                    buffer,
+                } = &mut **it;
+                let mut pre = MaskedVCycle {
+                    vcycle,
+                    active,
+                    buffer,
+                };
+                let atol = KRYLOV_FRACTION * settings.tolerance * scale;
+                let rep = pcg::solve(
+                    masked,
+                    &mut pre,
+                    rhs,
+                    zeta,
+                    atol,
+                    crate::linalg::solver::MAX_KRYLOV_ITERATIONS,
+                    work,
+                );
+                self.krylov += rep.iterations;
+                if rep.converged {
+                    Ok(())
+                } else {
+                    Err(SolveError::NotConverged {
+                        what: "damage step (multigrid conjugate gradients)",
+                        step,
+                        iterations: rep.iterations,
+                        residual: rep.residual / scale,
+                        tolerance: KRYLOV_FRACTION * settings.tolerance,
+                    })
+                }
+            }
+        }
     }
 
     /// The warm start for the next solve as codes: 0 free, 1 at the lower bound, 2 at the
@@ -330,6 +516,50 @@ mod tests {
                     .unwrap();
                 assert!(rep.residual <= 1e-10);
                 assert_kkt(&h, &g, &zeta);
+            }
+        }
+    }
+
+    /// The multigrid path (CG with the masked V-cycle) meets the same KKT conditions.
+    #[test]
+    fn multigrid_path_solves_the_same_box_qps() {
+        let mut rng = TestRng::from_seed(RngAlgorithm::ChaCha, &[9; 32]);
+        for &(n, k, kappa) in &[
+            (24, 1.0 / 128.0, 0.5),
+            (16, 1.0, 1e-2),
+            (20, 1.0 / 4096.0, 100.0),
+        ] {
+            let (h, m, nn) = h_matrix(n, k, kappa);
+            let mg = crate::fem::multilevel::scalar_solver(
+                h.clone(),
+                crate::linalg::LinearPath::Multigrid,
+            )
+            .unwrap();
+            let mut solver = DamageStep::with_solver(h.clone(), Some(mg)).unwrap();
+            let mut direct = DamageStep::new(h.clone()).unwrap();
+            let mut zeta = vec![1.0; nn];
+            let mut zeta_d = zeta.clone();
+            solver.set_active_from(&zeta);
+            direct.set_active_from(&zeta);
+            for trial in 0..8 {
+                let mut mz = vec![0.0; nn];
+                m.mul_vec(&zeta_d, &mut mz);
+                let amp = [0.1, 1.0, 10.0, 100.0][trial % 4];
+                let g: Vec<f64> = mz
+                    .iter()
+                    .map(|v| v / k + amp * (rng.random::<f64>() - 0.5) * 2.0 / (n * n) as f64)
+                    .collect();
+                let rep = solver
+                    .solve(&g, &mut zeta, &SolverSettings::default(), trial)
+                    .unwrap();
+                direct
+                    .solve(&g, &mut zeta_d, &SolverSettings::default(), trial)
+                    .unwrap();
+                assert!(rep.residual <= 1e-10 && rep.krylov_iterations > 0);
+                assert_kkt(&h, &g, &zeta);
+                for (a, b) in zeta.iter().zip(&zeta_d) {
+                    assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+                }
             }
         }
     }

@@ -123,6 +123,7 @@ pub fn solve(
         return Ok(SolverReport {
             iterations: 0,
             residual: 0.0,
+            krylov_iterations: 0,
         });
     }
     let s = p.s.as_slice();
@@ -152,6 +153,7 @@ pub fn solve(
             return Ok(SolverReport {
                 iterations: it,
                 residual,
+                krylov_iterations: 0,
             });
         }
         // Past the iteration limit, on non-finite data, or when stalled at working precision

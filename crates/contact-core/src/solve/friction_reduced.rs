@@ -93,6 +93,7 @@ pub fn solve(
             return Ok(SolverReport {
                 iterations: it,
                 residual,
+                krylov_iterations: 0,
             });
         }
         if it == settings.max_iterations {

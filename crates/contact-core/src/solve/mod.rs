@@ -16,6 +16,14 @@ pub mod velocity;
 pub struct SolverReport {
     pub iterations: usize,
     pub residual: f64,
+    /// Conjugate-gradient iterations of the step's linear solves (multigrid path only; absent
+    /// from the direct path's reports).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub krylov_iterations: usize,
+}
+
+fn is_zero(v: &usize) -> bool {
+    *v == 0
 }
 
 /// Settings shared by the sub-problem solvers.
@@ -25,6 +33,10 @@ pub struct SolverSettings {
     pub tolerance: f64,
     /// Iteration limit of each sub-problem solver.
     pub max_iterations: usize,
+    /// The node's per-job memory limit in bytes (None: no limit): the linear path is chosen
+    /// so that the predicted peak fits ([`crate::memory::choose`]).
+    #[serde(skip)]
+    pub memory_limit: Option<u64>,
 }
 
 impl SolverSettings {
@@ -40,6 +52,7 @@ impl Default for SolverSettings {
         SolverSettings {
             tolerance: 1e-10,
             max_iterations: 500,
+            memory_limit: None,
         }
     }
 }
@@ -70,4 +83,8 @@ pub enum SolveError {
     /// JSON pointer in the scene.
     #[error("invalid scene data at {pointer}: {message}")]
     Data { pointer: String, message: String },
+    /// The run does not fit the per-job memory limit on any allowed path (found before any
+    /// numeric work).
+    #[error("{0}")]
+    Memory(#[from] crate::memory::MemoryError),
 }

@@ -12,9 +12,11 @@
 
 use super::velocity::VelocityStep;
 use super::SolveError;
-use crate::fem::{assembly, DofMap, Geometry};
+use crate::fem::{assembly, multilevel, DofMap, Geometry};
 use crate::linalg::dense::min_eig_scaled;
+use crate::linalg::schur::{schur_by_solves, SCHUR_COLUMN_TOLERANCE};
 use crate::linalg::{schur_complement, Cholesky, SchurPath};
+use crate::linalg::{LinearPath, LinearSolver};
 use crate::mesh::Mesh;
 use crate::problem::Problem;
 
@@ -61,17 +63,37 @@ pub fn check<const D: usize>(
     let d: Vec<f64> = velocity.weights().iter().map(|w| 1.0 / w.sqrt()).collect();
     let gram = assembly::viscous_stiffness(mesh, geo, dofs, 0.5, 0.0);
     let n_i = dofs.n_interior;
-    let g_ii =
-        Cholesky::new(gram.block(0..n_i, 0..n_i).lower_csc().as_ref()).map_err(|source| {
-            SolveError::Factor {
-                what: "strain Gram",
-                source,
-            }
-        })?;
-    let (s_g, _) = schur_complement(&gram, n_i, &g_ii, SchurPath::TrailingBlock);
+    let factor_error = |source| SolveError::Factor {
+        what: "strain Gram",
+        source,
+    };
+    let s_g = match velocity.linear_solver() {
+        LinearSolver::Direct(_) => {
+            let g_ii = Cholesky::new(gram.block(0..n_i, 0..n_i).lower_csc().as_ref())
+                .map_err(factor_error)?;
+            schur_complement(&gram, n_i, &g_ii, SchurPath::TrailingBlock).0
+        }
+        LinearSolver::Multigrid(_) => {
+            let mut g_ii = multilevel::velocity_solver(
+                mesh,
+                dofs,
+                gram.block(0..n_i, 0..n_i),
+                n_i,
+                LinearPath::Multigrid,
+            )
+            .map_err(factor_error)?;
+            schur_by_solves(&gram, n_i, &mut g_ii).map_err(|e| SolveError::NotConverged {
+                what: "strain Gram Schur complement (multigrid)",
+                step: 0,
+                iterations: e.iterations,
+                residual: e.residual,
+                tolerance: SCHUR_COLUMN_TOLERANCE,
+            })?
+        }
+    };
     let c_tau = (1.0 / min_eig_scaled(&s_g, &d)).sqrt();
     let lhs = c2 * c_tau * c_tau;
-    let discrete = min_eig_scaled(velocity.schur(), &d) - c2;
+    let discrete = min_eig_scaled(velocity.schur()?, &d) - c2;
     Ok(SmallnessReport {
         c2,
         m_a,

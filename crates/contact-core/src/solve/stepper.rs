@@ -13,11 +13,13 @@ use super::damage::DamageStep;
 use super::smallness::{self, SmallnessReport};
 use super::velocity::VelocityStep;
 use super::{SolveError, SolverReport, SolverSettings};
+use crate::fem::multilevel;
 use crate::fem::{assembly, loads, norms, DofMap, Geometry};
 use crate::laws::constitutive::{elastic_stress, viscous_stress, von_mises};
 use crate::laws::damage_source::phi;
 use crate::laws::Tensor;
-use crate::linalg::{Csr, SchurPath};
+use crate::linalg::{Csr, LinearPath, SchurPath};
+use crate::memory;
 use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::{Problem, SmallnessPolicy};
 use std::time::Instant;
@@ -250,6 +252,9 @@ impl DamagePart {
 /// smallness estimate and the mass matrix. Cloning shares the velocity factor.
 #[derive(Clone)]
 pub struct Prepared<const D: usize = 2> {
+    /// The linear path taken and its predicted peak bytes.
+    pub linear: LinearPath,
+    pub predicted_bytes: u64,
     mesh: Mesh<D>,
     geo: Geometry<D>,
     dofs: DofMap<D>,
@@ -262,9 +267,16 @@ pub struct Prepared<const D: usize = 2> {
 
 impl<const D: usize> Prepared<D> {
     /// Meshes, assembles and factors the velocity operator; estimates the smallness
-    /// condition (2.31).
+    /// condition (2.31). No memory limit: the path is the scene's (`auto` as if unlimited).
     pub fn new(problem: &Problem) -> Result<Prepared<D>, SolveError> {
+        Self::within(problem, None)
+    }
+
+    /// [`Prepared::new`] under a per-job memory limit: the linear path is chosen (or the run
+    /// refused) from the predicted peak before anything is assembled.
+    pub fn within(problem: &Problem, memory_limit: Option<u64>) -> Result<Prepared<D>, SolveError> {
         let start = Instant::now();
+        let (linear, predicted_bytes) = memory::choose(problem, memory_limit)?;
         let mesh = problem.mesh().map_err(|e| SolveError::Data {
             pointer: format!("/boundary/{}", e.part()),
             message: e.to_string(),
@@ -273,11 +285,24 @@ impl<const D: usize> Prepared<D> {
         let dofs = DofMap::new(&mesh, &problem.boundary);
         let visc = problem.material.viscosity;
         let k = assembly::viscous_stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi);
-        let mut velocity =
-            VelocityStep::new(k, &dofs, problem.friction.clone(), SchurPath::default())?;
+        let n_i = dofs.n_interior;
+        let k_ii = multilevel::velocity_solver(&mesh, &dofs, k.block(0..n_i, 0..n_i), n_i, linear)
+            .map_err(|source| SolveError::Factor {
+                what: "velocity",
+                source,
+            })?;
+        let mut velocity = VelocityStep::with_solver(
+            k,
+            &dofs,
+            problem.friction.clone(),
+            SchurPath::default(),
+            k_ii,
+        );
         let smallness = smallness::check(problem, &mesh, &geo, &dofs, &mut velocity)?;
         let mass = assembly::mass(&mesh, &geo);
         Ok(Prepared {
+            linear,
+            predicted_bytes,
             mesh,
             geo,
             dofs,
@@ -307,12 +332,15 @@ pub struct Simulation<const D: usize = 2> {
     eps: Vec<Tensor<D>>,
     b: Vec<Tensor<D>>,
     pub setup_seconds: f64,
+    /// The linear path taken and its predicted peak bytes ([`crate::memory`]).
+    pub linear: LinearPath,
+    pub predicted_bytes: u64,
 }
 
 impl<const D: usize> Simulation<D> {
     /// Meshes, assembles and factors everything once; checks the smallness condition.
     pub fn new(problem: Problem, settings: SolverSettings) -> Result<Simulation<D>, SolveError> {
-        let prepared = Prepared::new(&problem)?;
+        let prepared = Prepared::within(&problem, settings.memory_limit)?;
         Simulation::from_prepared(problem, settings, prepared)
     }
 
@@ -326,6 +354,8 @@ impl<const D: usize> Simulation<D> {
     ) -> Result<Simulation<D>, SolveError> {
         let start = Instant::now();
         let Prepared {
+            linear,
+            predicted_bytes,
             mesh,
             geo,
             dofs,
@@ -362,7 +392,19 @@ impl<const D: usize> Simulation<D> {
                     d.kappa,
                     &assembly::laplacian(&mesh, &geo),
                 );
-                let mut solver = DamageStep::new(h)?;
+                let mut solver = match linear {
+                    LinearPath::Multigrid => {
+                        let mg =
+                            multilevel::scalar_solver(h.clone(), linear).map_err(|source| {
+                                SolveError::Factor {
+                                    what: "damage",
+                                    source,
+                                }
+                            })?;
+                        DamageStep::with_solver(h, Some(mg))?
+                    }
+                    _ => DamageStep::new(h)?,
+                };
                 solver.set_active_from(&zeta);
                 Some(DamagePart {
                     solver,
@@ -395,6 +437,8 @@ impl<const D: usize> Simulation<D> {
             eps: vec![Tensor::zeros(); nt],
             b: vec![Tensor::zeros(); nt],
             setup_seconds: prepared_seconds + start.elapsed().as_secs_f64(),
+            linear,
+            predicted_bytes,
             problem,
             mesh,
             geo,
@@ -633,6 +677,22 @@ impl<const D: usize> Simulation<D> {
                 node
             })
             .collect()
+    }
+
+    /// "direct (Cholesky)" or "multigrid (smoothed aggregation, 4 levels)": how the
+    /// velocity (and damage) systems are solved.
+    pub fn linear_solver(&self) -> String {
+        self.velocity.solver.linear_solver().describe()
+    }
+
+    /// Krylov iterations of the last step's velocity and damage solves.
+    pub fn krylov_iterations(&self) -> (usize, usize) {
+        (
+            self.velocity.solver.krylov_iterations(),
+            self.damage
+                .as_ref()
+                .map_or(0, |d| d.solver.krylov_iterations()),
+        )
     }
 
     /// Dimension and factor size of the velocity system (interior DOFs).

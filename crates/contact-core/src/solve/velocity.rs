@@ -6,11 +6,14 @@
 //! Eliminating w_I = K_II⁻¹ (f_I − K_IC x) leaves the small non-smooth problem of
 //! [`super::friction_reduced`] with S = K_CC − K_CI K_II⁻¹ K_IC and b = f_C − K_CI K_II⁻¹ f_I.
 //!
-//! K_II is factored once per job. Per step: one solve for y = K_II⁻¹ f_I; if every contact
-//! node sticks (|b_i| ≤ ω_i μ(0), checked exactly) then x = 0 and w_I = y: done. Otherwise
-//! S is formed (once, lazily, as the trailing block of a factor of K with the contact DOFs
-//! last: [`crate::linalg::schur`]), the reduced problem is solved, and one more solve
-//! recovers w_I.
+//! K_II is factored once per job, or (the multigrid path) gets a multigrid hierarchy once and
+//! is solved by preconditioned conjugate gradients to a residual well below the step's
+//! tolerance ([`LinearSolver`]). Per step: one solve for y = K_II⁻¹ f_I (warm-started on the
+//! multigrid path from the previous steps' y, extrapolated linearly); if every contact node
+//! sticks (|b_i| ≤ ω_i μ(0), checked exactly) then x = 0 and w_I = y: done. Otherwise S is
+//! formed (once, lazily: as the trailing block of a factor of K with the contact DOFs last,
+//! [`crate::linalg::schur`], or on the multigrid path column by column by solves), the
+//! reduced problem is solved, and one more solve recovers w_I.
 //!
 //! Each Γ3 node has d − 1 consecutive tangential DOFs: one in 2D (the reduced problem of
 //! [`super::friction_reduced`]), two in 3D (the isotropic, group-sparse one of
@@ -19,12 +22,18 @@
 use super::{friction_isotropic, friction_reduced};
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::fem::DofMap;
-use crate::linalg::{schur_complement, Cholesky, Csr, SchurPath};
+use crate::linalg::schur::{schur_by_solves, SCHUR_COLUMN_TOLERANCE};
+use crate::linalg::{schur_complement, Csr, LinearSolver, SchurPath};
 use crate::problem::FrictionLaw;
 use nalgebra::DMatrix;
 
 /// Most rounds of iterative refinement of the interior velocity per step.
 const REFINEMENTS: usize = 3;
+
+/// The multigrid path solves K_II y = f_I to this fraction of the step's tolerance (in the
+/// max norm, relative to ‖f‖∞), so that its rounding-free error stays far below what the
+/// full KKT residual checks and the norms agree with the direct path.
+const KRYLOV_FRACTION: f64 = 0.01;
 
 /// Cloning shares the factor of K_II (see [`Cholesky`]); the clone has its own warm start.
 #[derive(Clone)]
@@ -32,7 +41,7 @@ pub struct VelocityStep {
     /// The operator on all free DOFs (for residuals), interior first, contact last.
     k: Csr,
     n_i: usize,
-    k_ii: Cholesky,
+    k_ii: LinearSolver,
     /// Contact rows, interior columns.
     k_ci: Csr,
     /// Tangential DOFs per Γ3 node: d − 1.
@@ -50,7 +59,11 @@ pub struct VelocityStep {
     /// Reaction on the contact DOFs, −(S x − b): the discrete friction force at each node.
     reaction: Vec<f64>,
     y: Vec<f64>,
+    /// y of the step before (the multigrid path's extrapolated warm start).
+    y_prev: Vec<f64>,
     r: Vec<f64>,
+    /// Krylov iterations of the current step (multigrid path).
+    krylov: usize,
 }
 
 impl VelocityStep {
@@ -62,17 +75,29 @@ impl VelocityStep {
         path: SchurPath,
     ) -> Result<Self, SolveError> {
         let n_i = dofs.n_interior;
+        let k_ii = LinearSolver::direct(&k.block(0..n_i, 0..n_i)).map_err(|source| {
+            SolveError::Factor {
+                what: "velocity",
+                source,
+            }
+        })?;
+        Ok(Self::with_solver(k, dofs, law, path, k_ii))
+    }
+
+    /// The step with a given solver of K_II (the leading n_interior block of `k`).
+    pub fn with_solver<const D: usize>(
+        k: Csr,
+        dofs: &DofMap<D>,
+        law: FrictionLaw,
+        path: SchurPath,
+        k_ii: LinearSolver,
+    ) -> Self {
+        let n_i = dofs.n_interior;
         let n = dofs.n_free();
-        let k_ii =
-            Cholesky::new(k.block(0..n_i, 0..n_i).lower_csc().as_ref()).map_err(|source| {
-                SolveError::Factor {
-                    what: "velocity",
-                    source,
-                }
-            })?;
+        debug_assert_eq!(k_ii.n(), n_i);
         let k_ci = k.block(n_i..n, 0..n_i);
         let m = dofs.n_contact();
-        Ok(VelocityStep {
+        VelocityStep {
             k,
             n_i,
             k_ii,
@@ -91,8 +116,10 @@ impl VelocityStep {
             x: vec![0.0; m],
             reaction: vec![0.0; m],
             y: vec![0.0; n_i],
+            y_prev: vec![0.0; n_i],
             r: vec![0.0; n],
-        })
+            krylov: 0,
+        }
     }
 
     pub fn n_contact(&self) -> usize {
@@ -119,9 +146,19 @@ impl VelocityStep {
         self.x.copy_from_slice(x);
     }
 
-    /// Nonzeros of the factor of K_II and its dimension.
+    /// Nonzeros of the factor of K_II and its dimension (0 nonzeros on the multigrid path).
     pub fn factor_size(&self) -> (usize, usize) {
-        (self.k_ii.n(), self.k_ii.nnz_l())
+        (self.k_ii.n(), self.k_ii.factor().map_or(0, |c| c.nnz_l()))
+    }
+
+    /// The solver of K_II.
+    pub fn linear_solver(&self) -> &LinearSolver {
+        &self.k_ii
+    }
+
+    /// Krylov iterations of the last step (0 on the direct path).
+    pub fn krylov_iterations(&self) -> usize {
+        self.krylov
     }
 
     /// How S is (to be) formed.
@@ -134,19 +171,67 @@ impl VelocityStep {
         (&self.k, self.n_i)
     }
 
-    /// One forward + backward substitution with the K_II factor, in place (for benchmarks).
+    /// One solve with K_II, in place (for benchmarks): a substitution pair on the direct
+    /// path, a multigrid-CG solve from zero to 1e-10 relative on the other.
     pub fn substitute(&mut self, v: &mut [f64]) {
-        self.k_ii.solve_in_place(v);
+        let b = v.to_vec();
+        let atol = 1e-10 * b.iter().fold(f64::MIN_POSITIVE, |m, x| m.max(x.abs()));
+        v.iter_mut().for_each(|x| *x = 0.0);
+        let _ = self.k_ii.solve(&b, v, atol);
     }
 
     /// S = K_CC − K_CI K_II⁻¹ K_IC, computed on first use.
-    pub fn schur(&mut self) -> &DMatrix<f64> {
+    pub fn schur(&mut self) -> Result<&DMatrix<f64>, SolveError> {
         if self.schur.is_none() {
-            let (s, path) = schur_complement(&self.k, self.n_i, &self.k_ii, self.schur_path);
+            let s = match self.k_ii.factor() {
+                Some(f) => {
+                    let (s, path) = schur_complement(&self.k, self.n_i, f, self.schur_path);
+                    self.schur_path = path;
+                    s
+                }
+                None => self.schur_by_solves()?,
+            };
             self.schur = Some(s);
-            self.schur_path = path;
         }
-        self.schur.as_ref().unwrap()
+        Ok(self.schur.as_ref().unwrap())
+    }
+
+    /// S column by column on the multigrid path ([`schur_by_solves`]).
+    fn schur_by_solves(&mut self) -> Result<DMatrix<f64>, SolveError> {
+        self.schur_path = SchurPath::BlockedSolves;
+        schur_by_solves(&self.k, self.n_i, &mut self.k_ii).map_err(|e| SolveError::NotConverged {
+            what: "Schur complement column (multigrid)",
+            step: 0,
+            iterations: e.iterations,
+            residual: e.residual,
+            tolerance: SCHUR_COLUMN_TOLERANCE,
+        })
+    }
+
+    /// K_II y = b on the solver's path, from the guess in `y`, to KRYLOV_FRACTION of the
+    /// tolerance relative to `scale`.
+    fn solve_interior(
+        &mut self,
+        b: &[f64],
+        y: &mut [f64],
+        scale: f64,
+        settings: &SolverSettings,
+        step: usize,
+    ) -> Result<(), SolveError> {
+        let atol = KRYLOV_FRACTION * settings.tolerance * scale;
+        match self.k_ii.solve(b, y, atol) {
+            Ok(it) => {
+                self.krylov += it;
+                Ok(())
+            }
+            Err(e) => Err(SolveError::NotConverged {
+                what: "velocity step (multigrid conjugate gradients)",
+                step,
+                iterations: e.iterations,
+                residual: e.residual / scale,
+                tolerance: KRYLOV_FRACTION * settings.tolerance,
+            }),
+        }
     }
 
     /// Solves (3.13) for the free-DOF load `f`, writing the free-DOF velocity into `w`.
@@ -161,8 +246,20 @@ impl VelocityStep {
     ) -> Result<SolverReport, SolveError> {
         let n_i = self.n_i;
         let m = self.n_contact();
-        self.y.copy_from_slice(&f[..n_i]);
-        self.k_ii.solve_in_place(&mut self.y);
+        let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
+        self.krylov = 0;
+        let mut y = std::mem::take(&mut self.y);
+        if matches!(self.k_ii, LinearSolver::Multigrid(_)) {
+            // Warm start: y_n ≈ 2 y_{n−1} − y_{n−2}; y_prev ← y_{n−1}.
+            for (y, p) in y.iter_mut().zip(self.y_prev.iter_mut()) {
+                let last = *y;
+                *y = 2.0 * last - *p;
+                *p = last;
+            }
+        }
+        let solved = self.solve_interior(&f[..n_i], &mut y, scale, settings, step);
+        self.y = y;
+        solved?;
         let mut iterations = 0;
         if m > 0 {
             let mut b = f[n_i..].to_vec();
@@ -193,7 +290,14 @@ impl VelocityStep {
                     ..*settings
                 };
                 let block = self.block;
-                let s = self.schur();
+                let s = match self.schur() {
+                    Ok(s) => s,
+                    Err(e) => {
+                        self.weights = weights;
+                        self.node_weights = node_weights;
+                        return Err(e);
+                    }
+                };
                 let rep = match block {
                     1 => friction_reduced::solve(
                         &friction_reduced::Reduced {
@@ -224,19 +328,19 @@ impl VelocityStep {
                 self.node_weights = node_weights;
                 iterations = rep?.iterations;
                 // w_I = K_II⁻¹ (f_I − K_IC x).
-                let wi = &mut w[..n_i];
-                wi.copy_from_slice(&f[..n_i]);
+                let mut rhs = f[..n_i].to_vec();
                 let mut kic_x = vec![0.0; n_i];
                 self.k_ci.tmul_vec_add(&x, &mut kic_x);
-                wi.iter_mut().zip(&kic_x).for_each(|(a, v)| *a -= v);
-                self.k_ii.solve_in_place(wi);
+                rhs.iter_mut().zip(&kic_x).for_each(|(a, v)| *a -= v);
                 self.x = x;
+                let wi = &mut w[..n_i];
+                wi.copy_from_slice(&self.y);
+                self.solve_interior(&rhs, wi, scale, settings, step)?;
             }
             w[n_i..].copy_from_slice(&self.x);
         } else {
             w.copy_from_slice(&self.y);
         }
-        let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
         let mut residual = self.full_residual(f, w) / scale;
         if residual > settings.tolerance && residual.is_finite() {
             residual = self.refine(f, w, scale, settings.tolerance);
@@ -256,6 +360,7 @@ impl VelocityStep {
         Ok(SolverReport {
             iterations,
             residual,
+            krylov_iterations: self.krylov,
         })
     }
 }
@@ -272,8 +377,12 @@ impl VelocityStep {
         let n_i = self.n_i;
         let mut residual = self.full_residual(f, w) / scale;
         for _ in 0..REFINEMENTS {
-            let mut d = self.r[..n_i].to_vec();
-            self.k_ii.solve_in_place(&mut d);
+            let r = self.r[..n_i].to_vec();
+            let mut d = vec![0.0; n_i];
+            let r_scale = r.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
+            if let Ok(it) = self.k_ii.solve(&r, &mut d, 1e-3 * r_scale) {
+                self.krylov += it;
+            }
             let before = w[..n_i].to_vec();
             w[..n_i].iter_mut().zip(&d).for_each(|(w, d)| *w -= d);
             let refined = self.full_residual(f, w) / scale;

@@ -1,0 +1,363 @@
+//! Multigrid V-cycle preconditioner for the SPD operators of a run (the velocity operator K
+//! on the free DOFs, the damage matrix H = M/k + κL), in the AMGCL manner: the coarsening
+//! ([`Coarsening`]: smoothed aggregation, or prolongators given by a nested mesh hierarchy),
+//! the smoother ([`smoother::Chebyshev`] over point-block Jacobi) and the coarsest solve (a
+//! sparse Cholesky factor) are separate parts.
+//!
+//! Set-up, per level l: A_{l+1} = P_lᵀ A_l P_l (Galerkin, [`super::galerkin`]), so the
+//! constraints built into the fine DOFs hold on every level. Apply (one V-cycle, x = B r):
+//! pre-smooth from 0, restrict the residual, recurse, prolongate and add, post-smooth with
+//! the same polynomial — B is symmetric positive definite, fit for conjugate gradients.
+
+pub mod aggregation;
+pub mod smoother;
+#[cfg(test)]
+mod tests;
+
+use super::cholesky::{Cholesky, FactorError};
+use super::galerkin::{galerkin, transpose};
+use super::pcg::Preconditioner;
+use super::Csr;
+use smoother::Chebyshev;
+use std::sync::Arc;
+
+/// The DOFs of each node block (a node's free velocity components; an aggregate's coarse
+/// DOFs; a single DOF for scalar problems), CSR-style.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Blocks {
+    ptr: Vec<usize>,
+    dofs: Vec<usize>,
+}
+
+impl Blocks {
+    /// Blocks from the block of each DOF (`u32::MAX`: no block, not allowed here).
+    pub fn from_block_of(block_of: &[u32], n_blocks: usize) -> Blocks {
+        let mut ptr = vec![0usize; n_blocks + 1];
+        for &b in block_of {
+            ptr[b as usize + 1] += 1;
+        }
+        for b in 0..n_blocks {
+            ptr[b + 1] += ptr[b];
+        }
+        let mut next = ptr.clone();
+        let mut dofs = vec![0; block_of.len()];
+        for (i, &b) in block_of.iter().enumerate() {
+            dofs[next[b as usize]] = i;
+            next[b as usize] += 1;
+        }
+        let mut blocks = Blocks { ptr, dofs };
+        blocks.drop_empty();
+        blocks
+    }
+
+    /// Consecutive DOF ranges ptr[b]..ptr[b+1].
+    pub fn contiguous(ptr: &[usize]) -> Blocks {
+        Blocks {
+            ptr: ptr.to_vec(),
+            dofs: (0..*ptr.last().unwrap_or(&0)).collect(),
+        }
+    }
+
+    /// One DOF per block.
+    pub fn scalar(n: usize) -> Blocks {
+        Blocks::contiguous(&(0..=n).collect::<Vec<_>>())
+    }
+
+    fn drop_empty(&mut self) {
+        let mut ptr = vec![0];
+        for b in 0..self.len() {
+            if self.ptr[b + 1] > self.ptr[b] {
+                ptr.push(self.ptr[b + 1]);
+            }
+        }
+        self.ptr = ptr;
+    }
+
+    pub fn len(&self) -> usize {
+        self.ptr.len() - 1
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    pub fn n_dofs(&self) -> usize {
+        self.dofs.len()
+    }
+
+    pub fn dofs(&self, b: usize) -> &[usize] {
+        &self.dofs[self.ptr[b]..self.ptr[b + 1]]
+    }
+
+    /// The block of each of the n DOFs.
+    pub fn block_of(&self, n: usize) -> Vec<u32> {
+        let mut of = vec![u32::MAX; n];
+        for b in 0..self.len() {
+            for &i in self.dofs(b) {
+                of[i] = b as u32;
+            }
+        }
+        of
+    }
+}
+
+/// How the levels are made.
+#[derive(Debug, Clone)]
+pub enum Coarsening {
+    /// Smoothed aggregation with the near-nullspace B (n × k, row-major).
+    Aggregation { nullspace: Vec<f64>, k: usize },
+    /// The prolongators of a nested mesh hierarchy, finest first: P_0 is n_0 × n_1, …;
+    /// each coarse level's blocks are its nodes (`blocks[l]` for level l + 1).
+    Geometric {
+        prolongators: Vec<Csr>,
+        blocks: Vec<Blocks>,
+    },
+}
+
+/// Settings of the hierarchy.
+#[derive(Debug, Clone, Copy)]
+pub struct Params {
+    /// A level with at most this many DOFs is factored directly.
+    pub coarse_size: usize,
+    pub max_levels: usize,
+    /// Chebyshev degree of the pre- and post-smoother.
+    pub degree: usize,
+    /// The smoother damps [λ/ratio, 1.1 λ].
+    pub ratio: f64,
+    /// Strength threshold θ of aggregation on the finest level.
+    pub theta: f64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            coarse_size: 2000,
+            max_levels: 12,
+            degree: 3,
+            ratio: 10.0,
+            theta: 0.08,
+        }
+    }
+}
+
+/// One level above the coarsest.
+#[derive(Debug)]
+struct Level {
+    a: Arc<Csr>,
+    smoother: Chebyshev,
+    /// To the next coarser level, and its transpose.
+    p: Csr,
+    pt: Csr,
+}
+
+/// The multigrid hierarchy of one operator: the fine operator, the coarser Galerkin
+/// operators, smoothers and the factored coarsest operator. Immutable once built; shared
+/// between solvers (each has its own [`VCycle`] work space).
+#[derive(Debug)]
+pub struct Hierarchy {
+    levels: Vec<Level>,
+    coarse_a: Csr,
+    coarse: Cholesky,
+    kind: &'static str,
+}
+
+impl Hierarchy {
+    /// Builds the levels of `a` (the finest operator) with node `blocks`.
+    pub fn new(
+        a: Arc<Csr>,
+        blocks: Blocks,
+        coarsening: Coarsening,
+        params: Params,
+    ) -> Result<Hierarchy, FactorError> {
+        let mut levels = Vec::new();
+        let mut a = a;
+        let mut blocks = blocks;
+        let kind = match coarsening {
+            Coarsening::Aggregation { .. } => "smoothed aggregation",
+            Coarsening::Geometric { .. } => "geometric",
+        };
+        match coarsening {
+            Coarsening::Aggregation { mut nullspace, k } => {
+                let mut theta = params.theta;
+                while a.nrows > params.coarse_size && levels.len() + 1 < params.max_levels {
+                    let smoother = Chebyshev::new(&a, &blocks, params.degree, params.ratio);
+                    let (ptr, list) = aggregation::strength(&a, &blocks, theta);
+                    let (agg, count) = aggregation::aggregates(&ptr, &list);
+                    let (t, coarse_blocks, coarse_null) =
+                        aggregation::tentative(&blocks, &agg, count, &nullspace, k);
+                    if t.ncols == 0 || t.ncols * 10 > a.nrows * 9 {
+                        break; // no longer coarsening: factor this level
+                    }
+                    let p = aggregation::smooth_prolongator(
+                        &a,
+                        &smoother.jacobi,
+                        smoother.lambda_hi() / 1.1,
+                        &t,
+                    );
+                    let pt = transpose(&p);
+                    let coarse = Arc::new(galerkin(&a, &p, &pt));
+                    levels.push(Level { a, smoother, p, pt });
+                    a = coarse;
+                    blocks = coarse_blocks;
+                    nullspace = coarse_null;
+                    theta *= 0.5;
+                }
+            }
+            Coarsening::Geometric {
+                prolongators,
+                blocks: coarse_blocks,
+            } => {
+                for (p, cb) in prolongators.into_iter().zip(coarse_blocks) {
+                    let smoother = Chebyshev::new(&a, &blocks, params.degree, params.ratio);
+                    let pt = transpose(&p);
+                    let coarse = Arc::new(galerkin(&a, &p, &pt));
+                    levels.push(Level { a, smoother, p, pt });
+                    a = coarse;
+                    blocks = cb;
+                }
+            }
+        }
+        let coarse_a = Arc::try_unwrap(a).unwrap_or_else(|a| (*a).clone());
+        let coarse = Cholesky::new(coarse_a.lower_csc().as_ref())?;
+        Ok(Hierarchy {
+            levels,
+            coarse_a,
+            coarse,
+            kind,
+        })
+    }
+
+    /// Number of levels, the coarsest included.
+    pub fn n_levels(&self) -> usize {
+        self.levels.len() + 1
+    }
+
+    /// "smoothed aggregation" or "geometric".
+    pub fn kind(&self) -> &'static str {
+        self.kind
+    }
+
+    /// Σ nnz(A_l) / nnz(A_0): the operator complexity.
+    pub fn operator_complexity(&self) -> f64 {
+        let fine = self
+            .levels
+            .first()
+            .map_or(self.coarse_a.nnz(), |l| l.a.nnz());
+        let all: usize = self.levels.iter().map(|l| l.a.nnz()).sum::<usize>() + self.coarse_a.nnz();
+        all as f64 / fine.max(1) as f64
+    }
+
+    /// Sizes (rows) of every level, finest first.
+    pub fn sizes(&self) -> Vec<usize> {
+        self.levels
+            .iter()
+            .map(|l| l.a.nrows)
+            .chain(std::iter::once(self.coarse_a.nrows))
+            .collect()
+    }
+
+    /// Bytes held by the hierarchy beyond the fine operator: coarse operators, prolongators
+    /// and their transposes, smoother blocks, the coarse factor, and one V-cycle's work
+    /// vectors.
+    pub fn bytes(&self) -> usize {
+        let csr = |m: &Csr| m.nnz() * 16 + (m.nrows + 1) * 8;
+        let mut b = csr(&self.coarse_a) + self.coarse.nnz_l() * 8 + self.coarse_a.nrows * 32;
+        for (i, l) in self.levels.iter().enumerate() {
+            if i > 0 {
+                b += csr(&l.a);
+            }
+            b += csr(&l.p) + csr(&l.pt) + l.a.nrows * 8 * (4 + 2 * 9);
+        }
+        b
+    }
+
+    /// The finest operator.
+    pub fn operator(&self) -> &Csr {
+        self.levels.first().map_or(&self.coarse_a, |l| &l.a)
+    }
+
+    /// A fresh work space for V-cycles on this hierarchy.
+    pub fn vcycle(self: &Arc<Self>) -> VCycle {
+        let work = self
+            .sizes()
+            .into_iter()
+            .map(|n| LevelWork {
+                b: vec![0.0; n],
+                x: vec![0.0; n],
+                r: vec![0.0; n],
+                d: vec![0.0; n],
+                t: vec![0.0; n],
+            })
+            .collect();
+        VCycle {
+            coarse: self.coarse.clone(),
+            hierarchy: self.clone(),
+            work,
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+struct LevelWork {
+    b: Vec<f64>,
+    x: Vec<f64>,
+    r: Vec<f64>,
+    d: Vec<f64>,
+    t: Vec<f64>,
+}
+
+/// One V-cycle x = B r on a shared [`Hierarchy`], with its own work vectors.
+pub struct VCycle {
+    hierarchy: Arc<Hierarchy>,
+    coarse: Cholesky,
+    work: Vec<LevelWork>,
+}
+
+impl Clone for VCycle {
+    fn clone(&self) -> Self {
+        self.hierarchy.vcycle()
+    }
+}
+
+impl VCycle {
+    pub fn hierarchy(&self) -> &Arc<Hierarchy> {
+        &self.hierarchy
+    }
+
+    fn cycle(&mut self, l: usize) {
+        let h = self.hierarchy.clone();
+        if l == h.levels.len() {
+            let w = &mut self.work[l];
+            w.x.copy_from_slice(&w.b);
+            self.coarse.solve_in_place(&mut w.x);
+            return;
+        }
+        let level = &h.levels[l];
+        {
+            let w = &mut self.work[l];
+            w.x.iter_mut().for_each(|v| *v = 0.0);
+            let LevelWork { b, x, r, d, t } = w;
+            level.smoother.smooth(&level.a, b, x, r, d, t);
+            // t ← b − A x, restricted into the next level's right-hand side.
+            level.a.mul_vec(x, t);
+            t.iter_mut().zip(b.iter()).for_each(|(t, b)| *t = b - *t);
+        }
+        let (fine, coarse) = self.work.split_at_mut(l + 1);
+        level.pt.mul_vec(&fine[l].t, &mut coarse[0].b);
+        self.cycle(l + 1);
+        let (fine, coarse) = self.work.split_at_mut(l + 1);
+        let w = &mut fine[l];
+        level.p.mul_vec(&coarse[0].x, &mut w.t);
+        w.x.iter_mut().zip(&w.t).for_each(|(x, t)| *x += t);
+        let LevelWork { b, x, r, d, t } = w;
+        level.smoother.smooth(&level.a, b, x, r, d, t);
+    }
+}
+
+impl Preconditioner for VCycle {
+    fn apply(&mut self, r: &[f64], z: &mut [f64]) {
+        self.work[0].b.copy_from_slice(r);
+        self.cycle(0);
+        z.copy_from_slice(&self.work[0].x);
+    }
+}

@@ -1,0 +1,266 @@
+//! A job's peak memory, predicted before any numeric work, and the choice of the linear
+//! path that fits (the scene's `solver.linear`, [`LinearPath`]).
+//!
+//! The prediction counts what a run holds at its peak, from the mesh's node and cell counts
+//! alone (no mesh is built): the mesh and its geometry, the assembled operators (K on the
+//! free DOFs, M, L and H = M/k + κL), the per-cell and per-node state, and then
+//! - the direct path: the factors of K_II and of H, whose fill follows the measured growth
+//!   of the AMD-ordered supernodal factor (3D: nnz(L) ≈ 1.8 n^1.58; 2D: 5 n log₂ n, n the
+//!   unknowns); the exact figure comes from the symbolic analysis once the operator is
+//!   assembled ([`crate::linalg::cholesky::Cholesky::with_limit`]), before the numeric
+//!   factorisation allocates anything;
+//! - the multigrid path: the hierarchies of K_II and H (coarse operators, prolongators and
+//!   their transposes, smoother blocks, a small coarse factor) as multiples of the fine
+//!   operators, calibrated on the box and rectangle presets (`contact-sim bench --memory`).
+//!
+//! A slipping step on either path also holds the dense Schur complement onto Γ3 (m² values,
+//! m the tangential contact DOFs), which is not counted: it depends on the Γ3 part of the
+//! boundary, known only once the mesh is tagged.
+
+use crate::linalg::LinearPath;
+use crate::problem::Problem;
+
+/// Predicted peak bytes of one run on each path.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Prediction {
+    pub direct: u64,
+    pub multigrid: u64,
+}
+
+/// Counts the prediction works from.
+#[derive(Debug, Clone, Copy)]
+struct Counts {
+    d: f64,
+    nodes: f64,
+    cells: f64,
+    /// Nodes coupled to a node (itself included): the rows of a nodal operator.
+    stencil: f64,
+    damage: bool,
+}
+
+fn counts(p: &Problem) -> Counts {
+    let d = p.dim();
+    let nodes = p.n_nodes() as f64;
+    let cells = match (&p.body, p.depth_cells()) {
+        (None, Some(nz)) => {
+            let (nx, ny) = p.cells();
+            (6 * nx * ny * nz) as f64
+        }
+        (None, None) => {
+            let (nx, ny) = p.cells();
+            let per = if p.pattern == crate::mesh::MeshPattern::Cross {
+                4
+            } else {
+                2
+            };
+            (per * nx * ny) as f64
+        }
+        (Some(_), _) if d == 2 => 2.0 * nodes,
+        (Some(_), _) => 5.5 * nodes,
+    };
+    Counts {
+        d: d as f64,
+        nodes,
+        cells,
+        stencil: if d == 2 { 7.0 } else { 15.0 },
+        damage: p.damage.is_some(),
+    }
+}
+
+/// Factor entries of an SPD operator with `n` unknowns from a mesh of dimension `d`.
+fn factor_entries(d: f64, n: f64) -> f64 {
+    if d == 2.0 {
+        5.0 * n * n.max(2.0).log2()
+    } else {
+        1.8 * n.powf(1.58)
+    }
+}
+
+/// CSR bytes of `nnz` entries (value and index) in `rows` rows.
+fn csr(nnz: f64, rows: f64) -> f64 {
+    16.0 * nnz + 8.0 * rows
+}
+
+/// The prediction for a validated problem.
+pub fn predict(p: &Problem) -> Prediction {
+    let c = counts(p);
+    let n = c.d * c.nodes;
+    let nnz_k = c.d * c.d * c.nodes * c.stencil;
+    let nnz_h = c.nodes * c.stencil;
+    let per_cell = 8.0 * ((c.d + 1.0) + (c.d + 1.0) * c.d + 1.0 + 2.0 * c.d * c.d);
+    // Element matrices (D(D+1))² per cell as (row, col, value) triplets while assembling.
+    let assembly = 24.0 * c.cells * (c.d * (c.d + 1.0)).powi(2);
+    let vectors = 8.0 * (30.0 * n + 12.0 * c.nodes);
+    let scalar = if c.damage { 3.0 } else { 1.0 };
+    // K (full free operator) and its K_II and K_CI blocks; M, L and H.
+    let operators = 2.0 * csr(nnz_k, n) + scalar * csr(nnz_h, c.nodes);
+    let base = 8.0 * c.d * c.nodes + per_cell * c.cells + vectors + operators;
+    let direct_factors = 8.0
+        * 1.25
+        * (factor_entries(c.d, n)
+            + if c.damage {
+                factor_entries(c.d, c.nodes)
+            } else {
+                0.0
+            });
+    // K_II's lower triangle handed to the factorisation (faer's CSC copy).
+    let direct = base + direct_factors + 0.5 * csr(nnz_k, n);
+    let hierarchy_k = 1.2 * csr(nnz_k, n) + 8.0 * 25.0 * n;
+    let hierarchy_h = if c.damage {
+        1.0 * csr(nnz_h, c.nodes) + 8.0 * 25.0 * c.nodes
+    } else {
+        0.0
+    };
+    let multigrid = base + hierarchy_k + hierarchy_h;
+    Prediction {
+        direct: (direct.max(assembly + base)) as u64,
+        multigrid: (multigrid.max(assembly + base)) as u64,
+    }
+}
+
+/// Why no path fits.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MemoryError {
+    #[error("the direct solver needs about {} of memory (predicted), more than this node's per-job limit of {}; use \"solver\": {{\"linear\": \"multigrid\"}} (about {}) or \"auto\"", human(*predicted), human(*allowed), human(*multigrid))]
+    DirectTooLarge {
+        predicted: u64,
+        allowed: u64,
+        multigrid: u64,
+    },
+    #[error("this run needs about {} of memory (predicted, on the {path} path), more than this node's per-job limit of {}; choose a coarser mesh", human(*predicted), human(*allowed))]
+    TooLarge {
+        predicted: u64,
+        allowed: u64,
+        path: &'static str,
+    },
+}
+
+impl MemoryError {
+    /// The scene field to blame: the solver choice, or the mesh.
+    pub fn pointer(&self) -> &'static str {
+        match self {
+            MemoryError::DirectTooLarge { .. } => "/solver/linear",
+            MemoryError::TooLarge { .. } => "/mesh",
+        }
+    }
+}
+
+/// Bytes as a short human figure ("3.2 GiB").
+pub fn human(bytes: u64) -> String {
+    let b = bytes as f64;
+    if b >= (1u64 << 30) as f64 {
+        format!("{:.1} GiB", b / (1u64 << 30) as f64)
+    } else {
+        format!("{:.0} MiB", (b / (1u64 << 20) as f64).ceil())
+    }
+}
+
+/// Unknowns below which `auto` keeps the direct path when it fits: a sparse Cholesky
+/// factor is at its floor there (all 2D paper sizes, 3D up to a few 10⁴ unknowns).
+const DIRECT_3D_UNKNOWNS: f64 = 60_000.0;
+
+/// The path a problem takes under a per-job memory limit (None: no limit), with its
+/// prediction. `auto`: 2D and small 3D bodies take the direct path, larger 3D bodies
+/// multigrid; either falls back to the other when only the other fits.
+pub fn choose(p: &Problem, limit: Option<u64>) -> Result<(LinearPath, u64), MemoryError> {
+    let pred = predict(p);
+    let fits = |b: u64| limit.is_none_or(|l| b <= l);
+    let allowed = limit.unwrap_or(u64::MAX);
+    let c = counts(p);
+    match p.linear {
+        LinearPath::Direct if fits(pred.direct) => Ok((LinearPath::Direct, pred.direct)),
+        LinearPath::Direct => Err(MemoryError::DirectTooLarge {
+            predicted: pred.direct,
+            allowed,
+            multigrid: pred.multigrid,
+        }),
+        LinearPath::Multigrid if fits(pred.multigrid) => {
+            Ok((LinearPath::Multigrid, pred.multigrid))
+        }
+        LinearPath::Multigrid => Err(MemoryError::TooLarge {
+            predicted: pred.multigrid,
+            allowed,
+            path: "multigrid",
+        }),
+        LinearPath::Auto => {
+            let prefer_direct = c.d == 2.0 || c.d * c.nodes <= DIRECT_3D_UNKNOWNS;
+            let order = if prefer_direct {
+                [
+                    (LinearPath::Direct, pred.direct),
+                    (LinearPath::Multigrid, pred.multigrid),
+                ]
+            } else {
+                [
+                    (LinearPath::Multigrid, pred.multigrid),
+                    (LinearPath::Direct, pred.direct),
+                ]
+            };
+            order
+                .into_iter()
+                .find(|&(_, b)| fits(b))
+                .ok_or(MemoryError::TooLarge {
+                    predicted: pred.multigrid.min(pred.direct),
+                    allowed,
+                    path: "multigrid",
+                })
+        }
+    }
+}
+
+/// The process's peak resident memory (VmHWM), where the OS reports it.
+pub fn peak_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// `80 %` of physical memory (MemTotal), where the OS reports it.
+pub fn default_limit(share: usize) -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024 / 10 * 8 / share.max(1) as u64)
+}
+
+/// Parses a byte count with an optional K/M/G/T suffix (powers of 1024): "4G", "512M".
+pub fn parse_bytes(s: &str) -> Result<u64, String> {
+    let s = s.trim();
+    let (num, mult) = match s.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let m = match c.to_ascii_uppercase() {
+                'K' => 1u64 << 10,
+                'M' => 1 << 20,
+                'G' => 1 << 30,
+                'T' => 1 << 40,
+                _ => return Err(format!("unknown suffix {c:?} in {s:?}: use K, M, G or T")),
+            };
+            (&s[..i], m)
+        }
+        _ => (s, 1),
+    };
+    let v: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a byte count (e.g. 4G, 512M, 1000000)"))?;
+    if !(v.is_finite() && v > 0.0) {
+        return Err(format!("{s:?}: the limit must be positive"));
+    }
+    Ok((v * mult as f64) as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn byte_counts_parse_with_suffixes() {
+        assert_eq!(parse_bytes("4G").unwrap(), 4 << 30);
+        assert_eq!(parse_bytes("512m").unwrap(), 512 << 20);
+        assert_eq!(parse_bytes("1000").unwrap(), 1000);
+        assert_eq!(parse_bytes("1.5K").unwrap(), 1536);
+        assert!(
+            parse_bytes("4Q").is_err() && parse_bytes("-1G").is_err() && parse_bytes("").is_err()
+        );
+    }
+}
