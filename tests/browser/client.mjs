@@ -323,6 +323,8 @@ async function testSimulation() {
   await axeCheck(page, 'on the result view');
   const vtu = await page.getAttribute('#dl-vtu', 'href');
   check(vtu === `/jobs/${jobId}/fields/8.vtu`, `VTU link of the shown step: ${vtu}`);
+  const vtuName = await page.getAttribute('#dl-vtu', 'download');
+  check(vtuName === `contact-sim-${jobId.slice(0, 8)}-step-8.vtu`, `the VTU file name carries the job id: ${vtuName}`);
   for (const href of await page.locator('.downloads a').evaluateAll((as) => as.map((a) => a.getAttribute('href')))) {
     const r = await page.request.get(base + href);
     check(r.status() === 200, `download ${href} answers 200`);
@@ -1586,7 +1588,7 @@ async function testApiKeys() {
   // A download link fetches with the key and saves the file.
   const [dl] = await Promise.all([page.waitForEvent('download'), page.click('#dl-vtu')]);
   const vtu = fs.readFileSync(await dl.path(), 'utf8');
-  check(vtu.includes('<VTKFile') && dl.suggestedFilename() === 'step-50.vtu', `a download link works with the key (${dl.suggestedFilename()}, ${vtu.length} bytes)`);
+  check(vtu.includes('<VTKFile') && dl.suggestedFilename() === `contact-sim-${id.slice(0, 8)}-step-50.vtu`, `a download link works with the key (${dl.suggestedFilename()}, ${vtu.length} bytes)`);
   check(log.some((r) => r.url.endsWith('.vtu') && r.auth === `Bearer ${key}`), 'the VTU was requested with the key');
 
   // A reload keeps the key (no dialog); a refused key is forgotten and asked for again.
