@@ -493,7 +493,7 @@ def test_a_server_that_is_not_the_service_is_named(tmp_path: Path) -> None:
     finally:
         httpd.shutdown()
         httpd.server_close()
-    assert f"{url}/jobs" in str(e.value) and "contact-sim service" in str(e.value)
+    assert f"(from {url}/" in str(e.value) and "contact-sim service" in str(e.value)
 
 
 def test_examples_help_shows_defaults() -> None:
