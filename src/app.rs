@@ -37,6 +37,7 @@ pub fn app(state: AppState) -> Router {
         .route("/openapi.yaml", get(misc::openapi))
         .route("/scene.schema.json", get(misc::scene_schema))
         .route("/", get(client::index))
+        .route("/docs", get(client::docs))
         .route("/client/{*file}", get(client::file))
         .fallback(|| async { Problem::not_found("no such route; see GET /openapi.yaml") })
         .method_not_allowed_fallback(|| async {

@@ -51,6 +51,38 @@ fn whole_lifecycle_over_http() {
     assert!(
         String::from_utf8_lossy(&get(a, "/openapi.yaml").body).contains("/jobs/{id}/result.pvd")
     );
+    // GET /docs: the contract rendered by the vendored Swagger UI, every file from this
+    // server (no CDN), its licence beside it; the client's header links it.
+    let docs = get(a, "/docs");
+    assert_eq!(docs.status, 200);
+    assert!(docs
+        .header("content-type")
+        .unwrap()
+        .starts_with("text/html"));
+    let page = docs.text();
+    assert!(
+        !page.contains("://"),
+        "the reference page loads nothing from elsewhere"
+    );
+    for (file, needle) in [
+        ("/client/docs.js", "/openapi.yaml"),
+        (
+            "/client/vendor/swagger-ui/swagger-ui-bundle.js",
+            "SwaggerUIBundle",
+        ),
+        ("/client/vendor/swagger-ui/swagger-ui.css", ".swagger-ui"),
+        ("/client/vendor/swagger-ui/LICENSE", "Apache License"),
+        ("/client/vendor/swagger-ui/NOTICE", "swagger-ui"),
+    ] {
+        assert!(
+            page.contains(file) || !file.ends_with(".js") && !file.ends_with(".css"),
+            "{file}"
+        );
+        let r = get(a, file);
+        assert_eq!(r.status, 200, "{file}");
+        assert!(r.text().contains(needle), "{file} has {needle:?}");
+    }
+    assert!(get(a, "/").text().contains("href=\"/docs\""));
     assert_eq!(
         get(a, "/presets").json()["presets"]
             .as_array()
@@ -199,9 +231,10 @@ fn whole_lifecycle_over_http() {
     assert_eq!(sets[0].0, "0");
     for (n, (t, file)) in sets.iter().enumerate() {
         assert_eq!(t.parse::<f64>().unwrap(), n as f64 / 8.0);
-        assert_eq!(*file, format!("/jobs/{id}/fields/{n}.vtu"));
+        // Relative to the PVD's own URL, so a saved copy opens beside its files.
+        assert_eq!(*file, format!("fields/{n}.vtu"));
     }
-    let r0 = get(a, sets[0].1);
+    let r0 = get(a, &format!("/jobs/{id}/{}", sets[0].1));
     assert_eq!(r0.status, 200);
     let vtu0 = String::from_utf8(r0.body).unwrap();
     check_vtu_arrays(&vtu0, nodes, triangles);
@@ -405,6 +438,28 @@ fn study_presets_are_listed_and_served_as_study_requests() {
             doc,
             json!({"study": contact_core::study::presets::get(name).unwrap()})
         );
+        // The preset's name alone is the same request: the same study, the same document.
+        let by_name = post_json(a, "/jobs", &json!({"preset": name}));
+        assert_eq!(by_name.status, 202, "{}", by_name.text());
+        let by_name = by_name.json();
+        assert_eq!(
+            (&by_name["kind"], &by_name["scene"]),
+            (&json!("study"), &json!(name))
+        );
+        let first = by_name["id"].as_str().unwrap();
+        let c = http(a, "POST", &format!("/jobs/{first}/cancel"), &[], b"");
+        assert!(c.status == 200 || c.status == 202, "{}", c.text());
+        wait_status(a, first, &["cancelled"], Duration::from_secs(10));
+        // A study preset's levels are its own: overrides are refused at their pointer.
+        let p = assert_problem(
+            &post_json(
+                a,
+                "/jobs",
+                &json!({"preset": name, "overrides": {"h": "1/4"}}),
+            ),
+            422,
+        );
+        assert_eq!(p["errors"][0]["pointer"], "/overrides", "{p}");
         // What the page puts in its editor runs as it is.
         let posted = post_json(a, "/jobs", &doc);
         assert_eq!(
@@ -432,6 +487,16 @@ fn study_presets_are_listed_and_served_as_study_requests() {
     let r = get(a, "/presets/paper-table-3");
     assert_problem(&r, 404);
     assert!(String::from_utf8_lossy(&r.body).contains("paper-table-1"));
+    // An unknown name in POST /jobs lists the study presets among the known ones.
+    let p = assert_problem(
+        &post_json(a, "/jobs", &json!({"preset": "paper-table-3"})),
+        422,
+    );
+    let msg = p["errors"][0]["message"].as_str().unwrap();
+    assert!(
+        msg.contains("paper-exp1") && msg.contains("paper-table-2"),
+        "{msg}"
+    );
     srv.stop();
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -484,9 +549,37 @@ fn bad_input_gets_problem_json_naming_the_field() {
             json!({"preset": "paper-exp1", "overrides": {"k": "1/0"}}),
             "/overrides/k",
         ),
+        // T is the scene's alias of t_end, in overrides too, and errors point at it.
+        (
+            json!({"preset": "paper-exp1", "overrides": {"T": "-1"}}),
+            "/overrides/T",
+        ),
+        (
+            json!({"preset": "paper-exp1", "overrides": {"T": 1, "t_end": 1}}),
+            "/overrides/T",
+        ),
+        (
+            json!({"preset": "paper-exp1", "overrides": {"dt": 1}}),
+            "/overrides/dt",
+        ),
     ] {
         let p = assert_problem(&post_json(a, "/jobs", &body), 422);
         assert_eq!(p["errors"][0]["pointer"], pointer, "{body}");
+    }
+    // T sets the final time like t_end: the number of steps follows at the preset's k.
+    for key in ["T", "t_end"] {
+        let r = post_json(
+            a,
+            "/jobs",
+            &json!({"preset": "paper-exp1", "overrides": {"h": "1/2", "k": "1/4", key: "1/2"}}),
+        );
+        assert!(r.status == 202 || r.status == 200, "{}", r.text());
+        let job = r.json();
+        let id = job["id"].as_str().unwrap();
+        wait_status(a, id, &["succeeded"], Duration::from_secs(30));
+        let summary = get(a, &format!("/jobs/{id}/summary")).json();
+        assert_eq!(summary["time"]["t_end"], json!(0.5), "{key}");
+        assert_eq!(summary["time"]["steps"], json!(2), "{key}");
     }
     // Sent raw: the server answers before it has read the whole body, and closes.
     let big = vec![b' '; 2 << 20];

@@ -125,11 +125,14 @@ fn presets_are_listed_and_round_trip() {
     }
 }
 
-/// The example scene in README.md stays valid.
+/// The example scene of the guide's scene format stays valid.
 #[test]
-fn readme_example_scene_validates() {
-    let readme =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+fn guide_example_scene_validates() {
+    let readme = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/docs/src/reference/scene-format.md"
+    ))
+    .unwrap();
     let start = readme.find("```json\n").expect("json block") + 8;
     let end = start + readme[start..].find("```").unwrap();
     let doc: Value = serde_json::from_str(&readme[start..end]).unwrap();

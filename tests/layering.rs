@@ -1,4 +1,5 @@
-//! The layout README's "Layout" section draws is the one the compiler sees: in each crate of
+//! The layout the user guide's source map (docs/src/reference/layout.md) draws is the one the
+//! compiler sees: in each crate of
 //! the workspace the top-level modules use each other without cycles (data flows one way),
 //! and the numerical core names nothing of the service.
 //!
@@ -130,7 +131,7 @@ fn the_cycle_finder_finds_cycles() {
 #[test]
 fn core_modules_form_no_cycle() {
     let g = module_graph(&workspace().join("crates/contact-core/src"));
-    // The data flow of README's diagram, spot-checked in both directions.
+    // The data flow of the guide's diagram, spot-checked in both directions.
     for (from, to) in [
         ("problem", "expr"),
         ("scene", "problem"),
@@ -175,14 +176,10 @@ fn the_core_names_nothing_of_the_service() {
     }
 }
 
-/// The code block of README's "Layout" section: one line per module, its path first.
-fn readme_layout() -> Vec<String> {
-    let readme = std::fs::read_to_string(workspace().join("README.md")).unwrap();
-    let section = readme
-        .split("\n## Layout\n")
-        .nth(1)
-        .expect("README has a Layout section");
-    let block = section.split("```").nth(1).expect("a code block");
+/// The first code block of the guide's source layout: one line per module, its path first.
+fn layout_map() -> Vec<String> {
+    let text = std::fs::read_to_string(workspace().join("docs/src/reference/layout.md")).unwrap();
+    let block = text.split("```").nth(1).expect("a code block");
     block
         .lines()
         .filter_map(|l| l.split_whitespace().next())
@@ -191,8 +188,8 @@ fn readme_layout() -> Vec<String> {
 }
 
 #[test]
-fn readme_layout_names_every_module_file_and_no_other() {
-    let listed = readme_layout();
+fn layout_map_names_every_module_file_and_no_other() {
+    let listed = layout_map();
     let mut files = Vec::new();
     for dir in ["src", "crates/contact-core/src"] {
         rust_files(&workspace().join(dir), &mut files);
@@ -207,13 +204,13 @@ fn readme_layout_names_every_module_file_and_no_other() {
         };
         assert!(
             listed.contains(&as_listed),
-            "README's Layout does not list {as_listed}"
+            "docs/src/reference/layout.md does not list {as_listed}"
         );
     }
     for l in listed.iter().filter(|l| l.contains('/')) {
         assert!(
             workspace().join(l).exists(),
-            "README's Layout lists {l}, which does not exist"
+            "docs/src/reference/layout.md lists {l}, which does not exist"
         );
     }
 }

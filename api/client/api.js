@@ -217,14 +217,14 @@ export function fields(id, step, withMesh, only = null) {
  * The step numbers of a succeeded simulation that can be shown: 0 (the initial state, t = 0)
  * and the stored ones. The summary lists every computed step but not which were stored
  * (output.every / last), so they are read from the ParaView collection, whose DataSet entries
- * reference /jobs/{id}/fields/{n}.vtu.
+ * name fields/{n}.vtu (relative to the PVD's URL).
  */
 export async function storedSteps(id) {
   const xml = await getText(`/jobs/${id}/result.pvd`);
   const doc = new DOMParser().parseFromString(xml, 'application/xml');
   const steps = [];
   for (const ds of doc.querySelectorAll('DataSet')) {
-    const m = /\/fields\/(\d+)\.vtu$/.exec(ds.getAttribute('file') || '');
+    const m = /(?:^|\/)fields\/(\d+)\.vtu$/.exec(ds.getAttribute('file') || '');
     if (m) steps.push({ n: Number(m[1]), t: Number(ds.getAttribute('timestep')) });
   }
   steps.sort((a, b) => a.n - b.n);

@@ -104,11 +104,48 @@ function show(job) {
       el('span', { id: 'run-eta' }, job.status === 'queued' ? 'queued' : `${p.percent ?? 0}%${eta}`)));
   }
   if (job.error) {
-    children.push(el('p', { class: 'error', id: 'job-error' }, `${job.error.title}: ${job.error.detail}`));
+    const smallness = /\/problems\/smallness$/.test(job.error.type || '');
+    if (smallness) {
+      // The detail already names the condition and both numbers: said once, and the way
+      // out ("smallness": "warn") is a button rather than a sentence to act on by hand.
+      const detail = String(job.error.detail || job.error.title).replace(/\s*Set "smallness": "warn" to run anyway\.?\s*$/, '');
+      children.push(el('p', { class: 'error', id: 'job-error' }, detail));
+      children.push(rerunWithWarn(job));
+    } else {
+      children.push(el('p', { class: 'error', id: 'job-error' }, `${job.error.title}: ${job.error.detail}`));
+    }
     for (const e of job.error.errors || []) children.push(el('p', { class: 'error' }, el('code', {}, e.pointer), ': ', e.message));
     markFailedScene(job);
   }
   viewRoot.replaceChildren(...children);
+}
+
+/**
+ * The offer to rerun a job refused by the smallness condition (2.31) with "smallness":
+ * "warn": a button when this tab knows the scene it ran, else how to do it by hand.
+ */
+function rerunWithWarn(job) {
+  const text = submittedText.get(job.id);
+  let doc = null;
+  try {
+    doc = text === undefined ? null : JSON.parse(text);
+  } catch {
+    doc = null;
+  }
+  if (!doc || typeof doc !== 'object' || doc.preset || doc.study) {
+    return el('p', { class: 'hint', id: 'rerun-warn-hint' },
+      'To run it anyway, add "smallness": "warn" to its scene (Edit as scene) and run it again: the run then records the violation as a warning.');
+  }
+  return el('p', {},
+    el('button', {
+      id: 'rerun-warn', type: 'button',
+      onclick: () => {
+        const warned = { ...doc, smallness: 'warn' };
+        const t = JSON.stringify(warned, null, 2);
+        submit(t, { label: { ...sceneFacts(warned), edited: true }, text: t });
+      },
+    }, 'Rerun with "smallness": "warn"'),
+    el('span', { class: 'hint' }, ' runs it anyway and records the violation as a warning.'));
 }
 
 /**
@@ -366,6 +403,8 @@ async function describePreset() {
   const p = presetList.find((x) => x.name === presetSelect.value);
   const study = p?.kind === 'study';
   for (const k of ['h', 'k', 't_end']) $(`#ov-${k}`).disabled = study;
+  // A study's levels are its own: the hint about h and k would not apply.
+  $('#ov-hint').hidden = study;
   const parts = [el('span', {}, p?.description || '')];
   if (study) {
     parts.push(el('span', { class: 'preset-note' },

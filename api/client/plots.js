@@ -7,7 +7,7 @@
 // that many CSS pixels wide (style.css .plots), so 12-unit text is never drawn under 12 px;
 // the left margin is sized from the longest y label, so no label is cut.
 
-import { fmt } from './util.js';
+import { distinctDigits, fmt } from './util.js';
 
 const NS = 'http://www.w3.org/2000/svg';
 const svg = (tag, attrs = {}) => {
@@ -35,13 +35,17 @@ export function linePlot(parent, { title, xs, ys, xLabel = 't', colour = '#1864a
   if (fromZero && xmin > 0) xmin = 0;
   let ymin = Math.min(...good.map((p) => p[1]));
   let ymax = Math.max(...good.map((p) => p[1]));
-  if (!(ymax > ymin)) {
-    // A constant series (e.g. no damage): centre it.
-    const d = Math.max(Math.abs(ymax) * 0.05, 1e-9);
-    ymin -= d;
-    ymax += d;
+  // A series constant up to rounding (no damage; a friction traction of 0.5 ± 1e-14) is
+  // drawn flat in the middle with its value, not stretched into full-height noise.
+  const flat = good.length > 0 && !(ymax - ymin > 1e-9 * Math.max(Math.abs(ymax), Math.abs(ymin), 1e-300));
+  const flatValue = flat ? (ymin + ymax) / 2 : null;
+  if (flat) {
+    const d = Math.max(Math.abs(flatValue) * 0.05, 1e-9);
+    ymin = flatValue - d;
+    ymax = flatValue + d;
   }
-  const yLabels = good.length ? [fmt(ymax, 3), fmt(ymin, 3)] : ['', ''];
+  const yDigits = distinctDigits(ymax, ymin, 3);
+  const yLabels = good.length ? [fmt(ymax, yDigits), fmt(ymin, yDigits)] : ['', ''];
   const m = { l: 8 + CHAR_W * Math.max(...yLabels.map((s) => s.length), 1), r: 10, t: 22, b: 24 };
   const X = (x) => m.l + ((x - xmin) / (xmax - xmin || 1)) * (w - m.l - m.r);
   const Y = (y) => h - m.b - ((y - ymin) / (ymax - ymin)) * (h - m.t - m.b);
@@ -51,6 +55,7 @@ export function linePlot(parent, { title, xs, ys, xLabel = 't', colour = '#1864a
   root.dataset.points = String(good.length);
   root.dataset.ymin = String(ymin);
   root.dataset.ymax = String(ymax);
+  if (flat) root.dataset.flat = String(flatValue);
   const text = (x, y, s, anchor = 'start', cls = 'tick') => {
     const t = svg('text', { x, y, 'text-anchor': anchor, class: cls });
     t.textContent = s;
@@ -71,10 +76,11 @@ export function linePlot(parent, { title, xs, ys, xLabel = 't', colour = '#1864a
       for (const [x, y] of good) g.append(svg('circle', { cx: X(x).toFixed(1), cy: Y(y).toFixed(1), r: 1.8 }));
       root.append(g);
     } else {
-      const d = good.map(([x, y], i) => `${i ? 'L' : 'M'}${X(x).toFixed(1)},${Y(y).toFixed(1)}`).join('');
+      const d = good.map(([x, y], i) => `${i ? 'L' : 'M'}${X(x).toFixed(1)},${Y(flat ? flatValue : y).toFixed(1)}`).join('');
       root.append(svg('path', { d, fill: 'none', stroke: colour, 'stroke-width': 1.6 }));
       if (good.length === 1) root.append(svg('circle', { cx: X(good[0][0]), cy: Y(good[0][1]), r: 2.5, fill: colour }));
     }
+    if (flat) root.append(text(w - m.r - 4, Y(flatValue) - 5, `constant ${fmt(flatValue, 6)}`, 'end', 'tick flat-value'));
   }
   const marker = svg('line', { y1: m.t, y2: h - m.b, class: 'marker', visibility: 'hidden' });
   const dot = svg('circle', { r: 3, class: 'marker-dot', visibility: 'hidden' });

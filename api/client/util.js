@@ -27,6 +27,30 @@ export function fmt(x, digits = 4) {
   return x.toExponential(digits - 1);
 }
 
+/**
+ * The fewest significant digits (at least `min`, at most 15) at which fmt tells a from b
+ * apart: the two ends of an axis over near-constant data (1.3712 and 1.3718) must not both
+ * read "1.37".
+ */
+export function distinctDigits(a, b, min = 3) {
+  let d = min;
+  while (d < 15 && a !== b && fmt(a, d) === fmt(b, d)) d++;
+  return d;
+}
+
+/**
+ * Significant digits for tick labels `ticks` (evenly spaced): enough to resolve their step,
+ * so 0.9992, 0.9994, 0.9996 do not all read "0.999"; at least `min`.
+ */
+export function tickDigits(ticks, min = 3) {
+  if (ticks.length < 2) return min;
+  const step = Math.abs(ticks[1] - ticks[0]);
+  const big = Math.max(...ticks.map((t) => Math.abs(t)));
+  if (!(step > 0) || !(big > 0)) return min;
+  const d = Math.floor(Math.log10(big)) - Math.floor(Math.log10(step)) + 1;
+  return Math.min(15, Math.max(min, d));
+}
+
 /** Mesh sizes and time steps read best as 1/n when they are reciprocals of integers. */
 export function fmtStep(x) {
   if (typeof x !== 'number' || !(x > 0)) return fmt(x);

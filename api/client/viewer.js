@@ -15,7 +15,7 @@
 // same, with u, w of three components per node and von Mises per tetrahedron.
 
 import * as api from './api.js';
-import { el, fmt, fmtStep, fmtSeconds } from './util.js';
+import { el, fmt, fmtStep, fmtSeconds, distinctDigits, tickDigits } from './util.js';
 import { drawField, probe, partKinds, edgeKind, boundingBox, KINDS, STICK, SLIP } from './render.js';
 import { cssGradient, niceRange, niceTicks, LUT } from './colormap.js';
 import { linePlot } from './plots.js';
@@ -404,7 +404,7 @@ export class SimulationView {
     this.root.dataset.step = String(doc.n);
     this.stepLabel.textContent = `step ${doc.n} of ${this.summary.time?.steps ?? '?'} · t = ${fmt(doc.t)}`;
     this.vtuLink.href = `/jobs/${this.job.id}/fields/${doc.n}.vtu`;
-    this.vtuLink.download = `step-${doc.n}.vtu`;
+    this.vtuLink.download = `contact-sim-${this.job.id.slice(0, 8)}-step-${doc.n}.vtu`;
     this.slider.setAttribute('aria-valuetext', `step ${doc.n}, t = ${fmt(doc.t)}`);
     for (const p of this.plots) p.setMarker(doc.t);
     this.drawGamma3();
@@ -550,12 +550,15 @@ export class SimulationView {
     if (this.d3) this.draw3d(vals, range);
     else this.draw2d(vals, range);
     const q = QUANTITIES[this.quantity.value];
-    this.cbLo.textContent = fmt(range[0]);
-    this.cbHi.textContent = fmt(range[1]);
+    const ends = distinctDigits(range[0], range[1], 4);
+    this.cbLo.textContent = fmt(range[0], ends);
+    this.cbHi.textContent = fmt(range[1], ends);
     this.range = range;
-    this.cbTicks.replaceChildren(...niceTicks(range[0], range[1], 5).map((v) => el('span', {
+    const ticks = niceTicks(range[0], range[1], 5);
+    const digits = tickDigits(ticks);
+    this.cbTicks.replaceChildren(...ticks.map((v) => el('span', {
       class: 'cb-tick', style: `left: ${(100 * (v - range[0])) / (range[1] - range[0])}%`, dataset: { value: String(v) },
-    }, fmt(v, 3))));
+    }, fmt(v, digits))));
     this.cbLabel.textContent = vals
       ? `${this.label(q)}: min ${fmt(min)}, max ${fmt(max)}${max - min <= 1e-12 * Math.max(1, Math.abs(max)) ? ' (uniform)' : ''}`
       : `${this.label(q)}: not stored`;
@@ -684,10 +687,12 @@ export class SimulationView {
     ctx.textBaseline = 'top';
     const [lo, hi] = this.range || [0, 1];
     ctx.textAlign = 'center';
-    for (const v of niceTicks(lo, hi, 5)) {
+    const ticks = niceTicks(lo, hi, 5);
+    const digits = tickDigits(ticks);
+    for (const v of ticks) {
       const x = x0 + ((v - lo) / (hi - lo)) * bw;
       ctx.fillRect(Math.round(x), y0 + barH, 1, Math.round(4 * dpr));
-      ctx.fillText(fmt(v, 3), x, y0 + barH + pad / 2);
+      ctx.fillText(fmt(v, digits), x, y0 + barH + pad / 2);
     }
     ctx.textAlign = 'left';
     ctx.fillText(`${this.cbLabel.textContent} · ${this.stepLabel.textContent} · ${this.job.scene || ''} ${this.job.id.slice(0, 8)}`,

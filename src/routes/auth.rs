@@ -19,11 +19,11 @@ use std::sync::Arc;
 use uuid::Uuid;
 
 /// Routes served without a key: the browser client (it asks for the key), the API
-/// description, the presets, and `/healthz` (bare liveness without an admin key).
+/// description and its rendered reference, the presets, and `/healthz` (bare liveness without an admin key).
 fn is_public(path: &str) -> bool {
     matches!(
         path,
-        "/" | "/openapi.yaml" | "/scene.schema.json" | "/presets" | "/healthz"
+        "/" | "/docs" | "/openapi.yaml" | "/scene.schema.json" | "/presets" | "/healthz"
     ) || path.starts_with("/client/")
         || path.starts_with("/presets/")
 }
@@ -189,6 +189,7 @@ mod tests {
             "/",
             "/client/app.js",
             "/openapi.yaml",
+            "/docs",
             "/presets",
             "/presets/x",
             "/healthz",

@@ -1,6 +1,6 @@
 //! The browser client: `GET /` (the page) and `GET /client/{*file}` (its ES modules and CSS,
 //! and the vendored three.js under `vendor/three/`, imported by the 3D viewer through the
-//! page's import map). The files live under `api/client/` and are embedded in the binary, so
+//! page's import map); `GET /docs`, the API reference rendered by the vendored Swagger UI. The files live under `api/client/` and are embedded in the binary, so
 //! the service needs nothing beside itself (no CDN). A file is found by its exact path in the
 //! fixed list below, never on the file system, so no request can name anything else. Each
 //! response carries a strong ETag (a hash of the file) with `Cache-Control: no-cache`:
@@ -37,7 +37,10 @@ const JS: &str = "text/javascript; charset=utf-8";
 /// Every file under `api/client/`, by its path there (a test checks the directory tree and
 /// this list agree). three.js 0.187.0 is vendored unmodified from its npm package: the two
 /// files of its ES module build (`three.module.js` imports `./three.core.js`; this release
-/// ships no minified build), the OrbitControls addon and the licence.
+/// ships no minified build), the OrbitControls addon and the licence. Swagger UI 5.35.0 (the
+/// API reference at `GET /docs`) is vendored unmodified from its npm package swagger-ui-dist:
+/// its browser bundle and stylesheet, with its licence, notice and the bundle's third-party
+/// licences.
 const ASSETS: &[Asset] = &[
     asset!("index.html", "text/html; charset=utf-8"),
     asset!("style.css", "text/css; charset=utf-8"),
@@ -58,6 +61,19 @@ const ASSETS: &[Asset] = &[
     asset!("vendor/three/build/three.module.js", JS),
     asset!("vendor/three/build/three.core.js", JS),
     asset!("vendor/three/examples/jsm/controls/OrbitControls.js", JS),
+    asset!("docs.html", "text/html; charset=utf-8"),
+    asset!("docs.js", JS),
+    asset!("vendor/swagger-ui/LICENSE", "text/plain; charset=utf-8"),
+    asset!("vendor/swagger-ui/NOTICE", "text/plain; charset=utf-8"),
+    asset!(
+        "vendor/swagger-ui/swagger-ui-bundle.js.LICENSE.txt",
+        "text/plain; charset=utf-8"
+    ),
+    asset!("vendor/swagger-ui/swagger-ui-bundle.js", JS),
+    asset!(
+        "vendor/swagger-ui/swagger-ui.css",
+        "text/css; charset=utf-8"
+    ),
 ];
 
 /// ETags of `ASSETS`, in order, computed once.
@@ -114,6 +130,11 @@ pub async fn index(headers: HeaderMap) -> Result<Response, Problem> {
     serve("index.html", &headers)
 }
 
+/// `GET /docs`: the HTTP API reference, api/openapi.yaml rendered in the browser.
+pub async fn docs(headers: HeaderMap) -> Result<Response, Problem> {
+    serve("docs.html", &headers)
+}
+
 /// `GET /client/{*file}`: a module, stylesheet or the page itself, or a vendored file
 /// (`vendor/three/...`).
 pub async fn file(Path(file): Path<String>, headers: HeaderMap) -> Result<Response, Problem> {
@@ -162,7 +183,7 @@ mod tests {
                 "html" => "text/html",
                 "css" => "text/css",
                 "js" => "text/javascript",
-                "LICENSE" => "text/plain",
+                "LICENSE" | "NOTICE" | "txt" => "text/plain",
                 _ => panic!("unexpected client file {}", a.name),
             };
             assert!(a.content_type.starts_with(want), "{}", a.name);

@@ -17,6 +17,7 @@ use axum::Extension;
 use contact_core::scene::{self, canonical, hex_sha256, presets, Overrides};
 use contact_core::solve::SolverSettings;
 use contact_core::study;
+use contact_core::study::presets as study_presets;
 use serde_json::{json, Value};
 use std::convert::Infallible;
 use std::time::Duration;
@@ -113,10 +114,21 @@ pub fn scene_hash(scene: &Value) -> String {
     hex_sha256(key.to_string().as_bytes())
 }
 
-/// Expands `{"preset": NAME, "overrides": {...}}`; any other document is a scene.
-fn expand(doc: Value) -> Result<(Value, bool), Problem> {
+/// A preset request: `{"preset": NAME, "overrides": {...}}`.
+enum PresetRequest {
+    /// Not a preset request: the document is a scene or a study.
+    None,
+    /// A scene preset expanded with its overrides, and the key the final time was given by
+    /// (`t_end` or its alias `T`), for the pointers of errors.
+    Scene(Value, &'static str),
+    /// A study preset's name (the paper's tables): runs as `{"study": {"preset": NAME}}`.
+    Study(String),
+}
+
+/// Reads a preset request; any other document is a scene or a study.
+fn expand(doc: &Value) -> Result<PresetRequest, Problem> {
     let Some(obj) = doc.as_object().filter(|o| o.contains_key("preset")) else {
-        return Ok((doc, false));
+        return Ok(PresetRequest::None);
     };
     for k in obj.keys() {
         if k != "preset" && k != "overrides" {
@@ -129,48 +141,77 @@ fn expand(doc: Value) -> Result<(Value, bool), Problem> {
     let name = obj["preset"]
         .as_str()
         .ok_or_else(|| Problem::invalid_field("/preset", "preset must be a string"))?;
+    if study_presets::get(name).is_some() {
+        if obj.contains_key("overrides") {
+            return Err(Problem::invalid_field(
+                "/overrides",
+                format!(
+                    "{name:?} is a study preset, which takes no overrides; \
+                     edit its study document (GET /presets/{name}) and submit that"
+                ),
+            ));
+        }
+        return Ok(PresetRequest::Study(name.to_string()));
+    }
     let mut scene = presets::get(name).ok_or_else(|| {
         Problem::invalid_field(
             "/preset",
             format!(
                 "unknown preset {name:?}; known: {}",
-                presets::names().join(", ")
+                presets::names()
+                    .iter()
+                    .chain(study_presets::names())
+                    .copied()
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ),
         )
     })?;
     let mut o = Overrides::default();
+    let mut t_key = "t_end";
     if let Some(ov) = obj.get("overrides") {
         let ov = ov
             .as_object()
             .ok_or_else(|| Problem::invalid_field("/overrides", "overrides must be an object"))?;
+        if ov.contains_key("t_end") && ov.contains_key("T") {
+            return Err(Problem::invalid_field(
+                "/overrides/T",
+                "give the final time once: t_end or its alias T, not both",
+            ));
+        }
         for (k, v) in ov {
             match k.as_str() {
                 "h" => o.h = Some(v.clone()),
                 "k" => o.k = Some(v.clone()),
                 "t_end" => o.t_end = Some(v.clone()),
+                "T" => {
+                    o.t_end = Some(v.clone());
+                    t_key = "T";
+                }
                 _ => {
                     return Err(Problem::invalid_field(
                         &format!("/overrides/{k}"),
-                        format!("unknown override {k:?} (allowed: h, k, t_end)"),
+                        format!("unknown override {k:?} (allowed: h, k, T or its alias t_end)"),
                     ))
                 }
             }
         }
     }
     scene::apply_overrides(&mut scene, &o);
-    Ok((scene, true))
+    Ok(PresetRequest::Scene(scene, t_key))
 }
 
-/// Maps pointers of an expanded preset back to the request's `overrides`.
-fn map_override_pointers(mut p: Problem) -> Problem {
+/// Maps pointers of an expanded preset back to the request's `overrides` (`t_key`: the key
+/// the request gave the final time by).
+fn map_override_pointers(mut p: Problem, t_key: &str) -> Problem {
     for err in p.errors.iter_mut().flatten() {
         let mapped = match err.pointer.as_str() {
-            "/mesh/h" => "/overrides/h",
-            "/time/k" | "/time/N" => "/overrides/k",
-            "/time/t_end" => "/overrides/t_end",
+            "/mesh/h" => "/overrides/h".to_string(),
+            "/time/k" | "/time/N" => "/overrides/k".to_string(),
+            "/time/t_end" => format!("/overrides/{t_key}"),
             _ => continue,
         };
-        err.pointer = mapped.to_string();
+        err.pointer = mapped;
     }
     p
 }
@@ -288,6 +329,13 @@ fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), Proble
 /// study's summary counts as nothing), or why it is refused (422 at the offending field).
 /// Blocking.
 fn validated(doc: Value, state: &AppState) -> Result<(Value, usize, u64), Problem> {
+    let doc = match expand(&doc)? {
+        PresetRequest::Study(name) => json!({"study": {"preset": name}}),
+        PresetRequest::Scene(scene_doc, t_key) => {
+            return validated_scene(scene_doc, Some(t_key), state)
+        }
+        PresetRequest::None => doc,
+    };
     match doc.get("study") {
         Some(study) => {
             if let Some(k) = doc
@@ -304,24 +352,31 @@ fn validated(doc: Value, state: &AppState) -> Result<(Value, usize, u64), Proble
             check_study_limits(&plan, state)?;
             Ok((json!({ "study": expanded }), study::total_steps(&plan), 0))
         }
-        None => {
-            let (scene_doc, is_preset) = expand(doc)?;
-            let problem = match scene::validate_with(&scene_doc, &*state.rt.meshes) {
-                Ok(p) => p,
-                Err(errors) => {
-                    let e = Problem::invalid_scene(&errors);
-                    return Err(if is_preset {
-                        map_override_pointers(e)
-                    } else {
-                        e
-                    });
-                }
-            };
-            let bytes = check_limits(&problem, state, is_preset, &scene_doc)?;
-            let steps = problem.steps;
-            Ok((scene_doc, steps, bytes))
-        }
+        None => validated_scene(doc, None, state),
     }
+}
+
+/// A scene document (`preset`: the key of the final time when it was expanded from a preset
+/// request, whose errors then point into `overrides`): the document, its steps and stored
+/// bytes, or why it is refused.
+fn validated_scene(
+    scene_doc: Value,
+    preset: Option<&str>,
+    state: &AppState,
+) -> Result<(Value, usize, u64), Problem> {
+    let problem = match scene::validate_with(&scene_doc, &*state.rt.meshes) {
+        Ok(p) => p,
+        Err(errors) => {
+            let e = Problem::invalid_scene(&errors);
+            return Err(match preset {
+                Some(t_key) => map_override_pointers(e, t_key),
+                None => e,
+            });
+        }
+    };
+    let bytes = check_limits(&problem, state, preset.is_some(), &scene_doc)?;
+    let steps = problem.steps;
+    Ok((scene_doc, steps, bytes))
 }
 
 pub async fn submit(

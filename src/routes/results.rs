@@ -411,8 +411,9 @@ pub async fn vtu(
     }))
 }
 
-/// `/jobs/{id}/result.pvd`: step 0 (t = 0) and every stored step, each referencing its
-/// `/jobs/{id}/fields/N.vtu`.
+/// `/jobs/{id}/result.pvd`: step 0 (t = 0) and every stored step, each referencing its VTU by
+/// the relative name `fields/N.vtu`: read from the service it resolves to
+/// `/jobs/{id}/fields/N.vtu`, and a saved copy opens beside a `fields/` folder of those files.
 pub async fn pvd(
     State(state): State<AppState>,
     Path(id): Path<String>,
@@ -427,7 +428,7 @@ pub async fn pvd(
     .await?;
     let entries: Vec<(f64, String)> = steps
         .iter()
-        .map(|&n| (n as f64 * k, format!("/jobs/{id}/fields/{n}.vtu")))
+        .map(|&n| (n as f64 * k, format!("fields/{n}.vtu")))
         .collect();
     Ok(blocking_body("application/xml", move |w| {
         write_pvd(w, &entries)

@@ -323,6 +323,8 @@ async function testSimulation() {
   await axeCheck(page, 'on the result view');
   const vtu = await page.getAttribute('#dl-vtu', 'href');
   check(vtu === `/jobs/${jobId}/fields/8.vtu`, `VTU link of the shown step: ${vtu}`);
+  const vtuName = await page.getAttribute('#dl-vtu', 'download');
+  check(vtuName === `contact-sim-${jobId.slice(0, 8)}-step-8.vtu`, `the VTU file name carries the job id: ${vtuName}`);
   for (const href of await page.locator('.downloads a').evaluateAll((as) => as.map((a) => a.getAttribute('href')))) {
     const r = await page.request.get(base + href);
     check(r.status() === 200, `download ${href} answers 200`);
@@ -1586,7 +1588,7 @@ async function testApiKeys() {
   // A download link fetches with the key and saves the file.
   const [dl] = await Promise.all([page.waitForEvent('download'), page.click('#dl-vtu')]);
   const vtu = fs.readFileSync(await dl.path(), 'utf8');
-  check(vtu.includes('<VTKFile') && dl.suggestedFilename() === 'step-50.vtu', `a download link works with the key (${dl.suggestedFilename()}, ${vtu.length} bytes)`);
+  check(vtu.includes('<VTKFile') && dl.suggestedFilename() === `contact-sim-${id.slice(0, 8)}-step-50.vtu`, `a download link works with the key (${dl.suggestedFilename()}, ${vtu.length} bytes)`);
   check(log.some((r) => r.url.endsWith('.vtu') && r.auth === `Bearer ${key}`), 'the VTU was requested with the key');
 
   // A reload keeps the key (no dialog); a refused key is forgotten and asked for again.
@@ -1666,9 +1668,129 @@ async function testApiKeys() {
   await sse.close();
 }
 
+// 9. A newcomer's rough edges (issue 25): plots of near-constant data (tick digits, distinct
+//    axis ends, a flat series drawn flat with its value); the study presets' hint; a paper
+//    study's table beside the paper's values, legible and scrolling on a phone; a smallness
+//    refusal said once with a rerun with "smallness": "warn"; the mesh form with a 3D mesh.
+async function testNewcomer() {
+  console.log('test 9: near-constant plots, study presets, paper columns, smallness rerun, 3D mesh form');
+  const page = await openPage();
+  // (a) Plots and colour-bar ticks, from the modules themselves.
+  const p = await page.evaluate(async () => {
+    const { linePlot } = await import('/client/plots.js');
+    const { niceTicks } = await import('/client/colormap.js');
+    const { fmt, tickDigits } = await import('/client/util.js');
+    const host = document.createElement('div');
+    document.body.append(host);
+    const flat = linePlot(host, { title: 'flat', xs: [0, 1, 2, 3], ys: [0.5 + 1e-14, 0.5 - 1e-14, 0.5, 0.5 + 2e-14] }).element;
+    const ys = [...flat.querySelectorAll('path')].map((e) => e.getAttribute('d')).join('').match(/,(-?[0-9.]+)/g);
+    const near = linePlot(host, { title: 'near', xs: [0, 1], ys: [1.3712, 1.3718] }).element;
+    const ends = [...near.querySelectorAll('text.tick')].slice(0, 2).map((t) => t.textContent);
+    const ticks = niceTicks(0.9991, 0.9997, 5);
+    const labels = ticks.map((v) => fmt(v, tickDigits(ticks)));
+    host.remove();
+    return {
+      flatValue: flat.dataset.flat, flatYs: [...new Set(ys)],
+      flatLabel: flat.querySelector('text.flat-value')?.textContent, ends, labels,
+    };
+  });
+  check(p.flatValue !== undefined && Math.abs(Number(p.flatValue) - 0.5) < 1e-12 && p.flatYs.length === 1 && /constant 0\.5\b/.test(p.flatLabel || ''),
+    `a series of 0.5 ± 2e-14 is drawn flat with its value (${p.flatLabel}; y ${p.flatYs.join(' ')})`);
+  check(p.ends.length === 2 && p.ends[0] !== p.ends[1], `axis ends over 1.3712…1.3718 differ: ${p.ends.join(' / ')}`);
+  check(new Set(p.labels).size === p.labels.length && p.labels.length >= 3, `colour-bar ticks over 0.9991…0.9997 differ: ${p.labels.join(', ')}`);
+
+  // (b) A study preset has no h/k/T hint; a scene preset has.
+  await page.selectOption('#preset-select', 'paper-table-1');
+  await page.waitForFunction(() => document.querySelector('#ov-hint').hidden);
+  await page.selectOption('#preset-select', 'paper-exp1');
+  await page.waitForFunction(() => !document.querySelector('#ov-hint').hidden);
+  check(true, 'the h/k/T hint is hidden for a study preset and shown for a scene preset');
+
+  // (c) A smallness refusal: said once, with a rerun with "smallness": "warn".
+  const scene = await (await context.request.get(`${base}/presets/paper-exp3`)).json();
+  scene.mesh.h = '1/8';
+  scene.time = { t_end: 1, k: '1/8' };
+  scene.friction = { law: 'slip_weakening', mu0: 1.2, mu1: 0.4, alpha: 3 };
+  await page.click('#scene-panel summary');
+  await page.fill('#scene-text', JSON.stringify(scene, null, 2));
+  await page.click('#submit-scene');
+  await page.waitForSelector('#job-error', { timeout: 30_000 });
+  const view = await page.textContent('#viewer');
+  const said = (view.match(/smallness condition \(2\.31\) fails/g) || []).length;
+  check(said === 1 && !view.includes('Set "smallness"'), `the smallness failure is said once (${said}×): ${(await page.textContent('#job-error')).slice(0, 80)}…`);
+  await axeCheck(page, 'on a smallness refusal');
+  await page.click('#rerun-warn');
+  await page.waitForFunction(() => document.querySelector('#viewer')?.dataset.state === 'ready', null, { timeout: 60_000 });
+  const warnedDoc = JSON.parse(await page.inputValue('#scene-text').catch(() => '{}') || '{}');
+  const shown = await page.getAttribute('#viewer', 'data-job');
+  const rerun = await (await context.request.get(`${base}/jobs/${shown}`)).json();
+  check(rerun.status === 'succeeded', `the rerun with "smallness": "warn" ran (${rerun.status}; editor smallness ${warnedDoc.smallness ?? 'unchanged'})`);
+  await page.close();
+
+  // (d) A paper study's table has the paper's values beside ours; on a phone it scrolls.
+  const id = 'f0000000-0000-4000-8000-000000000025';
+  const job = { id, status: 'succeeded', kind: 'study', scene: 'paper-table-1', created_at: '2026-01-01T00:00:00Z', progress: { step: 1, steps: 1, percent: 100 } };
+  const levels = [2, 4, 8, 16, 32];
+  const summary = {
+    kind: 'study', name: 'paper-table-1', vary: 'h',
+    reference: { h: 1 / 128, k: 1 / 128, w_V: 0.1527592631, zeta_Z0: 0.7638660333, seconds: 2 },
+    rows: levels.map((n, i) => ({ h: 1 / n, k: 1 / 128, err_w: 0.6 / 1.8 ** i, err_zeta: 0.14 / 2.6 ** i, order_w: i ? 0.85 : null, order_zeta: i ? 1.4 : null, unknowns: 10 * n * n, steps: 128, seconds: 0.01 * n })),
+    lsq_order_w: 0.8, lsq_order_zeta: 1.4,
+  };
+  const phone = await context.newPage();
+  await phone.setViewportSize({ width: 390, height: 800 });
+  phone.on('pageerror', (e) => pageErrors.push(String(e)));
+  await phone.route((u) => u.pathname.startsWith(`/jobs/${id}`), (route) => {
+    const rest = new URL(route.request().url()).pathname.slice(`/jobs/${id}`.length);
+    if (rest === '') return route.fulfill({ status: 200, contentType: 'application/json', body: JSON.stringify(job) });
+    if (rest === '/summary') return route.fulfill({ status: 200, contentType: 'application/json', body: JSON.stringify(summary) });
+    if (rest === '/report.svg') return route.fulfill({ status: 200, contentType: 'image/svg+xml', body: '<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"/>' });
+    return route.fulfill({ status: 404, contentType: 'application/problem+json', body: '{"title":"not found","status":404}' });
+  });
+  await phone.goto(`${base}/#job=${id}`);
+  await phone.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 15_000 });
+  const head = await phone.$$eval('#study-table thead th', (ths) => ths.map((t) => t.textContent));
+  const row2 = await phone.$$eval('#study-table tbody tr:nth-child(2) td', (tds) => tds.map((t) => t.textContent));
+  check(head.includes('paper err w') && head.includes('paper err ζ') && row2[0] === '1/4' && row2.includes('0.2203') && row2.includes('0.664') && row2.includes('0.04367') && row2.includes('1.004'),
+    `the paper's Table 1 beside ours: ${head.join('|')} / ${row2.join('|')}`);
+  const wrap = await phone.$eval('#viewer .table-wrap', (w) => ({ scroll: w.scrollWidth, client: w.clientWidth, page: document.documentElement.scrollWidth, note: getComputedStyle(w.querySelector('caption')).display, tab: w.tabIndex }));
+  check(wrap.scroll > wrap.client && wrap.page <= 390 && wrap.note !== 'none' && wrap.tab === 0,
+    `on a phone the table scrolls inside its frame and says so (${wrap.client} of ${wrap.scroll} px; page ${wrap.page} px)`);
+  await axeCheck(phone, 'on a paper study on a phone');
+  await phone.screenshot({ path: path.join(outDir, 'client-study-phone.png'), fullPage: true });
+  await phone.close();
+
+  // (e) The mesh form with a tetrahedral mesh, a 2D preset selected: a valid 3D scene.
+  const form = await openPage();
+  await form.route('**/meshes', (route) => route.fulfill({
+    status: 201, contentType: 'application/json',
+    body: JSON.stringify({
+      id: 'cd'.repeat(32), bytes: 1000, created_at: '2026-01-01T00:00:00Z',
+      summary: {
+        dimension: 3, nodes: 100, cells: 300, boundary_facets: 120,
+        groups: [{ name: 'base', facets: 40, measure: 1 }, { name: 'top', facets: 40, measure: 1 }, { name: 'side', facets: 40, measure: 2 }],
+        bounding_box: { min: [0, 0, 0], max: [1, 1, 2] }, min_cell_size: 0.1, max_cell_size: 0.3, min_quality: 0.5, mean_quality: 0.8,
+      },
+    }),
+  }));
+  await form.selectOption('#preset-select', 'paper-exp3');
+  await form.click('#mesh-panel summary');
+  await form.setInputFiles('#mesh-file', plateMsh);
+  await form.waitForSelector('#mesh-upload[data-state="ready"]', { timeout: 10_000 });
+  await form.selectOption('#mesh-groups tr[data-group="side"] select', 'traction');
+  await form.click('#mesh-build');
+  await form.waitForFunction(() => document.querySelector('#scene-text').value.includes('cdcdcd'));
+  const doc3 = JSON.parse(await form.inputValue('#scene-text'));
+  const vec3 = (v) => Array.isArray(v) && v.length === 3;
+  check(vec3(doc3.loads.f0) && (!doc3.initial || !doc3.initial.u0 || vec3(doc3.initial.u0))
+    && JSON.stringify(doc3.boundary) === JSON.stringify([{ type: 'contact', group: 'base' }, { type: 'clamped', group: 'top' }, { type: 'traction', group: 'side', f2: [0, 0, -1] }]),
+  `a 3D mesh under a 2D preset gives 3-vectors and a bound boundary: f0 ${JSON.stringify(doc3.loads.f0)}, ${JSON.stringify(doc3.boundary)}`);
+  await form.close();
+}
+
 // CLIENT_TESTS=5,7 runs only those sections (while working on one); all by default.
 const only = process.env.CLIENT_TESTS ? new Set(process.env.CLIENT_TESTS.split(',').map(Number)) : null;
-const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys];
+const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys, testNewcomer];
 
 let failed = false;
 try {

@@ -27,7 +27,10 @@ PAPER_ERR_ZETA = [8.7595e-2, 4.3672e-2, 1.7248e-2, 6.1124e-3, 2.1316e-3]
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
     ap.add_argument("--url", default="http://127.0.0.1:8080", help="the service")
     ap.add_argument("--token", default=None, help="API token (sent as a Bearer token)")
     ap.add_argument("--out", default="convergence.png", help="the PNG to write")

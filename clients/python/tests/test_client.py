@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from contact_sim import ApiError, Client, Job, JobCancelled, JobFailed
+from contact_sim import ApiError, Client, Job, JobCancelled, JobFailed, ServiceUnreachable
 from contact_sim._sse import events
 from conftest import MESHES, REPO, serve
 
@@ -310,6 +310,11 @@ def test_study_table_as_dataframe(client: Client) -> None:
         slope = math.log(df["err_w"][i - 1] / df["err_w"][i]) / math.log(2)
         assert df["order_w"][i] == pytest.approx(slope, rel=1e-9)
     assert df.attrs["reference"]["h"] == 1 / 16 and df.attrs["vary"] == "h"
+    # h and k also as the fractions the study was written in, next to the floats.
+    assert list(df["h_fraction"]) == ["1/2", "1/4", "1/8"]
+    assert list(df["k_fraction"]) == ["1/16"] * 3
+    cols = list(df.columns)
+    assert cols.index("h_fraction") == cols.index("h") + 1
     text = job.table_text()
     assert all(h in text for h in ("1/2", "1/4", "1/8"))
     assert job.report_svg().lstrip().startswith("<")
@@ -396,9 +401,9 @@ def test_readme_from_python_lines_run(
     server_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     readme = (REPO / "README.md").read_text(encoding="utf-8")
-    section = readme.split("\n## From Python\n", 1)[1].split("\n## ", 1)[0]
+    section = readme.split("\n### From Python\n", 1)[1].split("\n## ", 1)[0]
     code = section.split("```python\n", 1)[1].split("```", 1)[0]
-    assert len(code.strip().splitlines()) == 5
+    assert len(code.strip().splitlines()) == 8
     assert "http://127.0.0.1:8080" in code
     monkeypatch.chdir(tmp_path)
     scope: dict[str, object] = {}
@@ -408,7 +413,6 @@ def test_readme_from_python_lines_run(
     nodes, triangles, _ = rectangle_counts(2, 1, 16)
     f = scope["f"]
     assert f.nodes.shape == (nodes, 2) and f.triangles.shape == (triangles, 3)  # type: ignore[attr-defined]
-    assert (tmp_path / "exp3.vtu").stat().st_size > 0
     assert (tmp_path / f"contact-sim-{job.id}.tar").stat().st_size > 0
     scope["client"].close()  # type: ignore[attr-defined]
 
@@ -430,3 +434,73 @@ def test_convergence_example_writes_its_plot(server_url: str, tmp_path: Path) ->
     last = [line.split() for line in run.stdout.splitlines() if line.strip().startswith("1/32")]
     assert len(last) == 1
     assert (round(float(last[0][2]), 3), round(float(last[0][4]), 3)) == (0.869, 1.590)
+
+
+def test_fields_repr_is_one_line_of_shapes(client: Client) -> None:
+    job = client.submit("paper-exp2", overrides={"h": "1/4", "k": "1/4"}).wait(progress=False)
+    f = job.fields()
+    text = repr(f)
+    nodes, triangles, _ = rectangle_counts(2, 1, 4)
+    assert "\n" not in text and len(text) < 400, text
+    assert f"nodes=({nodes}, 2)" in text and f"triangles=({triangles}, 3)" in text
+    assert f"zeta=({nodes},)" in text and "array(" not in text
+
+
+def test_download_honours_the_umask(client: Client, tmp_path: Path) -> None:
+    import os
+
+    job = client.submit("paper-exp2", overrides={"h": "1/4", "k": "1/4"}).wait(progress=False)
+    old = os.umask(0o027)
+    try:
+        path = job.download(tmp_path)
+    finally:
+        os.umask(old)
+    # A new file of this user: 0666 less the umask 027.
+    assert path.stat().st_mode & 0o777 == 0o640
+
+
+def test_a_wrong_url_raises_an_error_naming_it(tmp_path: Path) -> None:
+    import socket
+
+    # A port nothing listens on: bound, then closed.
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    url = f"http://127.0.0.1:{port}"
+    with Client(url, retries=0, timeout=5) as c:
+        with pytest.raises(ServiceUnreachable) as e:
+            c.submit("paper-exp1")
+        assert url in str(e.value) and e.value.url == url
+        assert isinstance(e.value, ConnectionError)
+    with pytest.raises(ValueError, match="127.0.0.1:8080"):
+        Client("127.0.0.1:8080")
+
+
+def test_a_server_that_is_not_the_service_is_named(tmp_path: Path) -> None:
+    import functools
+    import http.server
+    import threading
+
+    # Another web server at the URL: its HTML refusal names the URL that answered.
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(tmp_path))
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{httpd.server_address[1]}"
+    try:
+        with Client(url, retries=0) as c:
+            with pytest.raises(ApiError) as e:
+                c.submit("paper-exp1")
+    finally:
+        httpd.shutdown()
+        httpd.server_close()
+    assert f"(from {url}/" in str(e.value) and "contact-sim service" in str(e.value)
+
+
+def test_examples_help_shows_defaults() -> None:
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    for script in sorted(examples.glob("*.py")):
+        run = subprocess.run(
+            [sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=60
+        )
+        assert run.returncode == 0, run.stderr
+        assert "(default: http://127.0.0.1:8080)" in run.stdout, run.stdout

@@ -3,7 +3,7 @@
 //!
 //! The numerics is the fully discrete scheme (Problem 3.1) of W. Han, M. Jureczka, A. Ochal,
 //! "Numerical analysis of a contact problem with damage", J. Comput. Appl. Math. 377 (2020)
-//! 112886, with the discrete choices written down in `docs/numerics.md`. Data flows one way:
+//! 112886, with the discrete choices written down in `docs/src/explanation/numerics.md`. Data flows one way:
 //! scene JSON → [`scene::validate`] → [`problem::Problem`] → [`mesh`] and [`fem`] matrices →
 //! [`solve::stepper`] time steps → [`output`] summary and fields; [`run`] drives one
 //! simulation, [`estimate`] its error bar, [`study`] convergence studies.

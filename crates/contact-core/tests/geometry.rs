@@ -1,4 +1,4 @@
-//! Any body shape (docs/numerics.md#meshes, #contact-frames): an imported copy of a rectangle
+//! Any body shape (docs/src/explanation/numerics.md#meshes, #contact-frames): an imported copy of a rectangle
 //! mesh gives the built-in results; a rotated copy of a scene gives the same norms (its Γ3
 //! is inclined, so every contact node has a rotated frame); a curved Γ3 keeps the run
 //! invariants; boundary parts selected by formulas equal the same parts given as segments.

@@ -1,4 +1,4 @@
-//! Regression against an independent implementation of the same discrete choices (docs/numerics.md#model-and-scheme) (values given in
+//! Regression against an independent implementation of the same discrete choices (docs/src/explanation/numerics.md#model-and-scheme) (values given in
 //! the issue that specified this core), and exact properties of the time stepping.
 
 mod common;

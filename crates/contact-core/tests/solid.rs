@@ -1,4 +1,4 @@
-//! Three dimensions (docs/numerics.md#meshes, #contact-frames): P1 tetrahedra converge at
+//! Three dimensions (docs/src/explanation/numerics.md#meshes, #contact-frames): P1 tetrahedra converge at
 //! order 1 on a manufactured solution; a box scene and a copy of it rotated about an
 //! oblique axis (imported from gmsh, loads rotated) give the same norms with slip in an
 //! oblique direction on Γ3; every step of the box scenes keeps the invariants (residuals,

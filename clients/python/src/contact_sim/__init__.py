@@ -9,7 +9,7 @@ follow their progress, and read results as numpy arrays, meshio meshes or pandas
 """
 
 from .client import Client, Job, __version__
-from .errors import ApiError, ContactSimError, JobCancelled, JobFailed
+from .errors import ApiError, ContactSimError, JobCancelled, JobFailed, ServiceUnreachable
 from .fields import Contact, Fields
 
 __all__ = [
@@ -21,5 +21,6 @@ __all__ = [
     "Job",
     "JobCancelled",
     "JobFailed",
+    "ServiceUnreachable",
     "__version__",
 ]

@@ -26,7 +26,7 @@ from typing import (
 import httpx
 
 from . import _sse
-from .errors import ApiError, JobCancelled, JobFailed
+from .errors import ApiError, JobCancelled, JobFailed, ServiceUnreachable
 from .fields import Fields
 
 if TYPE_CHECKING:  # optional extras, imported where used
@@ -39,7 +39,7 @@ __version__ = "0.1.0"
 
 #: A preset name, a scene / preset request / study request document, or a JSON file of one.
 Submission = Union[str, Mapping[str, Any], "os.PathLike[str]"]
-#: h, k or t_end: a number, a ratio string ("1/32") or a Fraction.
+#: h, k or T (t_end): a number, a ratio string ("1/32") or a Fraction.
 Ratio = Union[int, float, str, Fraction]
 
 FINISHED = frozenset({"succeeded", "failed", "cancelled"})
@@ -69,8 +69,27 @@ def _retry_after(r: httpx.Response) -> Optional[float]:
 
 def _error(r: httpx.Response) -> ApiError:
     return ApiError.from_response(
-        r.status_code, r.headers.get("content-type", ""), r.read(), _retry_after(r)
+        r.status_code,
+        r.headers.get("content-type", ""),
+        r.read(),
+        _retry_after(r),
+        url=str(r.request.url),
     )
+
+
+def _fraction(x: float) -> str:
+    """A mesh size or time step as the fraction it was written as ("1/128", "2"): the
+    nearest fraction with a denominator up to 10^6 (exact for the powers of two of a
+    ladder)."""
+    f = Fraction(x).limit_denominator(1_000_000)
+    return str(f.numerator) if f.denominator == 1 else f"{f.numerator}/{f.denominator}"
+
+
+def _umask() -> int:
+    """The process's umask (read by setting it, so set it straight back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 class Client:
@@ -89,6 +108,11 @@ class Client:
         timeout: float = 60.0,
         retries: int = 5,
     ) -> None:
+        if not url.startswith(("http://", "https://")):
+            raise ValueError(
+                f"url {url!r}: give the service's address with its scheme, "
+                "e.g. http://127.0.0.1:8080"
+            )
         headers = {"User-Agent": f"contact-sim-python/{__version__}"}
         if token:
             headers["Authorization"] = f"Bearer {token}"
@@ -114,7 +138,10 @@ class Client:
     def _send(self, method: str, path: str, **kw: Any) -> httpx.Response:
         """One request; 4xx/5xx raise :class:`ApiError`, 429/503 are retried first."""
         for attempt in range(self.retries + 1):
-            r = self._http.request(method, path, **kw)
+            try:
+                r = self._http.request(method, path, **kw)
+            except httpx.TransportError as e:
+                raise ServiceUnreachable(self.url, e) from e
             if r.status_code in (429, 503) and attempt < self.retries:
                 wait = _retry_after(r)
                 time.sleep(min(60.0, wait if wait is not None else 2.0**attempt))
@@ -132,11 +159,17 @@ class Client:
         dest.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=".part")
         try:
-            with os.fdopen(fd, "wb") as out, self._http.stream("GET", path) as r:
-                if r.status_code >= 400:
-                    raise _error(r)
-                for chunk in r.iter_bytes():
-                    out.write(chunk)
+            try:
+                with os.fdopen(fd, "wb") as out, self._http.stream("GET", path) as r:
+                    if r.status_code >= 400:
+                        raise _error(r)
+                    for chunk in r.iter_bytes():
+                        out.write(chunk)
+            except httpx.TransportError as e:
+                raise ServiceUnreachable(self.url, e) from e
+            # mkstemp creates the file 0600; a download gets the mode any new file of this
+            # user gets (0666 less the umask), as open() would have given it.
+            os.chmod(tmp, 0o666 & ~_umask())
             os.replace(tmp, dest)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
@@ -160,8 +193,8 @@ class Client:
         overrides: Optional[Mapping[str, Ratio]] = None,
         idempotency_key: Optional[str] = None,
     ) -> "Job":
-        """Submits a preset by name (with ``overrides`` of ``h``, ``k``, ``t_end``; a study
-        preset's name, e.g. "paper-table-1", submits that study), or a document: a scene,
+        """Submits a preset by name (with ``overrides`` of ``h``, ``k``, ``T`` or ``t_end``;
+        a study preset's name, e.g. "paper-table-1", submits that study), or a document: a scene,
         ``{"preset": ..., "overrides": ...}`` or a study ``{"study": {...}}``. A path reads
         the document from a JSON file.
 
@@ -425,8 +458,9 @@ class Job:
         return dict(self.client._json("GET", self._path("/summary")))
 
     def table(self) -> "pandas.DataFrame":
-        """A study's table as a DataFrame, one row per level: ``h``, ``k`` (and ``refine``
-        on a given mesh), ``err_w``, ``err_zeta``, ``order_w``, ... ; nested figures are
+        """A study's table as a DataFrame, one row per level: ``h``, ``k`` (floats, each
+        followed by ``h_fraction``, ``k_fraction``: the same as a fraction, "1/128"; and
+        ``refine`` on a given mesh), ``err_w``, ``err_zeta``, ``order_w``, ... ; nested figures are
         flattened (``velocity_iterations_mean``). ``attrs`` carries the reference run,
         ``vary`` and the least-squares orders. Needs the pandas extra."""
         import pandas as pd
@@ -435,6 +469,12 @@ class Job:
         if s.get("kind") != "study":
             raise ValueError(f"job {self.id} is a simulation; tables are made by studies")
         df = pd.json_normalize(s["rows"], sep="_")
+        # h and k as the fractions the study was written in ("1/128"), beside the floats.
+        for col in ("h", "k"):
+            if col in df.columns:
+                df.insert(
+                    list(df.columns).index(col) + 1, f"{col}_fraction", df[col].map(_fraction)
+                )
         for key in ("name", "vary", "reference", "lsq_order_w", "lsq_order_zeta"):
             if key in s:
                 df.attrs[key] = s[key]

@@ -8,7 +8,18 @@ from typing import Any, List, Mapping, Optional, Tuple
 
 
 class ContactSimError(Exception):
-    """Base class of the errors this package raises (transport errors stay httpx's)."""
+    """Base class of the errors this package raises."""
+
+
+class ServiceUnreachable(ContactSimError, ConnectionError):
+    """No answer from the service's URL (refused, timed out, unknown host, not HTTP): the
+    message names the URL; the transport error is its ``__cause__``."""
+
+    def __init__(self, url: str, reason: BaseException) -> None:
+        self.url = url
+        super().__init__(
+            f"cannot reach the contact-sim service at {url}: {reason or type(reason).__name__}"
+        )
 
 
 class ApiError(ContactSimError):
@@ -57,9 +68,11 @@ class ApiError(ContactSimError):
 
     @classmethod
     def from_response(cls, status: int, content_type: str, body: bytes,
-                      retry_after: Optional[float] = None) -> "ApiError":
-        """The error of a response; a body that is not problem+json (a proxy's HTML page)
-        becomes the detail, shortened."""
+                      retry_after: Optional[float] = None,
+                      url: Optional[str] = None) -> "ApiError":
+        """The error of a response; a body that is not problem+json (a proxy's HTML page,
+        another server at a wrong URL) becomes the detail, shortened, with the URL that
+        answered it."""
         problem: Any = None
         if "json" in content_type:
             try:
@@ -72,7 +85,8 @@ class ApiError(ContactSimError):
                 "type": "about:blank",
                 "title": "HTTP error",
                 "status": status,
-                "detail": text[:500] or f"HTTP {status} with an empty body",
+                "detail": (text[:500] or f"HTTP {status} with an empty body")
+                + (f" (from {url}: is this the contact-sim service?)" if url else ""),
             }
         return cls(status, problem, retry_after)
 

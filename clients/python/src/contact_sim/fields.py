@@ -80,6 +80,23 @@ class Fields:
     von_mises: Optional[FloatArray] = None
     contact: Optional[Contact] = None
 
+    def __repr__(self) -> str:
+        """One line: the step, its time and the shape of each array present (not the
+        arrays themselves, which can hold millions of numbers)."""
+        parts = [f"job={self.job!r}", f"n={self.n}", f"t={self.t:g}", f"dim={self.dim}"]
+        for name in (
+            "nodes", "triangles", "tetrahedra", "boundary", "boundary_part", "boundary_cell",
+            "u", "w", "zeta", "sigma", "von_mises",
+        ):
+            a = getattr(self, name)
+            if a is not None:
+                parts.append(f"{name}={tuple(a.shape)}")
+        if self.parts:
+            parts.append(f"parts={len(self.parts)}")
+        if self.contact is not None:
+            parts.append(f"contact={len(self.contact.node)} nodes")
+        return f"Fields({', '.join(parts)})"
+
     @property
     def cells(self) -> Optional[IntArray]:
         """The triangles or the tetrahedra, whichever the mesh has."""

@@ -4,7 +4,7 @@
 //! non-smooth friction term. Free DOFs are numbered interior first, contact last, so the
 //! contact block is the trailing block of every free-DOF matrix.
 //!
-//! Contact frames (docs/numerics.md#contact-frames): n_i is the unit vector along
+//! Contact frames (docs/src/explanation/numerics.md#contact-frames): n_i is the unit vector along
 //! Σ_F |F| ν_F over the Γ3 facets F at node i, and ω_i = Σ_F |F| / D. When n_i is a
 //! coordinate direction ±e_c (a straight Γ3 along an axis, as on rectangles) the node keeps
 //! the Cartesian components and component c is the fixed one; otherwise its D DOFs are the

@@ -2,7 +2,7 @@
 //! elastic term −(B_{n−1}, ε(v)) of (3.13), and the damage source F_{n−1} of (3.10), on
 //! triangles (d = 2) and tetrahedra (d = 3); nodal vectors have d components per node,
 //! interleaved.
-//! Quadratures (docs/numerics.md#quadrature-and-load-vectors): exact for constant data (f0:
+//! Quadratures (docs/src/explanation/numerics.md#quadrature-and-load-vectors): exact for constant data (f0:
 //! |T|/(d+1) per vertex; f2: |F|/d per facet vertex), otherwise exact for linear data
 //! (cells: edge midpoints on triangles, the 4-point rule on tetrahedra; facets: 2-point Gauss
 //! on segments, edge midpoints on triangles).
@@ -275,7 +275,7 @@ pub fn add_stress_divergence<const D: usize>(
 /// F_i = ∫_Ω φ_T(ζ) ψ_i by the cell rule of [`cell_rule`] (triangles: the 3 edge
 /// midpoints, weights |T|/3; tetrahedra: the 4-point rule, weights |T|/4), with ζ
 /// interpolated linearly to the points and the strain constant on T
-/// (docs/numerics.md#damage-source-vector). `phi(e, ζ)` is the source on element e at
+/// (docs/src/explanation/numerics.md#damage-source-vector). `phi(e, ζ)` is the source on element e at
 /// damage value ζ.
 pub fn damage_source<const D: usize>(
     mesh: &Mesh<D>,

@@ -1,4 +1,4 @@
-//! The norms (docs/numerics.md#norms): |v|_V = ‖ε(v)‖_L2(Ω) and |ζ|_Z0 = (ζᵀ M ζ)^½.
+//! The norms (docs/src/explanation/numerics.md#norms): |v|_V = ‖ε(v)‖_L2(Ω) and |ζ|_Z0 = (ζᵀ M ζ)^½.
 
 use super::Geometry;
 use crate::linalg::Csr;

@@ -1,5 +1,5 @@
 //! Interpolation of a P1 field from a coarse mesh onto a finer nested one
-//! (docs/numerics.md#nesting-and-prolongation): the meshes of h and h/2 are nested, so this
+//! (docs/src/explanation/numerics.md#nesting-and-prolongation): the meshes of h and h/2 are nested, so this
 //! is exact for P1 fields. Used by convergence studies and error estimates to compare a
 //! coarse solution with a finer one on the fine mesh.
 //!

@@ -1,5 +1,5 @@
 //! Bodies made in gmsh: an MSH 4.1 file ([`crate::msh`]) turned into a checked [`Mesh`]
-//! (docs/numerics.md#meshes): the cells are the elements of the highest dimension, the
+//! (docs/src/explanation/numerics.md#meshes): the cells are the elements of the highest dimension, the
 //! physical groups of facet elements become named [`Group`]s of boundary facets, and the
 //! mesh passes [`super::quality`]. [`summarize`] is what `POST /meshes` answers.
 

@@ -1,7 +1,7 @@
 //! Geometry only: nodes, simplicial cells (triangles in 2D, tetrahedra in 3D) and boundary
 //! facets tagged with the boundary part that contains them, for any dimension `D` (2 or 3).
 //!
-//! Where meshes come from (docs/numerics.md#meshes):
+//! Where meshes come from (docs/src/explanation/numerics.md#meshes):
 //! - [`Mesh::rectangle`]: the structured generator. n = round(1/h) cells per unit length,
 //!   every square cell cut by its lower-left → upper-right diagonal (default), so the meshes
 //!   of h and h/2 are nested.
@@ -32,7 +32,7 @@ pub use quality::MeshError;
 /// How each square cell of the structured mesh is cut into triangles.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MeshPattern {
-    /// Lower-left → upper-right diagonal (the default; docs/numerics.md#the-three-patterns).
+    /// Lower-left → upper-right diagonal (the default; docs/src/explanation/numerics.md#the-three-patterns).
     Diagonal,
     /// Lower-right → upper-left diagonal.
     AntiDiagonal,
@@ -163,7 +163,7 @@ impl<const D: usize> Mesh<D> {
         (0..D).map(|c| (hi[c] - lo[c]).powi(2)).sum::<f64>().sqrt()
     }
 
-    /// Tags every boundary facet with the part that selects it (docs/numerics.md#boundary-tagging).
+    /// Tags every boundary facet with the part that selects it (docs/src/explanation/numerics.md#boundary-tagging).
     pub fn tag_boundary(&mut self, supports: &[support::Support]) -> Result<(), support::TagError> {
         support::tag(self, supports)
     }

@@ -1,4 +1,4 @@
-//! Which boundary facets a boundary part selects (docs/numerics.md#boundary-tagging): a facet
+//! Which boundary facets a boundary part selects (docs/src/explanation/numerics.md#boundary-tagging): a facet
 //! belongs to a part when all its vertices lie on the part's support — a closed segment, or
 //! the zero set of a formula where an optional second formula is ≥ 0 — within 1e-9 × the
 //! diagonal of the body's bounding box, or when it is in the physical group the part names.

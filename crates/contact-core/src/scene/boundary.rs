@@ -1,5 +1,5 @@
 //! Boundary parts. Each selects boundary facets in one of three ways
-//! (docs/numerics.md#boundary-tagging): a straight segment `from`/`to` (on a rectangle: on
+//! (docs/src/explanation/numerics.md#boundary-tagging): a straight segment `from`/`to` (on a rectangle: on
 //! one side, parts not overlapping), a physical `group` of an imported mesh, or the zero set
 //! of a formula `on` where the formula `where` is ≥ 0. Whether every part selects facets,
 //! and no facet two parts, is checked on the mesh itself once it exists (`scene/mod.rs`).

@@ -1,4 +1,4 @@
-//! The `domain` section: the body. Four forms (docs/numerics.md#meshes):
+//! The `domain` section: the body. Four forms (docs/src/explanation/numerics.md#meshes):
 //! - the rectangle `{width, height}` (or `{"rectangle": {width, height}}`), meshed by the
 //!   structured generator at `mesh.h`;
 //! - the box `{width, height, depth}` (d = 3), meshed at `mesh.h` into cubes of 6 Kuhn

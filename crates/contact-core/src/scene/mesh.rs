@@ -142,7 +142,7 @@ pub(super) fn mesh_section(
     let cells = required(cx, m, ptr, "h", "the mesh size, e.g. \"1/32\"")
         .and_then(|hv| ratio(cx, hv, &hptr, Range::Positive))
         .and_then(|h| {
-            // n = round(1/h) cells per unit length in both directions (docs/numerics.md); the summary reports the effective h = 1/n.
+            // n = round(1/h) cells per unit length in both directions (docs/src/explanation/numerics.md); the summary reports the effective h = 1/n.
             let inv = 1.0 / h;
             let n = inv.round();
             if n < 1.0 {

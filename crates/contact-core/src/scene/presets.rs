@@ -1,7 +1,7 @@
 //! The paper's scenes (Han, Jureczka & Ochal 2020, section 4), written out in full.
 //!
 //! Every field is given explicitly, defaults included, so that `contact-sim preset NAME`
-//! prints a complete, self-documenting scene to start from. Common data (docs/numerics.md,
+//! prints a complete, self-documenting scene to start from. Common data (docs/src/explanation/numerics.md,
 //! "Paper scenes"): T = 1; A and B of (4.1) with η = ξ = 2, μ = λ = 4; u0 = 0; j(ξ) = 20|ξ|;
 //! φ of (4.2); κ = 0.5; ζ0 = 1.
 

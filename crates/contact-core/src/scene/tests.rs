@@ -865,15 +865,15 @@ fn schema_required_fields_match_validation() {
     }
 }
 
-/// The example scene of README's "Scene format" section.
+/// The example scene of the user guide's scene format chapter.
 fn readme_example() -> Value {
-    let readme = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../../README.md"));
-    let section = &readme[readme
-        .find("## Scene format")
-        .expect("README has a Scene format section")..];
+    let section = include_str!(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../docs/src/reference/scene-format.md"
+    ));
     let start = section.find("```json\n").expect("a JSON example") + "```json\n".len();
     let end = start + section[start..].find("```").expect("the example's end");
-    serde_json::from_str(&section[start..end]).expect("README's example is JSON")
+    serde_json::from_str(&section[start..end]).expect("the guide's example is JSON")
 }
 
 #[test]
@@ -882,7 +882,7 @@ fn presets_and_examples_conform_to_the_schema() {
         .iter()
         .map(|name| (name.to_string(), presets::get(name).unwrap()))
         .collect();
-    docs.push(("README example".into(), readme_example()));
+    docs.push(("the guide's example".into(), readme_example()));
     docs.push(("example()".into(), example()));
     docs.push(("minimal()".into(), minimal()));
     for (name, doc) in docs {

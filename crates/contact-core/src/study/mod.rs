@@ -1,5 +1,5 @@
 //! Convergence studies: runs of one scene at several (h, k) compared with a finer reference
-//! run on its nested mesh (docs/numerics.md#convergence-studies): the coarse P1 fields are interpolated onto the
+//! run on its nested mesh (docs/src/explanation/numerics.md#convergence-studies): the coarse P1 fields are interpolated onto the
 //! reference mesh (exact, [`crate::fem::prolongation`]); relative errors
 //! |w − w^hk|_V / |w|_V and |ζ − ζ^hk|_Z0 / |ζ|_Z0 at t = T and their maximum over the time
 //! nodes common to both runs; observed orders between consecutive levels and a least-squares
