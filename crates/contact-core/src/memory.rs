@@ -6,9 +6,7 @@
 //! free DOFs, M, L and H = M/k + κL), the per-cell and per-node state, and then
 //! - the direct path: the factors of K_II and of H, whose fill follows the measured growth
 //!   of the AMD-ordered supernodal factor (3D: nnz(L) ≈ 1.8 n^1.58; 2D: 5 n log₂ n, n the
-//!   unknowns); the exact figure comes from the symbolic analysis once the operator is
-//!   assembled ([`crate::linalg::cholesky::Cholesky::with_limit`]), before the numeric
-//!   factorisation allocates anything;
+//!   unknowns);
 //! - the multigrid path: the hierarchies of K_II and H (coarse operators, prolongators and
 //!   their transposes, smoother blocks, a small coarse factor) as multiples of the fine
 //!   operators, calibrated on the box and rectangle presets (`contact-sim bench --memory`).

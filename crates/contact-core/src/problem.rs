@@ -228,8 +228,8 @@ pub struct Problem {
     pub friction: FrictionLaw,
     pub smallness: SmallnessPolicy,
     /// The path of the linear solves (`solver.linear`): `Auto` is decided per job from the
-    /// predicted memory ([`crate::memory`]).
-    pub linear: crate::linalg::LinearPath,
+    /// predicted memory.
+    pub linear: LinearPath,
     /// None: ζ ≡ 1, no damage solve.
     pub damage: Option<Damage>,
     /// Initial displacement u_0(x, y).
@@ -383,5 +383,37 @@ impl Problem {
             (self.width * n).round() as usize,
             (self.height * n).round() as usize,
         )
+    }
+}
+
+/// Which path a job's linear systems take (the scene's `solver.linear`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LinearPath {
+    /// The faster path whose predicted memory fits the per-job limit.
+    #[default]
+    Auto,
+    Direct,
+    Multigrid,
+}
+
+impl LinearPath {
+    pub const NAMES: &'static [&'static str] = &["auto", "direct", "multigrid"];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            LinearPath::Auto => "auto",
+            LinearPath::Direct => "direct",
+            LinearPath::Multigrid => "multigrid",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<LinearPath> {
+        match s {
+            "auto" => Some(LinearPath::Auto),
+            "direct" => Some(LinearPath::Direct),
+            "multigrid" => Some(LinearPath::Multigrid),
+            _ => None,
+        }
     }
 }

@@ -14,7 +14,8 @@ pub mod pcg;
 pub mod schur;
 pub mod solver;
 
+pub use crate::problem::LinearPath;
 pub use cholesky::Cholesky;
 pub use csr::Csr;
 pub use schur::{schur_complement, SchurPath};
-pub use solver::{LinearPath, LinearSolver};
+pub use solver::LinearSolver;

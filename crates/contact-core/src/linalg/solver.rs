@@ -15,38 +15,6 @@ use super::pcg::{self, PcgWork};
 use super::Csr;
 use std::sync::Arc;
 
-/// Which path a job's linear systems take (the scene's `solver.linear`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum LinearPath {
-    /// The faster path whose predicted memory fits (see `crate::memory`).
-    #[default]
-    Auto,
-    Direct,
-    Multigrid,
-}
-
-impl LinearPath {
-    pub const NAMES: &'static [&'static str] = &["auto", "direct", "multigrid"];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            LinearPath::Auto => "auto",
-            LinearPath::Direct => "direct",
-            LinearPath::Multigrid => "multigrid",
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<LinearPath> {
-        match s {
-            "auto" => Some(LinearPath::Auto),
-            "direct" => Some(LinearPath::Direct),
-            "multigrid" => Some(LinearPath::Multigrid),
-            _ => None,
-        }
-    }
-}
-
 /// Most conjugate-gradient iterations of one solve.
 pub const MAX_KRYLOV_ITERATIONS: usize = 1000;
 

@@ -1,4 +1,4 @@
-//! The structured box [0, lx] × [0, ly] × [0, lz] (docs/numerics.md#meshes, SCHEME "General
+//! The structured box [0, lx] × [0, ly] × [0, lz] (docs/src/explanation/numerics.md#meshes, SCHEME "General
 //! meshes and 3D" (b)): a lattice of nx × ny × nz cuboid cells, each cut into the 6 tetrahedra
 //! of the Kuhn (Freudenthal) split, so that boxes of h and h/2 are nested.
 //!

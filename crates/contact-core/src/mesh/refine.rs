@@ -1,4 +1,4 @@
-//! Uniform (red) refinement (docs/numerics.md#meshes), nested by construction: every cell
+//! Uniform (red) refinement (docs/src/explanation/numerics.md#meshes), nested by construction: every cell
 //! is cut into 2^D children through its edge midpoints, in SCHEME's child order.
 //!
 //! - Triangles (x0, x1, x2), mij the midpoint of edge ij: (x0, m01, m02), (m01, x1, m12),

@@ -1,4 +1,4 @@
-//! The data of the velocity step's reduced problem on Γ3 (docs/numerics.md, "The reduced
+//! The data of the velocity step's reduced problem on Γ3 (docs/src/explanation/numerics.md, "The reduced
 //! non-smooth problem"):
 //!
 //!   minimise Φ(x) = ½ xᵀ S x − bᵀ x + Σ_i ω_i j(|x_i|),   j(r) = ∫_0^r μ(s) ds,

@@ -11,8 +11,6 @@
 
 pub mod aggregation;
 pub mod smoother;
-#[cfg(test)]
-mod tests;
 
 use super::cholesky::{Cholesky, FactorError};
 use super::galerkin::{galerkin, transpose};

@@ -1,13 +1,16 @@
-//! The V-cycle as a preconditioner: symmetric, exact on the near-nullspace, a contracting
+//! The multigrid V-cycle (crate::linalg::multigrid) as a preconditioner: symmetric, exact on the near-nullspace, a contracting
 //! two-grid method, and conjugate-gradient iteration counts that do not grow with 1/h.
 
-use super::*;
-use crate::fem::rigid_modes::{node_blocks, rigid_modes};
-use crate::fem::{assembly, DofMap, Geometry};
-use crate::linalg::pcg::{self, PcgWork};
-use crate::mesh::{Mesh, MeshPattern};
-use crate::problem::BoundaryPart;
-use crate::scene;
+use contact_core::fem::rigid_modes::{node_blocks, rigid_modes};
+use contact_core::fem::{assembly, DofMap, Geometry};
+use contact_core::linalg::multigrid::*;
+use contact_core::linalg::pcg::Preconditioner;
+use contact_core::linalg::pcg::{self, PcgWork};
+use contact_core::linalg::Csr;
+use contact_core::mesh::{Mesh, MeshPattern};
+use contact_core::problem::BoundaryPart;
+use contact_core::scene;
+use std::sync::Arc;
 
 /// The velocity operator of paper-convergence (Γ1 left, Γ3 bottom) at h = 1/n.
 fn elasticity_2d(n: usize) -> (Arc<Csr>, Blocks, Vec<f64>) {
@@ -30,7 +33,7 @@ fn operator<const D: usize>(
     )
 }
 
-fn preset(name: &str, n: usize) -> crate::problem::Problem {
+fn preset(name: &str, n: usize) -> contact_core::problem::Problem {
     let mut doc = scene::presets::get(name).expect("preset");
     let o = scene::Overrides {
         h: Some(format!("1/{n}").into()),
@@ -122,7 +125,10 @@ fn tentative_prolongator_reproduces_the_near_nullspace() {
             }
         }
         // Orthonormal columns: TᵀT = I.
-        let tt = crate::linalg::galerkin::product(&crate::linalg::galerkin::transpose(&t), &t);
+        let tt = contact_core::linalg::galerkin::product(
+            &contact_core::linalg::galerkin::transpose(&t),
+            &t,
+        );
         for r in 0..tt.nrows {
             for p in tt.indptr[r]..tt.indptr[r + 1] {
                 let want = if tt.indices[p] == r { 1.0 } else { 0.0 };
