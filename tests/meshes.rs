@@ -20,10 +20,15 @@ fn temp_dir(tag: &str) -> PathBuf {
     d
 }
 
+/// A test mesh of the core: the presets' meshes, else the reader's test files.
 fn test_mesh(name: &str) -> Vec<u8> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("crates/contact-core/tests/meshes")
-        .join(name);
+    let core = Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/contact-core");
+    let p = core.join("preset-meshes").join(name);
+    let p = if p.exists() {
+        p
+    } else {
+        core.join("tests/meshes").join(name)
+    };
     std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
@@ -758,8 +763,8 @@ fn jobs_on_uploaded_meshes() {
             format!("no uploaded mesh with id {unknown}; upload the .msh with POST /meshes"),
         ),
         (
-            "../crates/contact-core/tests/meshes/plate-with-hole.msh".to_string(),
-            "no uploaded mesh with id \"../crates/contact-core/tests/meshes/plate-with-hole.msh\"; upload the .msh with POST /meshes".to_string(),
+            "../crates/contact-core/preset-meshes/plate-with-hole.msh".to_string(),
+            "no uploaded mesh with id \"../crates/contact-core/preset-meshes/plate-with-hole.msh\"; upload the .msh with POST /meshes".to_string(),
         ),
         (
             "/etc/passwd".to_string(),

@@ -6,7 +6,7 @@
 use serde::Serialize;
 
 use super::quality::{figures, Figures, IndexMap, MeshError};
-use super::{AnyMesh, Group, Mesh};
+use super::{signed_measure, AnyMesh, Group, Mesh};
 use crate::msh::{self, MshMesh};
 
 /// Most nodes of an imported mesh (the structured generator's limit is of the same order).
@@ -126,6 +126,9 @@ pub struct MeshSummary {
     pub nodes: usize,
     pub cells: usize,
     pub boundary_facets: usize,
+    /// Cells whose vertices the file lists in the negative orientation (clockwise in 2D,
+    /// left-handed in 3D); accepted as they are.
+    pub negatively_oriented_cells: usize,
     /// Physical groups of facets, in the file's tag order.
     pub groups: Vec<GroupSummary>,
     pub bounding_box: BoundingBox,
@@ -155,6 +158,13 @@ pub fn summary<const D: usize>(mesh: &Mesh<D>) -> MeshSummary {
         nodes: mesh.n_nodes(),
         cells: mesh.n_cells(),
         boundary_facets: mesh.facets.len(),
+        negatively_oriented_cells: mesh
+            .cells()
+            .filter(|c| {
+                let p: Vec<[f64; D]> = c.iter().map(|&v| mesh.nodes[v]).collect();
+                signed_measure(&p) < 0.0
+            })
+            .count(),
         groups: mesh
             .groups
             .iter()
