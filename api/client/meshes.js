@@ -71,7 +71,7 @@ export class MeshUpload {
     this.status = el('p', { id: 'mesh-status', class: 'status-line', role: 'status' });
     this.result = el('div', { id: 'mesh-result' });
     root.append(
-      el('div', { class: 'field' }, el('label', { for: 'mesh-file' }, 'gmsh .msh file (MSH 4.1, ASCII or binary)'), this.input),
+      el('div', { class: 'field' }, el('label', { for: 'mesh-file' }, 'gmsh .msh file (MSH 4.1 or 2.2, ASCII or binary)'), this.input),
       el('p', { class: 'hint', id: 'mesh-hint' }, 'Or drop a .msh file anywhere on the page. Physical groups of lines become the groups you can bind below.'),
       this.status,
       this.result,

@@ -110,7 +110,7 @@ fn identity(dim: usize) -> impl Fn(usize) -> Vec<usize> {
 /// A permutation of 0..n per cell, from a seed (a xorshift generator: reproducible).
 fn shuffles(seed: u64, n: usize) -> impl Fn(usize) -> Vec<usize> {
     move |e| {
-        let mut x = seed ^ (e as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+        let mut x = (seed ^ (e as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)) | 1;
         let mut p: Vec<usize> = (0..n).collect();
         for i in (1..n).rev() {
             x ^= x << 13;
@@ -147,9 +147,12 @@ fn msh22_copies_of_every_test_mesh_read_back_exactly() {
     }
 }
 
+/// Boundary facets by sorted vertex set: (measure, outward normal, group names).
+type Boundary<'a, const D: usize> = HashMap<Vec<usize>, (f64, [f64; D], Vec<&'a str>)>;
+
 /// The boundary of a mesh as facet vertex sets with (measure, outward normal, group).
-fn boundary<const D: usize>(m: &Mesh<D>) -> HashMap<Vec<usize>, (f64, [f64; D], Vec<&str>)> {
-    let mut out: HashMap<Vec<usize>, (f64, [f64; D], Vec<&str>)> = HashMap::new();
+fn boundary<const D: usize>(m: &Mesh<D>) -> Boundary<'_, D> {
+    let mut out: Boundary<'_, D> = HashMap::new();
     for f in &m.facets {
         let mut k = f.nodes.to_vec();
         k.sort_unstable();

@@ -1,4 +1,4 @@
-//! Bodies made in gmsh: an MSH 4.1 file ([`crate::msh`]) turned into a checked [`Mesh`]
+//! Bodies made in gmsh: an MSH 4.1 or 2.2 file ([`crate::msh`]) turned into a checked [`Mesh`]
 //! (docs/numerics.md#meshes): the cells are the elements of the highest dimension, the
 //! physical groups of facet elements become named [`Group`]s of boundary facets, and the
 //! mesh passes [`super::quality`]. [`summarize`] is what `POST /meshes` answers.
@@ -19,13 +19,13 @@ pub const MAX_FILE_BYTES: usize = 256 << 20;
 /// Why a file is not a usable body mesh.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ImportError {
-    #[error("not a readable gmsh MSH 4.1 file: {0}")]
+    #[error("not a readable gmsh MSH file (version 4.1 or 2.2): {0}")]
     Format(#[from] msh::MshError),
     #[error("{0}")]
     Mesh(#[from] MeshError),
 }
 
-/// Reads an MSH 4.1 file of at most [`MAX_FILE_BYTES`].
+/// Reads an MSH 4.1 or 2.2 file of at most [`MAX_FILE_BYTES`].
 fn read(bytes: &[u8]) -> Result<MshMesh, ImportError> {
     if bytes.len() > MAX_FILE_BYTES {
         return Err(MeshError::TooLarge {
@@ -38,12 +38,12 @@ fn read(bytes: &[u8]) -> Result<MshMesh, ImportError> {
     Ok(msh::read(bytes)?)
 }
 
-/// Reads, checks and converts an MSH 4.1 file (ASCII or binary) into a D-dimensional mesh.
+/// Reads, checks and converts an MSH 4.1 or 2.2 file (ASCII or binary) into a D-dimensional mesh.
 pub fn import<const D: usize>(bytes: &[u8]) -> Result<Mesh<D>, ImportError> {
     Ok(from_msh(&read(bytes)?)?)
 }
 
-/// Reads, checks and converts an MSH 4.1 file of either dimension: tetrahedra make a
+/// Reads, checks and converts an MSH 4.1 or 2.2 file of either dimension: tetrahedra make a
 /// [`AnyMesh::Solid`], triangles (all z = 0) an [`AnyMesh::Plane`].
 pub fn import_any(bytes: &[u8]) -> Result<AnyMesh, ImportError> {
     let m = read(bytes)?;
