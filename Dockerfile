@@ -1,14 +1,21 @@
 # Build with the Rust toolchain image, run on slim Debian as a non-root user.
+# .ci/docker_context.py checks in CI (no Docker daemon there) that these COPY lines hold the
+# whole workspace and every file the build embeds.
 FROM rust:1.95-bookworm AS build
 WORKDIR /src
 COPY Cargo.toml Cargo.lock ./
+COPY crates ./crates
 COPY src ./src
 COPY api ./api
 COPY benches ./benches
 RUN cargo build --release --locked --bin contact-sim
 
 FROM debian:bookworm-slim
-RUN useradd --system --uid 10001 --create-home --home-dir /home/contact contact \
+# curl only for the HEALTHCHECK below.
+RUN apt-get update \
+    && apt-get install -y --no-install-recommends curl ca-certificates \
+    && rm -rf /var/lib/apt/lists/* \
+    && useradd --system --uid 10001 --create-home --home-dir /home/contact contact \
     && mkdir -p /data && chown contact:contact /data
 COPY --from=build /src/target/release/contact-sim /usr/local/bin/contact-sim
 USER contact
@@ -16,4 +23,10 @@ WORKDIR /data
 ENTRYPOINT ["contact-sim"]
 EXPOSE 8080
 VOLUME ["/data"]
-CMD ["serve", "--addr", "0.0.0.0:8080", "--data-dir", "/data"]
+# /healthz answers 200 when the node can take work (503 when degraded: store unreachable,
+# disk below --min-free-disk). Worker containers serve no HTTP: compose.yaml turns it off.
+HEALTHCHECK --interval=30s --timeout=5s --start-period=20s --retries=3 \
+    CMD curl -fsS http://127.0.0.1:8080/healthz >/dev/null || exit 1
+# Off a loopback address a node needs --auth: API keys (contact-sim keys add), or off
+# behind a gateway that authenticates.
+CMD ["serve", "--addr", "0.0.0.0:8080", "--data-dir", "/data", "--auth", "required"]

@@ -52,6 +52,9 @@ pub struct Config {
     /// Whether requests need an API key (see `crate::auth`); with `Required`, the node
     /// refuses to start while the store has no active key.
     pub auth: crate::auth::AuthMode,
+    /// Free space of the data directory below which the node takes no new work
+    /// (`--min-free-disk`, see `crate::disk`).
+    pub min_free_disk: crate::disk::MinFreeDisk,
 }
 
 impl Default for Config {
@@ -77,6 +80,7 @@ impl Default for Config {
             header_timeout: std::time::Duration::from_secs(30),
             tls: None,
             auth: crate::auth::AuthMode::Off,
+            min_free_disk: crate::disk::MinFreeDisk::default(),
         }
     }
 }

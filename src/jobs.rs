@@ -109,6 +109,21 @@ pub struct Runtime {
     pub running: AtomicUsize,
     /// Reference runs shared by studies of the same scene and resolution.
     pub references: ReferenceCache,
+    /// The data directory's free space against `--min-free-disk`.
+    pub disk: crate::disk::DiskGuard,
+}
+
+/// The problem type of a write that found the disk full: the job goes back in the queue
+/// (see [`Runtime::run`]), it is never its error.
+const DISK_FULL: &str = "/problems/disk-full";
+
+/// A failed write of results: the disk full (see [`DISK_FULL`]), or a failure of the job.
+fn write_failure(e: &std::io::Error) -> Problem {
+    if crate::disk::is_full(e) {
+        failure("disk full", &e.to_string()).with_type(DISK_FULL)
+    } else {
+        failure("cannot write results", &e.to_string())
+    }
 }
 
 enum Outcome {
@@ -130,7 +145,6 @@ impl Runtime {
             store,
             results,
             meshes,
-            config,
             live: Mutex::new(HashMap::new()),
             channels: Mutex::new(HashMap::new()),
             wake: (Mutex::new(0), Condvar::new()),
@@ -139,6 +153,8 @@ impl Runtime {
             steps_done: AtomicU64::new(0),
             running: AtomicUsize::new(0),
             references: ReferenceCache::new(REFERENCES_KEPT),
+            disk: crate::disk::DiskGuard::new(config.data_dir.clone(), config.min_free_disk),
+            config,
         });
         let mut handles = Vec::new();
         for i in 0..rt.config.workers {
@@ -253,25 +269,67 @@ impl Runtime {
     }
 
     fn worker_loop(self: Arc<Self>, name: &str) {
+        let mut low_logged = false;
         while !self.shutdown.load(Ordering::SeqCst) {
+            // Below --min-free-disk the node takes no work: a job claimed now would only
+            // go back to the queue at its first write.
+            if let Err(low) = self.disk.check() {
+                if !std::mem::replace(&mut low_logged, true) {
+                    tracing::warn!(worker = name, "claiming nothing: {}", low.reason());
+                }
+                self.idle();
+                continue;
+            }
+            if std::mem::replace(&mut low_logged, false) {
+                tracing::info!(worker = name, "disk space is back; claiming jobs again");
+            }
             match self
                 .store
                 .claim(name, self.config.lease_s, self.config.max_attempts)
             {
                 Ok(Some(job)) => self.run(job, name),
-                Ok(None) => {
-                    let (m, cv) = &self.wake;
-                    let guard = m.lock().unwrap();
-                    let seen = *guard;
-                    let _ = cv.wait_timeout_while(guard, self.idle_wait(), |v| {
-                        *v == seen && !self.shutdown.load(Ordering::SeqCst)
-                    });
-                }
+                Ok(None) => self.idle(),
                 Err(e) => {
                     tracing::error!(worker = name, "claim failed: {e}");
                     std::thread::sleep(Duration::from_secs(1));
                 }
             }
+        }
+    }
+
+    /// Waits until woken (a job was enqueued, shutdown) or [`Self::idle_wait`] passed.
+    fn idle(&self) {
+        let (m, cv) = &self.wake;
+        let guard = m.lock().unwrap();
+        let seen = *guard;
+        let _ = cv.wait_timeout_while(guard, self.idle_wait(), |v| {
+            *v == seen && !self.shutdown.load(Ordering::SeqCst)
+        });
+    }
+
+    /// Puts a job whose write found the disk full back in the queue, its attempt not
+    /// counted: its files past the last checkpoint are removed (the next claim writes them
+    /// again from there) and the disk is measured afresh, so this node claims nothing more
+    /// until space is back.
+    fn requeue_full(&self, id: Uuid, worker: &str, detail: &str) {
+        tracing::warn!("job {id}: the disk is full ({detail}); back to the queue");
+        self.disk.note_full();
+        let checkpoint = self
+            .with_store_retry(|| self.store.load_checkpoint(id))
+            .ok()
+            .flatten()
+            .map(|(step, _)| step);
+        let partial = |name: &str| {
+            parse_step_file(name).is_some_and(|n| checkpoint.is_none_or(|c| n > c))
+                || (checkpoint.is_none() && name != SUMMARY_FILE)
+        };
+        if let Err(e) = self.results.remove_where(id, partial) {
+            tracing::warn!("job {id}: cannot remove its partial results: {e}");
+        }
+        match self.with_store_retry(|| self.store.requeue(id, worker)) {
+            Ok(true) => {}
+            Ok(false) => tracing::warn!("job {id} was no longer this worker's to requeue"),
+            Err(e) => tracing::error!("cannot requeue job {id}: {e}"),
         }
     }
 
@@ -311,6 +369,10 @@ impl Runtime {
             Ok(Outcome::Succeeded) => Some((JobStatus::Succeeded, None)),
             Ok(Outcome::Cancelled) => Some((JobStatus::Cancelled, None)),
             Ok(Outcome::Interrupted) => None,
+            Err(problem) if problem.type_ == DISK_FULL => {
+                self.requeue_full(id, worker, &problem.detail);
+                None
+            }
             Err(problem) => Some((JobStatus::Failed, Some(problem))),
         };
         let progress = self
@@ -329,6 +391,13 @@ impl Runtime {
             match self.with_store_retry(|| self.store.finish(id, status, error.clone())) {
                 Ok(()) => tracing::info!("job {id} {} (attempt {})", status.as_str(), job.attempt),
                 Err(e) => tracing::error!("cannot record the end of job {id}: {e}"),
+            }
+            if status != JobStatus::Succeeded {
+                // No partial results left on the disk: a failed job keeps its error (in the
+                // store) and its summary, if it wrote one.
+                if let Err(e) = self.results.remove_where(id, |n| n != SUMMARY_FILE) {
+                    tracing::warn!("job {id}: cannot remove its results: {e}");
+                }
             }
             drop(keeper);
             self.publish(
@@ -458,7 +527,7 @@ impl Runtime {
         }
         let solve_start = Instant::now();
         let mut last_checkpoint = Instant::now();
-        let io = |e: std::io::Error| failure("cannot write results", &e.to_string());
+        let io = |e: std::io::Error| write_failure(&e);
         while !sim.finished() {
             if cancel.load(Ordering::SeqCst) {
                 return Ok(Outcome::Cancelled);
@@ -559,7 +628,7 @@ impl Runtime {
         };
         match study::run(&plan, &self.references, exec, &progress) {
             Ok(result) => {
-                let io = |e: std::io::Error| failure("cannot write results", &e.to_string());
+                let io = |e: std::io::Error| write_failure(&e);
                 let json = serde_json::to_vec_pretty(&result).expect("study result serialises");
                 self.results
                     .write_atomic(id, TABLE_FILE, result.text_table().as_bytes())
@@ -605,6 +674,7 @@ impl Runtime {
                 tracing::warn!("checkpoint of {id} skipped, store unavailable: {e}");
                 Ok(())
             }
+            Err(StoreError::Io(e)) => Err(write_failure(&e)),
             Err(e) => Err(failure("checkpoint failed", &e.to_string())),
         }
     }

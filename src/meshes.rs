@@ -64,6 +64,22 @@ pub fn check_owner(doc: &Value, store: &dyn Store, caller: &Caller) -> Result<()
     Err(Problem::invalid_field(pointer, unknown_mesh(&id)))
 }
 
+/// What a mesh lookup says when the store cannot be read: a submission that meets it is
+/// answered 503 (retry), not 422 (the scene is not at fault).
+pub const STORE_UNREADABLE: &str = "the job store cannot be read";
+
+/// The 503 of a validation that could not read the store, if that is why it failed.
+pub fn store_outage(errors: &contact_core::scene::ValidationErrors) -> Option<Problem> {
+    errors.to_string().contains(STORE_UNREADABLE).then(|| {
+        Problem::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "job store unavailable",
+            format!("{errors}; retry shortly"),
+        )
+        .retry_after(2)
+    })
+}
+
 /// The sentence for a `domain.mesh` the service does not know.
 pub fn unknown_mesh(name: &str) -> String {
     if is_mesh_id(name) {
@@ -84,6 +100,10 @@ pub struct Meshes {
     /// Uploads parsed at the same time (each holds its file and its mesh in memory); the
     /// handler waits for a slot before handing an upload to the blocking pool.
     pub parse_slots: tokio::sync::Semaphore,
+    /// Held while a file and its row change together (an upload writes the file then the
+    /// row; a delete removes the row then the file), so that an upload and a delete of the
+    /// same mesh at the same instant never leave a row without its file.
+    files_and_rows: Mutex<()>,
 }
 
 impl Meshes {
@@ -93,6 +113,7 @@ impl Meshes {
             blobs,
             cache: Mutex::new(Vec::new()),
             parse_slots: tokio::sync::Semaphore::new(PARSES),
+            files_and_rows: Mutex::new(()),
         }
     }
 
@@ -108,7 +129,7 @@ impl Meshes {
             return Err(Problem::new(
                 StatusCode::UNPROCESSABLE_ENTITY,
                 "invalid mesh",
-                "the body is empty: send the bytes of a gmsh .msh file (MSH 4.1, ASCII or binary)",
+                "the body is empty: send the bytes of a gmsh .msh file (MSH 4.1 or 2.2, ASCII or binary)",
             )
             .with_type("/problems/invalid-mesh"));
         }
@@ -132,6 +153,7 @@ impl Meshes {
         })?;
         let summary =
             serde_json::to_value(&summary).map_err(|e| Problem::internal(e.to_string()))?;
+        let _together = self.files_and_rows.lock().unwrap();
         self.blobs.write(&id, bytes).map_err(io)?;
         let (record, new) = self.store.add_mesh(&id, bytes.len() as u64, &summary)?;
         if !self.blobs.exists(&id) {
@@ -167,6 +189,7 @@ impl Meshes {
         if !is_mesh_id(id) {
             return Ok(MeshDeletion::Absent);
         }
+        let _together = self.files_and_rows.lock().unwrap();
         let (outcome, orphan) = self.store.release_mesh(owner, id)?;
         if orphan {
             self.blobs
@@ -202,6 +225,7 @@ impl Meshes {
         if !is_mesh_id(id) {
             return Ok(MeshDeletion::Absent);
         }
+        let _together = self.files_and_rows.lock().unwrap();
         let outcome = self.store.delete_mesh(id)?;
         if outcome == MeshDeletion::Deleted {
             self.blobs
@@ -219,7 +243,7 @@ impl Meshes {
             match self.store.get_mesh(name) {
                 Ok(Some(_)) => {}
                 Ok(None) => return Err(unknown_mesh(name)),
-                Err(e) => return Err(format!("mesh {name}: the job store cannot be read: {e}")),
+                Err(e) => return Err(format!("mesh {name}: {STORE_UNREADABLE}: {e}")),
             }
         } else if presets::bundled_mesh(name).is_none() {
             return Err(unknown_mesh(name));

@@ -140,10 +140,15 @@ fn wait_done(addr: SocketAddr, token: &str, id: &str) -> Value {
     }
 }
 
+/// A test mesh of the core: the presets' meshes, else the reader's test files.
 fn test_mesh(name: &str) -> Vec<u8> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("crates/contact-core/tests/meshes")
-        .join(name);
+    let core = Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/contact-core");
+    let p = core.join("preset-meshes").join(name);
+    let p = if p.exists() {
+        p
+    } else {
+        core.join("tests/meshes").join(name)
+    };
     std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
@@ -569,6 +574,18 @@ fn assert_audited(api: &Proc) {
         lines.iter().any(|l| l.contains("resource=\"/jobs/")),
         "{lines:#?}"
     );
+    // Failed authentication: the reason and the peer address (never the token: the
+    // callers check the whole log for tokens).
+    let failed = |reason: &str| {
+        lines.iter().any(|l| {
+            l.contains("who=\"unauthenticated\"")
+                && l.contains(&format!("reason=\"{reason}\""))
+                && l.contains("outcome=\"401\"")
+                && l.contains("from=\"127.0.0.1:")
+        })
+    };
+    assert!(failed("no key"), "{lines:#?}");
+    assert!(failed("unknown or revoked key"), "{lines:#?}");
 }
 
 #[test]

@@ -20,10 +20,15 @@ fn temp_dir(tag: &str) -> PathBuf {
     d
 }
 
+/// A test mesh of the core: the presets' meshes, else the reader's test files.
 fn test_mesh(name: &str) -> Vec<u8> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("crates/contact-core/tests/meshes")
-        .join(name);
+    let core = Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/contact-core");
+    let p = core.join("preset-meshes").join(name);
+    let p = if p.exists() {
+        p
+    } else {
+        core.join("tests/meshes").join(name)
+    };
     std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
@@ -515,7 +520,7 @@ fn hostile_uploads_are_refused_with_a_reason() {
         ascii[el..].lines().nth(block + 2).unwrap().to_string()
     };
     let tri: Vec<&str> = triangle_line.split_whitespace().collect();
-    let inverted = format!("{} {} {} {}", tri[0], tri[1], tri[3], tri[2]);
+    let reversed = format!("{} {} {} {}", tri[0], tri[1], tri[3], tri[2]);
     let missing = format!("{} {} {} 99999", tri[0], tri[1], tri[2]);
     let cases: Vec<(&str, Vec<u8>, u16, &[&str])> = vec![
         ("empty body", Vec::new(), 422, &["empty"]),
@@ -532,10 +537,10 @@ fn hostile_uploads_are_refused_with_a_reason() {
             &["$Elements", "remaining"],
         ),
         (
-            "version 2.2",
-            ascii.replacen("4.1 0 8", "2.2 0 8", 1).into_bytes(),
+            "version 3.0",
+            ascii.replacen("4.1 0 8", "3.0 0 8", 1).into_bytes(),
             422,
-            &["2.2", "4.1"],
+            &["3.0", "4.1", "2.2"],
         ),
         (
             "NaN coordinate",
@@ -564,10 +569,10 @@ fn hostile_uploads_are_refused_with_a_reason() {
             &["$Elements"],
         ),
         (
-            "inverted cell",
-            ascii.replacen(&triangle_line, &inverted, 1).into_bytes(),
+            "second-order triangles",
+            test_mesh("square-order2-msh22.msh"),
             422,
-            &["cell 1 is inverted"],
+            &["6-node second-order triangle", "gmsh -order 1"],
         ),
         (
             "missing node",
@@ -597,6 +602,10 @@ fn hostile_uploads_are_refused_with_a_reason() {
         }
         eprintln!("{what}: {status} {detail}");
     }
+    // A cell listed in the other orientation is a labelling, not a fault: stored, counted.
+    let r = upload(a, ascii.replacen(&triangle_line, &reversed, 1).as_bytes());
+    assert_eq!(r.status, 201, "{}", r.text());
+    assert_eq!(r.json()["summary"]["negatively_oriented_cells"], 1);
     // Wrong media types, whatever the bytes.
     for ct in ["application/json", "text/plain", "image/png"] {
         assert_problem(
@@ -643,9 +652,9 @@ fn hostile_uploads_are_refused_with_a_reason() {
         *statuses.entry(r.status).or_insert(0) += 1;
     }
     eprintln!("150 damaged or random uploads: {statuses:?}");
-    // Nothing refused was stored.
+    // Nothing refused was stored (the one stored before: the copy with a reversed cell).
     let stored = get(a, "/meshes").json()["meshes"].as_array().unwrap().len();
-    assert_eq!(stored, statuses.get(&201).copied().unwrap_or(0));
+    assert_eq!(stored, 1 + statuses.get(&201).copied().unwrap_or(0));
     let files = std::fs::read_dir(dir.join("meshes")).unwrap().count();
     assert_eq!(files, stored);
     assert_eq!(get(a, "/healthz").status, 200);
@@ -758,8 +767,8 @@ fn jobs_on_uploaded_meshes() {
             format!("no uploaded mesh with id {unknown}; upload the .msh with POST /meshes"),
         ),
         (
-            "../crates/contact-core/tests/meshes/plate-with-hole.msh".to_string(),
-            "no uploaded mesh with id \"../crates/contact-core/tests/meshes/plate-with-hole.msh\"; upload the .msh with POST /meshes".to_string(),
+            "../crates/contact-core/preset-meshes/plate-with-hole.msh".to_string(),
+            "no uploaded mesh with id \"../crates/contact-core/preset-meshes/plate-with-hole.msh\"; upload the .msh with POST /meshes".to_string(),
         ),
         (
             "/etc/passwd".to_string(),

@@ -583,7 +583,7 @@ fn uploaded_meshes_are_shared_by_the_nodes() {
     let api = &cluster.api;
     let plate = std::fs::read(
         std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("crates/contact-core/tests/meshes/plate-with-hole.msh"),
+            .join("crates/contact-core/preset-meshes/plate-with-hole.msh"),
     )
     .unwrap();
     let octet = [("Content-Type", "application/octet-stream")];

@@ -36,6 +36,11 @@ pub struct NodeArgs {
     /// of physical memory divided by the workers.
     #[arg(long = "max-job-memory", value_parser = contact_core::memory::parse_bytes)]
     pub max_job_memory: Option<u64>,
+    /// Free space the data directory's disk must keep: bytes (1073741824, 512MiB, 2GB) or
+    /// a percentage of the disk (5%); 0 turns the check off. Below it POST /jobs and
+    /// POST /meshes answer 507, workers claim nothing and /healthz is degraded.
+    #[arg(long = "min-free-disk", default_value = "1GiB")]
+    pub min_free_disk: contact_sim::disk::MinFreeDisk,
 }
 
 impl NodeArgs {
@@ -63,6 +68,7 @@ impl NodeArgs {
             store: self.store,
             lease_s: seconds,
             max_attempts: self.max_attempts,
+            min_free_disk: self.min_free_disk,
             ..defaults
         })
     }

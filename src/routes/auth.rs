@@ -62,17 +62,42 @@ pub async fn layer(State(state): State<AppState>, mut req: Request, next: Next) 
     let path = req.uri().path().to_owned();
     let caller = match state.auth {
         AuthMode::Off | AuthMode::OffExposed => Caller::Anonymous,
-        AuthMode::Required => match resolve(&state, token_of(&req)).await {
-            Ok(Some(c)) => c,
-            Ok(None) if is_public(&path) => Caller::Public,
-            Ok(None) => return unauthorized(),
-            Err(p) => return p.into_response(),
-        },
+        AuthMode::Required => {
+            let token = token_of(&req);
+            let presented = req.headers().contains_key(header::AUTHORIZATION);
+            let malformed = presented && token.is_none();
+            match resolve(&state, token).await {
+                Ok(Some(c)) => c,
+                Ok(None) => {
+                    let public = is_public(&path);
+                    if presented || !public {
+                        let reason = if malformed {
+                            "malformed Authorization header (not Bearer <key>)"
+                        } else if presented {
+                            "unknown or revoked key"
+                        } else {
+                            "no key"
+                        };
+                        audit_failure(&req, &path, reason, public);
+                    }
+                    if public {
+                        Caller::Public
+                    } else {
+                        return unauthorized();
+                    }
+                }
+                Err(p) => return p.into_response(),
+            }
+        }
     };
     if !caller.sees_all() {
         if path == "/healthz" {
-            // Liveness for load balancers; the node's details are for admins.
-            return axum::Json(serde_json::json!({"status": "ok"})).into_response();
+            // Liveness for load balancers (ok, or degraded with its status code); the node's
+            // details and the reason are for admins.
+            if next.run(req).await.status().is_success() {
+                return axum::Json(serde_json::json!({"status": "ok"})).into_response();
+            }
+            return super::misc::degraded("the node cannot take work now".into()).into_response();
         }
         if path == "/metrics" {
             return Problem::new(
@@ -157,6 +182,25 @@ async fn resolve(state: &AppState, token: Option<String>) -> Result<Option<Calle
     let store = state.store().clone();
     let key = super::blocking(move || Ok(authenticate(&*store, &token)?)).await?;
     Ok(key.map(|k| Caller::Key(Arc::new(k))))
+}
+
+/// One line per failed authentication: the request, the reason, whether it went on as a
+/// public request, and the peer address. Never the token.
+fn audit_failure(req: &Request, path: &str, reason: &str, public: bool) {
+    let from = req
+        .extensions()
+        .get::<ConnectInfo<SocketAddr>>()
+        .map(|ConnectInfo(a)| a.to_string())
+        .unwrap_or_default();
+    tracing::warn!(
+        target: "contact_sim::audit",
+        who = "unauthenticated",
+        action = %format!("{} {path}", req.method()),
+        outcome = if public { "served as public" } else { "401" },
+        reason,
+        from,
+        "authentication failed"
+    );
 }
 
 /// One line per change: who (key name, or `anonymous`), what (method, path, and the

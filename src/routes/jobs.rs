@@ -347,8 +347,10 @@ fn validated(doc: Value, state: &AppState) -> Result<(Value, usize, u64), Proble
                     format!("unknown field {k:?} next to a study (a study request is {{\"study\": {{...}}}})"),
                 ));
             }
-            let (plan, expanded) = study::parse_with(study, "/study", &*state.rt.meshes)
-                .map_err(|e| Problem::invalid_scene(&e))?;
+            let (plan, expanded) =
+                study::parse_with(study, "/study", &*state.rt.meshes).map_err(|e| {
+                    crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))
+                })?;
             check_study_limits(&plan, state)?;
             Ok((json!({ "study": expanded }), study::total_steps(&plan), 0))
         }
@@ -367,6 +369,9 @@ fn validated_scene(
     let problem = match scene::validate_with(&scene_doc, &*state.rt.meshes) {
         Ok(p) => p,
         Err(errors) => {
+            if let Some(outage) = crate::meshes::store_outage(&errors) {
+                return Err(outage);
+            }
             let e = Problem::invalid_scene(&errors);
             return Err(match preset {
                 Some(t_key) => map_override_pointers(e, t_key),
@@ -395,6 +400,8 @@ pub async fn submit(
             ));
         }
     }
+    // A full disk is the node's condition: 507 before anything is stored.
+    state.rt.disk.check().map_err(|low| low.problem())?;
     let doc: Value = crate::json_body::parse(&body)?;
     crate::limits::check_depth(&doc, state.rt.config.max_json_depth)?;
     // Validation meshes the body (and reads an uploaded mesh): on the blocking pool. Another
@@ -622,17 +629,35 @@ pub async fn cancel(
     Ok(json_response(status, &job_view(&rec, &state)))
 }
 
+/// How long `DELETE /jobs/{id}` waits for a job whose cancel was requested to stop.
+const STOP_WAIT: std::time::Duration = std::time::Duration::from_secs(30);
+
 pub async fn delete_job(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, Problem> {
     let id = parse_id(&id)?;
-    let rec = load_job(&state, id).await?;
+    let mut rec = load_job(&state, id).await?;
+    // Right after a cancel the worker is finishing its current step: wait for it to stop
+    // (a step takes seconds at most) rather than answer 409.
+    let deadline = std::time::Instant::now() + STOP_WAIT;
+    while !rec.status.is_finished() && rec.cancel_requested && std::time::Instant::now() < deadline
+    {
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        rec = load_job(&state, id).await?;
+    }
     if !rec.status.is_finished() {
-        return Err(Problem::conflict(format!(
-            "job {id} is {}; cancel it first",
-            rec.status.as_str()
-        )));
+        let detail = if rec.cancel_requested {
+            format!("job {id} is cancelled but still stopping; retry shortly")
+        } else {
+            format!("job {id} is {}; cancel it first", rec.status.as_str())
+        };
+        let p = Problem::conflict(detail);
+        return Err(if rec.cancel_requested {
+            p.retry_after(2)
+        } else {
+            p
+        });
     }
     let store = state.store().clone();
     let results = state.rt.results.clone();

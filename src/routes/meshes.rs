@@ -74,6 +74,7 @@ pub async fn upload(
             ));
         }
     }
+    state.rt.disk.check().map_err(|low| low.problem())?;
     let meshes = state.rt.meshes.clone();
     // One upload parsed at a time per slot: each holds its file and its mesh in memory.
     let _slot = state

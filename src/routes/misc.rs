@@ -5,7 +5,7 @@ use crate::problem::Problem;
 use crate::state::AppState;
 use crate::store::JobStatus;
 use axum::extract::{Path, State};
-use axum::http::{header, HeaderValue};
+use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use contact_core::scene::presets;
@@ -54,9 +54,22 @@ pub async fn preset(Path(name): Path<String>) -> Result<Json<Value>, Problem> {
     )))
 }
 
-pub async fn healthz(State(state): State<AppState>) -> Result<Json<Value>, Problem> {
+/// The 503 problem of a node that cannot take work now, with why.
+pub fn degraded(reason: String) -> Problem {
+    Problem::new(StatusCode::SERVICE_UNAVAILABLE, "degraded", reason)
+        .with_type("/problems/degraded")
+        .retry_after(crate::disk::RETRY_AFTER_S)
+}
+
+/// 200 `ok`; 503 problem+json of type `/problems/degraded` with the reason when the node
+/// cannot take work (its disk below `--min-free-disk`); a store that cannot be read is the
+/// 503 problem of the store.
+pub async fn healthz(State(state): State<AppState>) -> Result<Response, Problem> {
     let store = state.store().clone();
     super::blocking(move || Ok(store.counts()?)).await?;
+    let rt = state.rt.clone();
+    let (low, space) =
+        super::blocking(move || Ok((rt.disk.check().err(), rt.disk.space().ok()))).await?;
     let mut health = json!({
         "status": "ok",
         "workers": state.rt.config.workers,
@@ -67,7 +80,13 @@ pub async fn healthz(State(state): State<AppState>) -> Result<Json<Value>, Probl
     if let Some(w) = state.auth.warning() {
         health["warning"] = json!(w);
     }
-    Ok(Json(health))
+    if let Some(s) = space {
+        health["disk"] = json!({"free_bytes": s.free, "total_bytes": s.total, "min_free_bytes": state.rt.config.min_free_disk.bytes(s.total)});
+    }
+    if let Some(low) = low {
+        return Err(degraded(low.reason()));
+    }
+    Ok(Json(health).into_response())
 }
 
 pub async fn metrics(State(state): State<AppState>) -> Result<Response, Problem> {
@@ -97,6 +116,16 @@ pub async fn metrics(State(state): State<AppState>) -> Result<Response, Problem>
     );
     out += "# HELP contact_sim_workers Worker threads of this node.\n# TYPE contact_sim_workers gauge\n";
     out += &format!("contact_sim_workers {}\n", state.rt.config.workers);
+    let rt = state.rt.clone();
+    if let Ok(s) = super::blocking(move || rt.disk.space().map_err(Problem::internal)).await {
+        out += "# HELP contact_sim_disk_free_bytes Free bytes of the data directory's disk.\n# TYPE contact_sim_disk_free_bytes gauge\n";
+        out += &format!("contact_sim_disk_free_bytes {}\n", s.free);
+        out += "# HELP contact_sim_disk_min_free_bytes The --min-free-disk floor in bytes (below it the node takes no work).\n# TYPE contact_sim_disk_min_free_bytes gauge\n";
+        out += &format!(
+            "contact_sim_disk_min_free_bytes {}\n",
+            state.rt.config.min_free_disk.bytes(s.total)
+        );
+    }
     let mut r = out.into_response();
     r.headers_mut().insert(
         header::CONTENT_TYPE,

@@ -257,6 +257,11 @@ pub trait Store: owners::Owners + Send + Sync + 'static {
         status: JobStatus,
         error: Option<serde_json::Value>,
     ) -> Result<(), StoreError>;
+    /// Puts `worker`'s running job back in the queue without counting the attempt: its
+    /// worker found the disk full, a condition of the node and not a fault of the job. The
+    /// checkpoint is kept, so the next claim resumes from it; a job whose cancel was
+    /// requested meanwhile is cancelled instead. False if the job is not `worker`'s.
+    fn requeue(&self, id: Uuid, worker: &str) -> Result<bool, StoreError>;
     /// Marks cancellation: a queued job becomes cancelled at once; a running job gets
     /// `cancel_requested` (its worker stops within one step). Returns the updated record.
     fn request_cancel(&self, id: Uuid) -> Result<Option<JobRecord>, StoreError>;

@@ -746,6 +746,27 @@ impl Store for PgStore {
         Ok(cancel_requested == Some(false))
     }
 
+    fn requeue(&self, id: Uuid, worker: &str) -> Result<bool, StoreError> {
+        let n = self.exec(|c| {
+            c.execute(
+                format!(
+                    "UPDATE jobs SET
+                         status = CASE WHEN cancel_requested THEN 'cancelled' ELSE 'queued' END,
+                         finished_at = CASE WHEN cancel_requested THEN {NOW_S}
+                                            ELSE finished_at END,
+                         last_checkpoint_step = CASE WHEN cancel_requested THEN NULL
+                                                     ELSE last_checkpoint_step END,
+                         worker_id = NULL, lease_until = NULL,
+                         attempt = GREATEST(attempt - 1, 0), stalls = GREATEST(stalls - 1, 0)
+                     WHERE id = $1 AND status = 'running' AND worker_id = $2"
+                )
+                .as_str(),
+                &[&id, &worker],
+            )
+        })?;
+        Ok(n > 0)
+    }
+
     /// A NaN residual is stored as NULL, as in SQLite.
     fn set_progress(&self, id: Uuid, progress: Progress) -> Result<(), StoreError> {
         let step = to_i64(progress.step, "step")?;

@@ -230,6 +230,35 @@ impl ResultFiles {
         }
     }
 
+    /// Removes the job's files for which `remove(name)` is true, and its temporary files;
+    /// then the directory if nothing is left in it. Ok if it does not exist.
+    pub fn remove_where(&self, id: Uuid, remove: impl Fn(&str) -> bool) -> io::Result<()> {
+        let dir = self.job_dir(id);
+        let entries = match fs::read_dir(&dir) {
+            Ok(e) => e,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
+            Err(e) => return Err(e),
+        };
+        for entry in entries {
+            let entry = entry?;
+            let name = entry.file_name();
+            let name = name.to_string_lossy();
+            if entry.file_type()?.is_file() && (name.starts_with(TEMP_PREFIX) || remove(&name)) {
+                match fs::remove_file(entry.path()) {
+                    Err(e) if e.kind() != io::ErrorKind::NotFound => return Err(e),
+                    _ => {}
+                }
+            }
+        }
+        match fs::remove_dir(&dir) {
+            // Not empty: files were kept.
+            Err(e) if e.kind() == io::ErrorKind::NotFound || dir.read_dir()?.next().is_some() => {
+                Ok(())
+            }
+            other => other,
+        }
+    }
+
     /// Total size in bytes of the regular files in the job's directory (temporary files
     /// included: they occupy disk too); 0 if it does not exist.
     pub fn bytes_used(&self, id: Uuid) -> io::Result<u64> {

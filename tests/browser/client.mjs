@@ -54,7 +54,7 @@ if (!base || !outDir) {
 fs.mkdirSync(outDir, { recursive: true });
 const executablePath = process.env.CHROMIUM || '/usr/bin/chromium';
 const repo = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../..');
-const plateMsh = path.join(repo, 'crates/contact-core/tests/meshes/plate-with-hole.msh');
+const plateMsh = path.join(repo, 'crates/contact-core/preset-meshes/plate-with-hole.msh');
 
 // Never hang CI: the whole run must finish in this time.
 const overall = setTimeout(() => {

@@ -93,6 +93,10 @@ const CASES: &[(&str, Case)] = &[
         claims_are_fair_across_owners,
     ),
     ("meshes_have_owners", meshes_have_owners),
+    (
+        "a_requeued_job_keeps_its_checkpoint_and_attempts",
+        a_requeued_job_keeps_its_checkpoint_and_attempts,
+    ),
 ];
 
 /// Runs every case on its own fixture from `fresh` (given the case's name) and fails naming
@@ -1102,4 +1106,37 @@ fn meshes_have_owners(f: &Fixture) {
         (MeshDeletion::Deleted, true)
     );
     assert!(store.get_mesh(&id).unwrap().is_none());
+}
+
+/// A job put back in the queue (its worker found the disk full): queued again without its
+/// worker, its attempt and stall not counted, its checkpoint kept for the next claim; only
+/// the holding worker may requeue it; a cancel requested meanwhile cancels it instead.
+fn a_requeued_job_keeps_its_checkpoint_and_attempts(f: &Fixture) {
+    let store = &*f.store;
+    let id = enqueue(store, 0).id;
+    for round in 0..5 {
+        let j = store.claim("w", 60.0, 1).unwrap().unwrap();
+        assert_eq!((j.id, j.attempt), (id, 1), "round {round}");
+        if round == 0 {
+            store.checkpoint(id, 4, b"four").unwrap();
+        }
+        assert!(!store.requeue(id, "other").unwrap());
+        assert!(store.requeue(id, "w").unwrap());
+        let rec = store.get(id).unwrap().unwrap();
+        assert_eq!((rec.status, rec.attempt), (JobStatus::Queued, 0));
+        assert_eq!(rec.lease_until, None);
+        assert_eq!(
+            store.load_checkpoint(id).unwrap(),
+            Some((4, b"four".to_vec()))
+        );
+        assert!(!store.requeue(id, "w").unwrap(), "not running");
+    }
+    // max_attempts = 1 and five requeues: never dead-lettered.
+    store.claim("w", 60.0, 1).unwrap().unwrap();
+    store.request_cancel(id).unwrap();
+    assert!(store.requeue(id, "w").unwrap());
+    let rec = store.get(id).unwrap().unwrap();
+    assert_eq!(rec.status, JobStatus::Cancelled);
+    assert!(rec.finished_at.is_some());
+    assert!(store.claim("w", 60.0, 1).unwrap().is_none());
 }

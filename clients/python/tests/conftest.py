@@ -17,7 +17,7 @@ import pytest
 from contact_sim import Client
 
 REPO = Path(__file__).resolve().parents[3]
-MESHES = REPO / "crates" / "contact-core" / "tests" / "meshes"
+MESHES = REPO / "crates" / "contact-core" / "preset-meshes"
 
 
 def binary() -> Path:

@@ -1,6 +1,6 @@
 //! Solids (D = 3): the Kuhn box, Bey refinement, prolongation between nested tetrahedral
 //! meshes, the 3D viscous stiffness, mass and Laplacian, and the two committed 3D test meshes
-//! (tests/meshes/standing-cylinder.msh, tests/meshes/box-rotated.msh). Expected values are
+//! (preset-meshes/standing-cylinder.msh, tests/meshes/box-rotated.msh). Expected values are
 //! computed independently of the code under test (lattice indices, cross products, volumes
 //! of the cells), never read back from it.
 
@@ -190,7 +190,12 @@ fn cuboid(l: [f64; 3], n: [usize; 3]) -> Mesh<3> {
 }
 
 fn read(name: &str) -> Mesh<3> {
-    let path = format!("{}/tests/meshes/{name}", env!("CARGO_MANIFEST_DIR"));
+    let dir = if name == "standing-cylinder.msh" {
+        "preset-meshes"
+    } else {
+        "tests/meshes"
+    };
+    let path = format!("{}/{dir}/{name}", env!("CARGO_MANIFEST_DIR"));
     let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
     import::import::<3>(&bytes).unwrap_or_else(|e| panic!("{name}: {e}"))
 }

@@ -209,6 +209,13 @@ impl From<rusqlite::Error> for StoreError {
             | rusqlite::Error::FromSqlConversionFailure(..)
             | rusqlite::Error::IntegralValueOutOfRange(..)
             | rusqlite::Error::Utf8Error(..) => StoreError::Corrupt(e.to_string()),
+            // The database's disk is full: an I/O condition of the node (see `crate::disk`).
+            rusqlite::Error::SqliteFailure(f, _) if f.code == rusqlite::ErrorCode::DiskFull => {
+                StoreError::Io(std::io::Error::new(
+                    std::io::ErrorKind::StorageFull,
+                    e.to_string(),
+                ))
+            }
             other => StoreError::Db(other.to_string()),
         }
     }
@@ -681,6 +688,22 @@ impl Store for SqliteStore {
     /// the stopping worker can record `cancelled` without being raced by a reclaim.
     fn heartbeat(&self, id: Uuid, worker: &str, lease_s: f64) -> Result<bool, StoreError> {
         self.heartbeat_at(id, worker, lease_s, now())
+    }
+
+    fn requeue(&self, id: Uuid, worker: &str) -> Result<bool, StoreError> {
+        let n = self.lock().execute(
+            "UPDATE jobs SET
+                 status = CASE WHEN cancel_requested != 0 THEN 'cancelled' ELSE 'queued' END,
+                 finished_at = CASE WHEN cancel_requested != 0 THEN ?3 ELSE finished_at END,
+                 checkpoint = CASE WHEN cancel_requested != 0 THEN NULL ELSE checkpoint END,
+                 checkpoint_step = CASE WHEN cancel_requested != 0 THEN NULL
+                                        ELSE checkpoint_step END,
+                 worker = NULL, lease_until = NULL,
+                 attempt = MAX(attempt - 1, 0), stalls = MAX(stalls - 1, 0)
+             WHERE id = ?1 AND status = 'running' AND worker = ?2",
+            params![id.to_string(), worker, now()],
+        )?;
+        Ok(n > 0)
     }
 
     /// Records step/steps/last residual (whatever the status; a no-op for an absent job).

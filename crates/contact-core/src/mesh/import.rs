@@ -1,4 +1,4 @@
-//! Bodies made in gmsh: an MSH 4.1 file ([`crate::msh`]) turned into a checked [`Mesh`]
+//! Bodies made in gmsh: an MSH 4.1 or 2.2 file ([`crate::msh`]) turned into a checked [`Mesh`]
 //! (docs/src/explanation/numerics.md#meshes): the cells are the elements of the highest dimension, the
 //! physical groups of facet elements become named [`Group`]s of boundary facets, and the
 //! mesh passes [`super::quality`]. [`summarize`] is what `POST /meshes` answers.
@@ -6,7 +6,7 @@
 use serde::Serialize;
 
 use super::quality::{figures, Figures, IndexMap, MeshError};
-use super::{AnyMesh, Group, Mesh};
+use super::{signed_measure, AnyMesh, Group, Mesh};
 use crate::msh::{self, MshMesh};
 
 /// Most nodes of an imported mesh (the structured generator's limit is of the same order).
@@ -19,13 +19,13 @@ pub const MAX_FILE_BYTES: usize = 256 << 20;
 /// Why a file is not a usable body mesh.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ImportError {
-    #[error("not a readable gmsh MSH 4.1 file: {0}")]
+    #[error("not a readable gmsh MSH file (version 4.1 or 2.2): {0}")]
     Format(#[from] msh::MshError),
     #[error("{0}")]
     Mesh(#[from] MeshError),
 }
 
-/// Reads an MSH 4.1 file of at most [`MAX_FILE_BYTES`].
+/// Reads an MSH 4.1 or 2.2 file of at most [`MAX_FILE_BYTES`].
 fn read(bytes: &[u8]) -> Result<MshMesh, ImportError> {
     if bytes.len() > MAX_FILE_BYTES {
         return Err(MeshError::TooLarge {
@@ -38,12 +38,12 @@ fn read(bytes: &[u8]) -> Result<MshMesh, ImportError> {
     Ok(msh::read(bytes)?)
 }
 
-/// Reads, checks and converts an MSH 4.1 file (ASCII or binary) into a D-dimensional mesh.
+/// Reads, checks and converts an MSH 4.1 or 2.2 file (ASCII or binary) into a D-dimensional mesh.
 pub fn import<const D: usize>(bytes: &[u8]) -> Result<Mesh<D>, ImportError> {
     Ok(from_msh(&read(bytes)?)?)
 }
 
-/// Reads, checks and converts an MSH 4.1 file of either dimension: tetrahedra make a
+/// Reads, checks and converts an MSH 4.1 or 2.2 file of either dimension: tetrahedra make a
 /// [`AnyMesh::Solid`], triangles (all z = 0) an [`AnyMesh::Plane`].
 pub fn import_any(bytes: &[u8]) -> Result<AnyMesh, ImportError> {
     let m = read(bytes)?;
@@ -126,6 +126,9 @@ pub struct MeshSummary {
     pub nodes: usize,
     pub cells: usize,
     pub boundary_facets: usize,
+    /// Cells whose vertices the file lists in the negative orientation (clockwise in 2D,
+    /// left-handed in 3D); accepted as they are.
+    pub negatively_oriented_cells: usize,
     /// Physical groups of facets, in the file's tag order.
     pub groups: Vec<GroupSummary>,
     pub bounding_box: BoundingBox,
@@ -155,6 +158,13 @@ pub fn summary<const D: usize>(mesh: &Mesh<D>) -> MeshSummary {
         nodes: mesh.n_nodes(),
         cells: mesh.n_cells(),
         boundary_facets: mesh.facets.len(),
+        negatively_oriented_cells: mesh
+            .cells()
+            .filter(|c| {
+                let p: Vec<[f64; D]> = c.iter().map(|&v| mesh.nodes[v]).collect();
+                signed_measure(&p) < 0.0
+            })
+            .count(),
         groups: mesh
             .groups
             .iter()

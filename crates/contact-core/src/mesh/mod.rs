@@ -103,7 +103,8 @@ pub struct Nesting {
 #[derive(Debug, Clone)]
 pub struct Mesh<const D: usize = 2> {
     pub nodes: Vec<[f64; D]>,
-    /// D + 1 node indices per cell, flat; all cells have the orientation of the first.
+    /// D + 1 node indices per cell, flat, in the order given (either orientation; every
+    /// quantity uses unsigned measures and geometric outward normals).
     cells: Vec<usize>,
     pub facets: Vec<Facet<D>>,
     pub groups: Vec<Group>,

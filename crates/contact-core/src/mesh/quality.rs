@@ -4,9 +4,11 @@
 //!
 //! - every coordinate finite; every cell's vertices distinct and existing;
 //! - no degenerate cell: |T| > 1e-12 × (longest edge)^D;
-//! - one orientation: every cell's signed measure has the sign of the first cell's (a cell of
-//!   the other sign is inverted — it overlaps its neighbours);
 //! - no cell twice; every facet shared by at most two cells (else the mesh is not a manifold);
+//! - no fold: at every interior facet the two cells lie on opposite sides of it (two cells on
+//!   the same side overlap, as when a node is moved across its neighbours). A cell's vertices
+//!   may be listed in either orientation, and the mesh may mix both: the order is a labelling,
+//!   not geometry, so only this geometric test says whether cells overlap;
 //! - every node in some cell; the cells connected through shared facets (one body).
 //!
 //! The boundary facets are the faces of exactly one cell, in the order of first appearance
@@ -42,8 +44,12 @@ pub enum MeshError {
         measure: f64,
         edge: f64,
     },
-    #[error("cell {cell} is inverted: its orientation is opposite to cell 0's, so it overlaps its neighbours")]
-    Inverted { cell: usize },
+    #[error("cell {cell} is folded onto cell {other}: both lie on the same side of their shared facet (nodes {nodes:?}), so they overlap (a node lies across its neighbours)")]
+    Folded {
+        cell: usize,
+        other: usize,
+        nodes: Vec<usize>,
+    },
     #[error("cell {cell} repeats cell {first} (the same vertices)")]
     DuplicateCell { cell: usize, first: usize },
     #[error("the facet with nodes {nodes:?} is shared by more than two cells (cell {cell} is the third): the mesh is not a manifold")]
@@ -124,6 +130,19 @@ struct Face {
     other: u32,
 }
 
+/// Whether the points `x` and `y` lie on the same side of the facet `f` (its vertices in
+/// one order for both). Neither lies on it: each makes a nondegenerate cell with it.
+fn same_side<const D: usize>(nodes: &[[f64; D]], f: &[usize; D], x: usize, y: usize) -> bool {
+    let side = |v: usize| {
+        let mut p = [[0.0; D]; 4];
+        for (slot, &i) in p.iter_mut().zip(f.iter().chain([&v])) {
+            *slot = nodes[i];
+        }
+        signed_measure(&p[..=D])
+    };
+    side(x) * side(y) > 0.0
+}
+
 /// Checks the cells (see the module doc) and builds the mesh with its boundary facets.
 pub fn build<const D: usize>(
     nodes: Vec<[f64; D]>,
@@ -143,7 +162,6 @@ pub fn build<const D: usize>(
     if let Some(node) = nodes.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
         return Err(MeshError::NotFinite { node });
     }
-    let mut sign = 0.0;
     for (e, cell) in cells.chunks_exact(D + 1).enumerate() {
         for (a, &v) in cell.iter().enumerate() {
             if v >= nodes.len() {
@@ -180,11 +198,6 @@ pub fn build<const D: usize>(
                 measure: measure.abs(),
                 edge,
             });
-        }
-        if e == 0 {
-            sign = measure.signum();
-        } else if measure.signum() != sign {
-            return Err(MeshError::Inverted { cell: e });
         }
     }
 
@@ -226,7 +239,17 @@ pub fn build<const D: usize>(
             });
             face.count += 1;
             match face.count {
-                2 => face.other = e as u32,
+                2 => {
+                    face.other = e as u32;
+                    let first = &cells[(D + 1) * face.cell as usize..][..D + 1];
+                    if same_side(&nodes, &key, first[face.opposite as usize], cell[a]) {
+                        return Err(MeshError::Folded {
+                            cell: e,
+                            other: face.cell as usize,
+                            nodes: key.to_vec(),
+                        });
+                    }
+                }
                 3.. => {
                     return Err(MeshError::NonManifold {
                         nodes: key.to_vec(),

@@ -97,9 +97,13 @@ fn quality_checks_name_the_first_offender() {
             MeshError::RepeatedNode { cell: 1, node: 2 },
         ),
         (
-            sq.clone(),
+            vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.9, 0.3]],
             vec![0, 1, 2, 0, 3, 2],
-            MeshError::Inverted { cell: 1 },
+            MeshError::Folded {
+                cell: 1,
+                other: 0,
+                nodes: vec![0, 2],
+            },
         ),
         (
             sq.clone(),
@@ -122,8 +126,8 @@ fn quality_checks_name_the_first_offender() {
         matches!(err, MeshError::Degenerate { cell: 0, .. }),
         "{err}"
     );
-    // Three triangles on one edge.
-    let fan = vec![[0.0, 0.0], [1.0, 0.0], [0.5, 1.0], [0.5, 2.0], [0.5, 3.0]];
+    // Three triangles on one edge (the first two on opposite sides of it).
+    let fan = vec![[0.0, 0.0], [1.0, 0.0], [0.5, 1.0], [0.5, -1.0], [0.5, 3.0]];
     let err = Mesh::from_cells(fan, vec![0, 1, 2, 0, 1, 3, 0, 1, 4]).unwrap_err();
     assert!(
         matches!(err, MeshError::NonManifold { cell: 2, .. }),
@@ -211,12 +215,26 @@ fn bey_refinement_of_a_tetrahedron() {
         < 1e-15));
     // The refined cells form a conforming mesh with the same boundary area.
     let g = Mesh::<3>::from_cells(f.nodes.clone(), f.cells.clone());
-    let g = match g {
-        Ok(g) => g,
-        Err(MeshError::Inverted { .. }) => return, // Bey's children need not share one orientation.
-        Err(e) => panic!("{e}"),
-    };
+    // Bey's children need not share one orientation: they are accepted as they are.
+    let g = g.unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(g.facets.len(), 16);
+}
+
+/// Whether every interior edge of a 2D mesh has its two triangles on opposite sides
+/// (checked independently of `quality`: by the signed areas of the two triangles made of the
+/// edge, in one order, and each triangle's third vertex).
+fn no_fold(m: &Mesh) -> bool {
+    let mut third: std::collections::HashMap<[usize; 2], Vec<usize>> = Default::default();
+    for t in m.triangles() {
+        for a in 0..3 {
+            let (p, q) = (t[(a + 1) % 3], t[(a + 2) % 3]);
+            third.entry([p.min(q), p.max(q)]).or_default().push(t[a]);
+        }
+    }
+    third.iter().all(|(e, v)| {
+        let side = |r: usize| signed_measure(&[m.nodes[e[0]], m.nodes[e[1]], m.nodes[r]]);
+        v.len() != 2 || side(v[0]) * side(v[1]) < 0.0
+    })
 }
 
 mod hostile {
@@ -236,7 +254,8 @@ mod hostile {
         #![proptest_config(ProptestConfig { cases: 2000, ..ProptestConfig::default() })]
 
         /// Any nodes and cells: a mesh or an error, never a panic; an accepted mesh has
-        /// positive cells of one orientation and boundary facets with unit normals.
+        /// nondegenerate cells, no two on the same side of a shared edge, and boundary facets
+        /// with unit outward normals.
         #[test]
         fn from_cells_never_panics(
             nodes in prop::collection::vec([coordinate(), coordinate()], 0..12),
@@ -244,8 +263,8 @@ mod hostile {
         ) {
             let n = cells.len() / 3 * 3;
             if let Ok(m) = Mesh::from_cells(nodes, cells[..n].to_vec()) {
-                let sign = m.area(0).signum();
-                prop_assert!((0..m.n_cells()).all(|t| m.area(t) * sign > 0.0));
+                prop_assert!((0..m.n_cells()).all(|t| m.area(t) != 0.0));
+                prop_assert!(no_fold(&m));
                 prop_assert!(!m.facets.is_empty());
                 for f in &m.facets {
                     prop_assert!((f.normal[0].hypot(f.normal[1]) - 1.0).abs() < 1e-12);
@@ -262,7 +281,7 @@ mod hostile {
             edits in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
             cut in any::<prop::sample::Index>(),
         ) {
-            let mut bytes = include_bytes!("../../tests/meshes/plate-with-hole.msh").to_vec();
+            let mut bytes = include_bytes!("../../preset-meshes/plate-with-hole.msh").to_vec();
             for (at, b) in edits {
                 let i = at.index(bytes.len());
                 bytes[i] = b;
@@ -297,7 +316,7 @@ mod hostile {
 
     #[test]
     fn the_plate_imports_with_its_groups() {
-        let bytes = include_bytes!("../../tests/meshes/plate-with-hole.msh");
+        let bytes = include_bytes!("../../preset-meshes/plate-with-hole.msh");
         let m = import::import::<2>(bytes).unwrap();
         let s = import::summary(&m);
         let len = |name: &str| s.groups.iter().find(|g| g.name == name).unwrap().measure;
@@ -314,5 +333,39 @@ mod hostile {
             m.facets.len(),
             s.groups.iter().map(|g| g.facets).sum::<usize>()
         );
+    }
+}
+
+/// Cells listed in either orientation (here every other one reversed) give the same mesh;
+/// moving an interior node across its neighbours folds it, which is refused whatever the
+/// cells' vertex order.
+#[test]
+fn either_orientation_is_accepted_and_a_fold_refused_in_both() {
+    let m = Mesh::rectangle(1.0, 1.0, 3, 3, MeshPattern::Diagonal);
+    let mut mixed = m.cells.clone();
+    for (e, c) in mixed.chunks_exact_mut(3).enumerate() {
+        if e % 2 == 1 {
+            c.swap(1, 2);
+        }
+    }
+    let a = Mesh::from_cells(m.nodes.clone(), m.cells.clone()).unwrap();
+    let b = Mesh::from_cells(m.nodes.clone(), mixed.clone()).unwrap();
+    assert_eq!(a.facets.len(), b.facets.len());
+    for (f, g) in a.facets.iter().zip(&b.facets) {
+        let (mut p, mut q) = (f.nodes, g.nodes);
+        p.sort_unstable();
+        q.sort_unstable();
+        assert_eq!((p, f.normal, f.measure), (q, g.normal, g.measure));
+    }
+    assert_eq!(
+        import::summary(&b).negatively_oriented_cells,
+        m.n_cells() / 2
+    );
+    // Node 5 = (1/3, 1/3) moved beyond its neighbour (2/3, 2/3).
+    let mut nodes = m.nodes.clone();
+    nodes[5] = [0.8, 0.8];
+    for cells in [m.cells.clone(), mixed] {
+        let err = Mesh::from_cells(nodes.clone(), cells).unwrap_err();
+        assert!(matches!(err, MeshError::Folded { .. }), "{err}");
     }
 }

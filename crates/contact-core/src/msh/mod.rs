@@ -1,8 +1,8 @@
-//! A reader of gmsh MSH 4.1 files (ASCII and binary, both byte orders) into a neutral mesh
-//! structure, for body shapes made with gmsh and imported into scenes.
+//! A reader of gmsh MSH files, versions 4.1 and 2.2 (ASCII and binary, both byte orders),
+//! into a neutral mesh structure, for body shapes made with gmsh and imported into scenes.
 //!
-//! Format pieces read:
-//! - `$MeshFormat`: version (only 4.1; 2.2 and others are refused by name), file type
+//! Format pieces read (version 4.1; the sections of 2.2 are in [`v2`]):
+//! - `$MeshFormat`: version (4.1 or 2.2; others are refused by name), file type
 //!   (0 ASCII, 1 binary), data size (the width of `size_t`, 4 or 8) and, in binary files, the
 //!   integer 1 that fixes the byte order.
 //! - `$PhysicalNames` (always ASCII): dimension, tag and quoted name of each physical group.
@@ -12,7 +12,8 @@
 //! - `$Elements`: the entity blocks of 2-node lines (type 1), 3-node triangles (type 2) and
 //!   4-node tetrahedra (type 4); points (type 15) are read past, so are lines in a 3D mesh.
 //!   Other known types of the cell or facet dimension (quadrangles, second-order elements…)
-//!   are refused; unknown types are refused because their size is unknown.
+//!   are refused by name, with how to export first-order simplices; unknown types are refused
+//!   because their size is unknown.
 //! - Any other section (`$Periodic`, `$NodeData`, …) is skipped up to its `$End` line.
 //!
 //! Output ([`MshMesh`]): the nodes as `[f64; 3]` in file order (their file tags mapped to
@@ -38,11 +39,12 @@ use std::fmt;
 
 #[cfg(test)]
 mod tests;
+mod v2;
 
 /// At most this many physical groups (named in `$PhysicalNames` or used by entities).
 pub const MAX_PHYSICAL_GROUPS: usize = 10_000;
 
-/// A mesh read from an MSH 4.1 file.
+/// A mesh read from an MSH 4.1 or 2.2 file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MshMesh {
     /// 2 (triangle cells, all z = 0) or 3 (tetrahedron cells).
@@ -142,7 +144,7 @@ pub enum MshError {
     #[error("not a gmsh MSH file: it must begin with $MeshFormat")]
     NotMsh,
     #[error(
-        "MSH version {0} is not supported: only version 4.1 is read (in gmsh, save with Mesh.MshFileVersion = 4.1)"
+        "MSH version {0} is not supported: versions 4.1 and 2.2 are read (in gmsh, save with Mesh.MshFileVersion = 4.1)"
     )]
     UnsupportedVersion(String),
     #[error("{at}: {what}")]
@@ -202,11 +204,18 @@ pub enum MshError {
         type_dim: usize,
         entity_dim: i32,
     },
-    #[error("$Elements: element type {element_type} ({name}) is not supported in a {dim}D mesh: only 3-node triangles with 2-node lines (2D) or 4-node tetrahedra with 3-node triangles (3D)")]
+    #[error("$Elements: element type {element_type} ({name}) is not supported in a {dim}D mesh: only first-order simplices are read, 3-node triangles with 2-node lines (2D) or 4-node tetrahedra with 3-node triangles (3D). {hint}")]
     UnsupportedElementType {
         element_type: i32,
         name: &'static str,
         dim: usize,
+        hint: &'static str,
+    },
+    #[error("{at}: element {element} has {count} tags; at most 4096 are read")]
+    TooManyTags {
+        at: Location,
+        element: u64,
+        count: i64,
     },
     #[error("$Nodes: node {node} has z = {z}, but the mesh has triangle cells, so it must be 2D (all z = 0)")]
     NotPlanar { node: u64, z: f64 },
@@ -224,13 +233,13 @@ pub enum MshError {
     UnterminatedSection { at: Location, name: String },
 }
 
-/// Reads an MSH 4.1 file from its bytes.
+/// Reads an MSH 4.1 or 2.2 file from its bytes.
 pub fn read(data: &[u8]) -> Result<MshMesh, MshError> {
     Reader::new(data).read()
 }
 
 /// Element types this reader can size: (gmsh type, nodes, dimension, name).
-const ELEMENT_TYPES: [(i32, usize, usize, &str); 12] = [
+const ELEMENT_TYPES: [(i32, usize, usize, &str); 31] = [
     (1, 2, 1, "2-node line"),
     (2, 3, 2, "3-node triangle"),
     (3, 4, 2, "4-node quadrangle"),
@@ -238,12 +247,102 @@ const ELEMENT_TYPES: [(i32, usize, usize, &str); 12] = [
     (5, 8, 3, "8-node hexahedron"),
     (6, 6, 3, "6-node prism"),
     (7, 5, 3, "5-node pyramid"),
-    (8, 3, 1, "3-node line"),
-    (9, 6, 2, "6-node triangle"),
-    (10, 9, 2, "9-node quadrangle"),
-    (11, 10, 3, "10-node tetrahedron"),
+    (8, 3, 1, "3-node second-order line"),
+    (9, 6, 2, "6-node second-order triangle"),
+    (10, 9, 2, "9-node second-order quadrangle"),
+    (11, 10, 3, "10-node second-order tetrahedron"),
+    (12, 27, 3, "27-node second-order hexahedron"),
+    (13, 18, 3, "18-node second-order prism"),
+    (14, 14, 3, "14-node second-order pyramid"),
     (15, 1, 0, "point"),
+    (16, 8, 2, "8-node second-order quadrangle"),
+    (17, 20, 3, "20-node second-order hexahedron"),
+    (18, 15, 3, "15-node second-order prism"),
+    (19, 13, 3, "13-node second-order pyramid"),
+    (20, 9, 2, "9-node third-order triangle"),
+    (21, 10, 2, "10-node third-order triangle"),
+    (22, 12, 2, "12-node fourth-order triangle"),
+    (23, 15, 2, "15-node fourth-order triangle"),
+    (24, 15, 2, "15-node fifth-order triangle"),
+    (25, 21, 2, "21-node fifth-order triangle"),
+    (26, 4, 1, "4-node third-order line"),
+    (27, 5, 1, "5-node fourth-order line"),
+    (28, 6, 1, "6-node fifth-order line"),
+    (29, 20, 3, "20-node third-order tetrahedron"),
+    (30, 35, 3, "35-node fourth-order tetrahedron"),
+    (31, 56, 3, "56-node fifth-order tetrahedron"),
 ];
+
+/// How to export a mesh without the element type `t` (not a first-order simplex).
+fn export_hint(t: i32) -> &'static str {
+    match t {
+        3 | 5..=7 | 10 | 12..=14 | 16..=19 => {
+            "Mesh with triangles (2D) or tetrahedra (gmsh -3) without recombination (Mesh.RecombineAll = 0, no Recombine or Transfinite volumes), first order (gmsh -order 1)."
+        }
+        _ => "Export first-order elements: gmsh -order 1 (or Mesh.ElementOrder = 1), with -2 for triangles or -3 for tetrahedra.",
+    }
+}
+
+/// The element type `t`: (nodes, dimension, name).
+fn type_info(t: i32) -> Option<(usize, usize, &'static str)> {
+    ELEMENT_TYPES
+        .iter()
+        .find(|e| e.0 == t)
+        .map(|&(_, n, d, name)| (n, d, name))
+}
+
+/// The slot of [`Kept`] that keeps elements of type `t` (lines, triangles, tetrahedra), or
+/// None for points and refused types (noted in `unsupported`).
+fn slot(
+    t: i32,
+    type_dim: usize,
+    name: &'static str,
+    unsupported: &mut Vec<(i32, usize, &'static str)>,
+) -> Option<usize> {
+    match t {
+        1 => Some(0),
+        2 => Some(1),
+        4 => Some(2),
+        15 => None,
+        _ => {
+            if !unsupported.iter().any(|u| u.0 == t) {
+                unsupported.push((t, type_dim, name));
+            }
+            None
+        }
+    }
+}
+
+/// An error if a refused type is of the cell or facet dimension (or higher), naming the
+/// refused type of the highest dimension.
+fn check_types(
+    kept: &[Kept; 3],
+    unsupported: &[(i32, usize, &'static str)],
+) -> Result<(), MshError> {
+    let dim = if !kept[2].nodes.is_empty() { 3 } else { 2 };
+    // The cells' type first: a second-order mesh's lines are second-order too.
+    if let Some(&(element_type, _, name)) = unsupported
+        .iter()
+        .rev()
+        .filter(|u| u.1 == dim || u.1 + 1 == dim || u.1 > dim)
+        .max_by_key(|u| u.1)
+    {
+        return Err(MshError::UnsupportedElementType {
+            element_type,
+            name,
+            dim,
+            hint: export_hint(element_type),
+        });
+    }
+    Ok(())
+}
+
+/// The file format version.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Version {
+    V41,
+    V22,
+}
 
 #[derive(Clone, Copy)]
 struct Binary {
@@ -251,11 +350,32 @@ struct Binary {
     size_t: usize,
 }
 
-/// The elements of one type that the mesh may keep, flat, with each element's entity tag.
+/// The elements of one type that the mesh may keep, flat, with each element's entity tag
+/// (in 2.2, its physical tag).
 #[derive(Default)]
 struct Kept {
     nodes: Vec<usize>,
     entities: Vec<i32>,
+}
+
+impl Kept {
+    /// Drops every element (of `per` nodes) that repeats the element before it.
+    fn dedup_consecutive(&mut self, per: usize) {
+        let n = self.entities.len();
+        let mut kept = 0;
+        for e in 0..n {
+            if kept > 0
+                && self.nodes[per * e..per * (e + 1)] == self.nodes[per * (kept - 1)..per * kept]
+            {
+                continue;
+            }
+            self.nodes.copy_within(per * e..per * (e + 1), per * kept);
+            self.entities[kept] = self.entities[e];
+            kept += 1;
+        }
+        self.nodes.truncate(per * kept);
+        self.entities.truncate(kept);
+    }
 }
 
 /// The `$Nodes` section: coordinates and tags in file order, and each tag's index.
@@ -270,6 +390,7 @@ struct Reader<'a> {
     pos: usize,
     section: &'static str,
     binary: Option<Binary>,
+    version: Version,
 }
 
 impl<'a> Reader<'a> {
@@ -279,6 +400,7 @@ impl<'a> Reader<'a> {
             pos: 0,
             section: "$MeshFormat",
             binary: None,
+            version: Version::V41,
         }
     }
 
@@ -382,7 +504,7 @@ impl<'a> Reader<'a> {
         what: &'static str,
     ) -> Result<(u64, usize), MshError> {
         let at = self.mark();
-        let tag = self.size(expected)?;
+        let tag = self.number(expected)?;
         if tag == 0 {
             return Err(MshError::ZeroTag {
                 at: self.loc(at),
@@ -390,6 +512,16 @@ impl<'a> Reader<'a> {
             });
         }
         Ok((tag, at))
+    }
+
+    /// A node or element number: a `size_t` in 4.1, an `int` in 2.2 (not negative).
+    fn number(&mut self, expected: &'static str) -> Result<u64, MshError> {
+        if self.version == Version::V41 || self.binary.is_none() {
+            return self.size(expected);
+        }
+        let at = self.pos;
+        let n = self.int(expected)?;
+        u64::try_from(n).map_err(|_| self.syntax(at, expected, n.to_string().as_bytes()))
     }
 
     fn size(&mut self, expected: &'static str) -> Result<u64, MshError> {
@@ -479,14 +611,31 @@ impl<'a> Reader<'a> {
                     self.section = "$PhysicalNames";
                     self.physical_names()
                 })?,
-                b"$Entities" => set_once(&mut entities, "$Entities", || {
-                    self.section = "$Entities";
-                    self.entities()
-                })?,
+                b"$Entities" if self.version == Version::V41 => {
+                    set_once(&mut entities, "$Entities", || {
+                        self.section = "$Entities";
+                        self.entities()
+                    })?
+                }
                 b"$Nodes" => set_once(&mut nodes, "$Nodes", || {
                     self.section = "$Nodes";
-                    self.nodes()
+                    match self.version {
+                        Version::V41 => self.nodes(),
+                        Version::V22 => self.nodes_v2(),
+                    }
                 })?,
+                b"$Elements" if self.version == Version::V22 => {
+                    let Some(Nodes { index, .. }) = &nodes else {
+                        return Err(MshError::SectionOrder("$Nodes", "$Elements"));
+                    };
+                    if elements.is_some() {
+                        return Err(MshError::DuplicateSection("$Elements"));
+                    }
+                    self.section = "$Elements";
+                    let (kept, physicals) = self.elements_v2(index)?;
+                    elements = Some(kept);
+                    entities = Some(physicals);
+                }
                 b"$Elements" => {
                     let Some(ents) = &entities else {
                         return Err(MshError::SectionOrder("$Entities", "$Elements"));
@@ -506,14 +655,25 @@ impl<'a> Reader<'a> {
             }
         }
         let names = names.unwrap_or_default();
-        let entities = entities.ok_or(MshError::MissingSection("$Entities"))?;
+        let entities = entities.ok_or(MshError::MissingSection(match self.version {
+            Version::V41 => "$Entities",
+            Version::V22 => "$Elements",
+        }))?;
         let Nodes {
             coords: nodes,
             tags: node_tags,
             ..
         } = nodes.ok_or(MshError::MissingSection("$Nodes"))?;
-        let [lines, triangles, tetrahedra] =
+        let [lines, mut triangles, mut tetrahedra] =
             elements.ok_or(MshError::MissingSection("$Elements"))?;
+        if self.version == Version::V22 {
+            // 2.2 repeats an element once per physical group it is in; a cell is one cell.
+            if tetrahedra.nodes.is_empty() {
+                triangles.dedup_consecutive(3);
+            } else {
+                tetrahedra.dedup_consecutive(4);
+            }
+        }
         let (dim, cells, facets) = if !tetrahedra.nodes.is_empty() {
             (3, tetrahedra, triangles)
         } else if !triangles.nodes.is_empty() {
@@ -563,7 +723,9 @@ impl<'a> Reader<'a> {
     fn mesh_format(&mut self) -> Result<(), MshError> {
         let start = self.pos;
         let version = self.token("the version")?;
-        if version != b"4.1" {
+        if version == b"2.2" {
+            self.version = Version::V22;
+        } else if version != b"4.1" {
             let shown = &version[..version.len().min(20)];
             let v = String::from_utf8_lossy(shown).into_owned();
             if v.parse::<f64>().is_ok() {
@@ -823,9 +985,7 @@ impl<'a> Reader<'a> {
                 });
             }
             let element_type = self.int("the element type")?;
-            let Some(&(_, per, type_dim, name)) =
-                ELEMENT_TYPES.iter().find(|t| t.0 == element_type)
-            else {
+            let Some((per, type_dim, name)) = type_info(element_type) else {
                 return Err(MshError::UnknownElementType {
                     at: self.loc(at),
                     element_type,
@@ -844,18 +1004,7 @@ impl<'a> Reader<'a> {
                 self.min_bytes(0, 1 + per, 0),
             )?;
             total += n as u64;
-            let slot = match element_type {
-                1 => Some(0),
-                2 => Some(1),
-                4 => Some(2),
-                15 => None,
-                _ => {
-                    if !unsupported.iter().any(|u| u.0 == element_type) {
-                        unsupported.push((element_type, type_dim, name));
-                    }
-                    None
-                }
-            };
+            let slot = slot(element_type, type_dim, name, &mut unsupported);
             if let Some(s) = slot {
                 kept[s].nodes.reserve(n * per);
                 kept[s].entities.reserve(n);
@@ -885,17 +1034,7 @@ impl<'a> Reader<'a> {
             });
         }
         self.end("$EndElements")?;
-        let dim = if !kept[2].nodes.is_empty() { 3 } else { 2 };
-        if let Some(&(element_type, _, name)) = unsupported
-            .iter()
-            .find(|u| u.1 == dim || u.1 + 1 == dim || u.1 > dim)
-        {
-            return Err(MshError::UnsupportedElementType {
-                element_type,
-                name,
-                dim,
-            });
-        }
+        check_types(&kept, &unsupported)?;
         Ok(kept)
     }
 

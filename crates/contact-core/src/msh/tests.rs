@@ -2,11 +2,16 @@ use super::*;
 use proptest::prelude::*;
 use std::f64::consts::PI;
 
+/// A test file: the presets' meshes, else the reader's own test files.
 fn mesh_file(name: &str) -> Vec<u8> {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/meshes")
-        .join(name);
-    std::fs::read(path).unwrap()
+    let core = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let path = core.join("preset-meshes").join(name);
+    let path = if path.exists() {
+        path
+    } else {
+        core.join("tests/meshes").join(name)
+    };
+    std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 fn read_file(name: &str) -> MshMesh {
@@ -324,9 +329,11 @@ fn a_small_square_reads_exactly() {
 
 #[test]
 fn other_versions_are_refused_by_name() {
-    let e = square_with("4.1 0 8", "2.2 0 8").unwrap_err();
-    assert_eq!(e, MshError::UnsupportedVersion("2.2".into()));
-    assert!(e.to_string().contains("2.2") && e.to_string().contains("4.1"));
+    for v in ["2.1", "3.0", "4.0", "4.2"] {
+        let e = square_with("4.1 0 8", &format!("{v} 0 8")).unwrap_err();
+        assert_eq!(e, MshError::UnsupportedVersion(v.into()));
+        assert!(e.to_string().contains("2.2") && e.to_string().contains("4.1"));
+    }
     assert_eq!(read(b"solid x\n").unwrap_err(), MshError::NotMsh);
     for header in ["4.1 0 999", "4.1 1 0", "4.1 2 8", "4.1 0 -8"] {
         let e = square_with("4.1 0 8", header).unwrap_err();
@@ -506,5 +513,225 @@ proptest! {
         let mut edited = lines.clone();
         edited[i] = &token;
         let _ = read(edited.join("\n").as_bytes());
+    }
+}
+
+/// [`SQUARE`] in MSH 2.2: the bottom edge in group 1, both triangles in group 2, the second
+/// triangle also in group 3 (so written twice, as gmsh does).
+const SQUARE_22: &str = "$MeshFormat
+2.2 0 8
+$EndMeshFormat
+$PhysicalNames
+2
+1 1 \"bottom\"
+2 2 \"body\"
+$EndPhysicalNames
+$Nodes
+4
+1 0 0 0
+2 1 0 0
+3 1 1 0
+4 0 1 0
+$EndNodes
+$Elements
+4
+1 1 2 1 1 1 2
+2 2 2 2 1 1 2 3
+3 2 2 2 1 1 3 4
+4 2 2 3 1 1 3 4
+$EndElements
+";
+
+/// [`SQUARE_22`] as a binary file in either byte order.
+fn square_22_binary(big_endian: bool) -> Vec<u8> {
+    let mut w = Binary {
+        out: Vec::new(),
+        big_endian,
+    };
+    w.text("$MeshFormat\n2.2 1 8\n").ints(&[1]);
+    w.text("\n$EndMeshFormat\n$PhysicalNames\n2\n1 1 \"bottom\"\n2 2 \"body\"\n");
+    w.text("$EndPhysicalNames\n$Nodes\n4\n");
+    for (i, p) in [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]
+        .iter()
+        .enumerate()
+    {
+        w.ints(&[i as i32 + 1]).doubles(&[p[0], p[1], 0.0]);
+    }
+    w.text("\n$EndNodes\n$Elements\n4\n");
+    w.ints(&[1, 1, 2]).ints(&[1, 1, 1, 1, 2]);
+    w.ints(&[2, 3, 2]);
+    w.ints(&[2, 2, 1, 1, 2, 3])
+        .ints(&[3, 2, 1, 1, 3, 4])
+        .ints(&[4, 3, 1, 1, 3, 4]);
+    w.text("\n$EndElements\n");
+    w.out
+}
+
+#[test]
+fn msh22_squares_read_as_the_41_square() {
+    let want = read(SQUARE.as_bytes()).unwrap();
+    let ascii = read(SQUARE_22.as_bytes()).unwrap();
+    // The same mesh; 2.2 has no entities, and the repeated triangle is one cell.
+    assert_eq!(ascii, want);
+    assert_eq!(read(&square_22_binary(false)).unwrap(), want);
+    assert_eq!(read(&square_22_binary(true)).unwrap(), want);
+}
+
+#[test]
+fn msh22_errors_are_named() {
+    let e = read(
+        SQUARE_22
+            .replace("3 2 2 2 1 1 3 4", "3 2 2 2 1 1 3 9")
+            .as_bytes(),
+    )
+    .unwrap_err();
+    assert_eq!(
+        e,
+        MshError::MissingNode {
+            element: 3,
+            node: 9
+        }
+    );
+    let e = read(SQUARE_22.replace("\n4 0 1 0", "\n3 0 1 0").as_bytes()).unwrap_err();
+    assert!(matches!(e, MshError::DuplicateNode { node: 3, .. }), "{e}");
+    let e = read(SQUARE_22.replace("2 1 0 0", "2 nan 0 0").as_bytes()).unwrap_err();
+    assert!(matches!(e, MshError::NonFinite { node: 2, .. }), "{e}");
+    let e = read(
+        SQUARE_22
+            .replace("2 2 2 2 1 1 2 3", "2 99 2 2 1 1 2 3")
+            .as_bytes(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(
+            e,
+            MshError::UnknownElementType {
+                element_type: 99,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let e = read(
+        SQUARE_22
+            .replace("$Nodes\n4\n", "$Nodes\n4000000000\n")
+            .as_bytes(),
+    )
+    .unwrap_err();
+    assert!(matches!(e, MshError::HugeCount { .. }), "{e}");
+    let e = read(
+        SQUARE_22
+            .replace("2 2 2 2 1 1 2 3", "2 2 99999 2 1 1 2 3")
+            .as_bytes(),
+    )
+    .unwrap_err();
+    assert!(matches!(e, MshError::TooManyTags { element: 2, .. }), "{e}");
+    // A quadrangle cell: refused by name, with how to export triangles.
+    let quad = SQUARE_22
+        .replace("$Elements\n4\n", "$Elements\n2\n")
+        .replace(
+            "2 2 2 2 1 1 2 3\n3 2 2 2 1 1 3 4\n4 2 2 3 1 1 3 4\n",
+            "2 3 2 2 1 1 2 3 4\n",
+        );
+    let e = read(quad.as_bytes()).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            MshError::UnsupportedElementType {
+                element_type: 3,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("RecombineAll"), "{e}");
+}
+
+#[test]
+fn every_truncation_of_the_msh22_squares_is_an_error() {
+    let data = SQUARE_22.as_bytes();
+    let complete = SQUARE_22.find("$EndElements").unwrap() + "$EndElements".len();
+    for len in 0..data.len() {
+        match read(&data[..len]) {
+            Ok(_) => assert!(len >= complete, "prefix of {len} bytes read"),
+            Err(e) => assert!(len < complete, "{len}: {e}"),
+        }
+    }
+    for big_endian in [false, true] {
+        let data = square_22_binary(big_endian);
+        for len in 0..data.len() - 1 {
+            assert!(read(&data[..len]).is_err(), "prefix of {len} bytes read");
+        }
+    }
+}
+
+/// gmsh's own MSH 2.2 copies of the plate (ASCII and binary) and of the cylinder (binary)
+/// read as the 4.1 files: the same nodes, cells and groups, in the same order.
+#[test]
+fn gmsh_msh22_files_read_as_their_41_originals() {
+    let plate = read_file("plate-with-hole.msh");
+    for name in [
+        "plate-with-hole-msh22.msh",
+        "plate-with-hole-msh22-binary.msh",
+    ] {
+        assert_eq!(read_file(name), plate, "{name}");
+    }
+    assert_eq!(
+        read_file("cylinder-msh22-binary.msh"),
+        read_file("cylinder.msh")
+    );
+}
+
+/// Files gmsh writes with second-order triangles or quadrangles: refused by type, naming the
+/// gmsh option that exports first-order simplices.
+#[test]
+fn gmsh_second_order_and_quadrangle_files_are_refused_by_name() {
+    let e = read(&mesh_file("square-order2-msh22.msh")).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            MshError::UnsupportedElementType {
+                element_type: 9,
+                dim: 2,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(
+        e.to_string().contains("6-node second-order triangle"),
+        "{e}"
+    );
+    assert!(e.to_string().contains("gmsh -order 1"), "{e}");
+    let e = read(&mesh_file("square-quads.msh")).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            MshError::UnsupportedElementType {
+                element_type: 3,
+                dim: 2,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("4-node quadrangle"), "{e}");
+    assert!(e.to_string().contains("RecombineAll = 0"), "{e}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
+
+    #[test]
+    fn mutated_msh22_files_never_panic(
+        edits in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+        binary in any::<bool>(),
+    ) {
+        let mut data = if binary { square_22_binary(false) } else { SQUARE_22.as_bytes().to_vec() };
+        for (at, byte) in edits {
+            let i = at.index(data.len());
+            data[i] = byte;
+        }
+        let _ = read(&data);
     }
 }

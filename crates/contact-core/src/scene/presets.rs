@@ -91,19 +91,19 @@ const PRESETS: &[Preset] = &[
 ];
 
 /// The meshes the presets import, bundled into the binary (generated once with gmsh by
-/// `crates/contact-core/tests/meshes/generate.py`).
+/// `crates/contact-core/tests/meshes/generate.py` and `generate_standing_cylinder.py`).
 const BUNDLED: &[(&str, &[u8])] = &[
     (
         "plate-with-hole.msh",
-        include_bytes!("../../tests/meshes/plate-with-hole.msh"),
+        include_bytes!("../../preset-meshes/plate-with-hole.msh"),
     ),
     (
         "arch-on-support.msh",
-        include_bytes!("../../tests/meshes/arch-on-support.msh"),
+        include_bytes!("../../preset-meshes/arch-on-support.msh"),
     ),
     (
         "standing-cylinder.msh",
-        include_bytes!("../../tests/meshes/standing-cylinder.msh"),
+        include_bytes!("../../preset-meshes/standing-cylinder.msh"),
     ),
 ];
 

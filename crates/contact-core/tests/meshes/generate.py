@@ -5,7 +5,8 @@ Run once, from this directory, with the `gmsh` Python wheel (headless, no GUI ne
     python3 -m venv /tmp/gmsh-venv && /tmp/gmsh-venv/bin/pip install gmsh
     /tmp/gmsh-venv/bin/python generate.py
 
-It writes, next to this script:
+It writes plate-with-hole.msh and arch-on-support.msh, which the presets embed, into
+../../preset-meshes/, and the others next to this script:
 
 - plate-with-hole.msh         2D, ASCII MSH 4.1: the plate [0, 2] x [0, 1] with a hole of
                               radius 0.2 centred at (0.7, 0.45); line groups "clamped" (x = 0),
@@ -29,6 +30,7 @@ import os
 import gmsh
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+PRESETS = os.path.join(HERE, "..", "..", "preset-meshes")
 
 
 def start(name):
@@ -42,9 +44,9 @@ def start(name):
     gmsh.model.add(name)
 
 
-def write(name, binary=False):
+def write(name, binary=False, folder=HERE):
     gmsh.option.setNumber("Mesh.Binary", 1 if binary else 0)
-    gmsh.write(os.path.join(HERE, name))
+    gmsh.write(os.path.join(folder, name))
 
 
 def group(dim, tags, name):
@@ -76,7 +78,7 @@ def plate_with_hole():
     group(1, arcs, "hole")
     group(2, [surface], "body")
     gmsh.model.mesh.generate(2)
-    write("plate-with-hole.msh")
+    write("plate-with-hole.msh", folder=PRESETS)
     write("plate-with-hole-binary.msh", binary=True)
     gmsh.finalize()
 
@@ -104,7 +106,7 @@ def arch_on_support():
     group(1, [end1], "free-end")
     group(2, [surface], "body")
     gmsh.model.mesh.generate(2)
-    write("arch-on-support.msh")
+    write("arch-on-support.msh", folder=PRESETS)
     gmsh.finalize()
 
 

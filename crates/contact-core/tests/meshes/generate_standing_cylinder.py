@@ -1,4 +1,5 @@
-"""Generate standing-cylinder.msh: a 3D test body of contact-core's solid tests.
+"""Generate ../../preset-meshes/standing-cylinder.msh: the body of the standing-cylinder preset
+and of contact-core's solid tests.
 
 The cylinder of radius 0.5 and height 1.5 standing on its base: axis z, base on z = 0, top on
 z = 1.5. Tetrahedra; physical triangle groups "base" (z = 0), "top" (z = 1.5) and "side"
@@ -58,7 +59,7 @@ def main():
     gmsh.model.addPhysicalGroup(2, side, name="side")
     gmsh.model.addPhysicalGroup(3, [volume], name="body")
     gmsh.model.mesh.generate(3)
-    gmsh.write(os.path.join(HERE, "standing-cylinder.msh"))
+    gmsh.write(os.path.join(HERE, "..", "..", "preset-meshes", "standing-cylinder.msh"))
     gmsh.finalize()
 
 
