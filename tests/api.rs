@@ -1134,3 +1134,39 @@ fn openapi_describes_the_router() {
     srv.stop();
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A job whose predicted peak exceeds the node's `--max-job-memory` is refused at
+/// submission, before any numeric work: at /solver/linear when the direct path is demanded,
+/// at the mesh when no path fits; `auto` under a limit only multigrid meets is accepted.
+#[test]
+fn a_job_over_the_memory_limit_is_refused_at_submission() {
+    let mut box_scene = contact_core::scene::presets::get("box-exp3").unwrap();
+    box_scene["mesh"]["h"] = json!("1/24");
+    box_scene["time"] = json!({"t_end": 1, "N": 1});
+    let problem = contact_core::scene::validate(&box_scene).unwrap();
+    let predicted = contact_core::memory::predict(&problem);
+    let dir = temp_dir("memory");
+    let s = Server::start_with(Config {
+        data_dir: dir.clone(),
+        workers: 0,
+        max_job_memory: Some(predicted.multigrid),
+        ..Config::default()
+    });
+    let a = s.addr;
+    box_scene["solver"] = json!({"linear": "direct"});
+    let p = assert_problem(&post_json(a, "/jobs", &box_scene), 422);
+    assert_eq!(p["errors"][0]["pointer"], "/solver/linear", "{p}");
+    let msg = p["errors"][0]["message"].as_str().unwrap();
+    assert!(
+        msg.contains("per-job limit") && msg.contains("multigrid"),
+        "{msg}"
+    );
+    box_scene["solver"] = json!({"linear": "auto"});
+    let r = post_json(a, "/jobs", &box_scene);
+    assert_eq!(r.status, 202, "{}", r.text());
+    box_scene["mesh"]["h"] = json!("1/32");
+    let p = assert_problem(&post_json(a, "/jobs", &box_scene), 422);
+    assert_eq!(p["errors"][0]["pointer"], "/mesh/h", "{p}");
+    s.stop();
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -299,3 +299,77 @@ fn a_mesh_file_is_read_next_to_the_scene() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A run over `--max-job-memory` is refused before any numeric work, naming the field and
+/// both figures; `auto` under a limit that only multigrid meets takes multigrid.
+#[test]
+fn a_run_over_the_memory_limit_is_refused_and_auto_takes_what_fits() {
+    let out = bin()
+        .args(["run", "--preset", "box-exp3", "--h", "1/8", "--k", "1/2"])
+        .args(["--linear-solver", "direct", "--max-job-memory", "1M"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("/solver/linear") && err.contains("per-job limit of 1 MiB"),
+        "{err}"
+    );
+    let out = bin()
+        .args([
+            "run",
+            "--preset",
+            "box-exp3",
+            "--h",
+            "1/8",
+            "--k",
+            "1/2",
+            "--max-job-memory",
+            "1M",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("\"/mesh\""));
+    // Between the two predictions: auto takes multigrid (a 3D box above the direct size).
+    let problem = {
+        let mut doc = contact_core::scene::presets::get("box-exp3").unwrap();
+        doc["mesh"]["h"] = Value::from("1/24");
+        contact_core::scene::validate(&doc).unwrap()
+    };
+    let p = contact_core::memory::predict(&problem);
+    assert!(p.multigrid < p.direct, "{p:?}");
+    let (path, _) = contact_core::memory::choose(&problem, Some(p.multigrid)).unwrap();
+    assert_eq!(path, contact_core::linalg::LinearPath::Multigrid);
+    let out = bin()
+        .args([
+            "run",
+            "--preset",
+            "box-exp3",
+            "--h",
+            "1/4",
+            "--k",
+            "1/2",
+            "--linear-solver",
+            "multigrid",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(summary["mesh"]["linear_solver"]
+        .as_str()
+        .unwrap()
+        .starts_with("multigrid"));
+    assert!(summary["memory"]["predicted_bytes"].as_u64().unwrap() > 0);
+    assert!(
+        summary["stats"]["velocity_max_krylov_iterations"]
+            .as_u64()
+            .unwrap()
+            > 0
+    );
+}

@@ -12,6 +12,8 @@
 //! Meshes without such levels (the mesh as given, generated rectangles and boxes) use
 //! smoothed aggregation with the rigid-body modes.
 
+#![allow(clippy::needless_range_loop)] // Index loops over nodes, blocks and components spell out the formulas.
+
 use super::rigid_modes::{self, node_blocks, rigid_modes};
 use super::{DofMap, Slot};
 use crate::linalg::cholesky::FactorError;

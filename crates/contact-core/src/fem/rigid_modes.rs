@@ -8,6 +8,8 @@
 //! DOFs (Γ1, the Γ3 normal) are simply absent, so the modes are those of the constrained
 //! space restricted to each aggregate.
 
+#![allow(clippy::needless_range_loop)] // Index loops over nodes, blocks and components spell out the formulas.
+
 use super::{DofMap, Slot};
 use crate::linalg::multigrid::Blocks;
 use crate::mesh::Mesh;

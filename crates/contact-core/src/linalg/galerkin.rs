@@ -131,9 +131,9 @@ mod tests {
 
     fn dense(a: &Csr) -> Vec<Vec<f64>> {
         let mut d = vec![vec![0.0; a.ncols]; a.nrows];
-        for r in 0..a.nrows {
+        for (r, row) in d.iter_mut().enumerate() {
             for p in a.indptr[r]..a.indptr[r + 1] {
-                d[r][a.indices[p]] += a.values[p];
+                row[a.indices[p]] += a.values[p];
             }
         }
         d

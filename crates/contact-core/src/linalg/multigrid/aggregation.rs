@@ -15,6 +15,8 @@
 //!    alone has fewer DOFs than rigid modes) are dropped: coarse blocks may be smaller.
 //! 4. Smoothed prolongator P = (I − ω D⁻¹A) T, ω = 4/(3 λ_max(D⁻¹A)), D the block diagonal.
 
+#![allow(clippy::needless_range_loop)] // Index loops over nodes, blocks and components spell out the formulas.
+
 use super::smoother::BlockJacobi;
 use super::Blocks;
 use crate::linalg::galerkin::{add, product};

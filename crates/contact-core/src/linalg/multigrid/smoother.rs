@@ -10,6 +10,8 @@
 //! matrix q(D⁻¹A) D⁻¹ is symmetric, so the same smoother before and after the coarse
 //! correction gives a symmetric V-cycle.
 
+#![allow(clippy::needless_range_loop)] // Index loops over nodes, blocks and components spell out the formulas.
+
 use super::Blocks;
 use crate::linalg::Csr;
 use nalgebra::{DMatrix, SymmetricEigen};
