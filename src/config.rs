@@ -28,8 +28,9 @@ pub struct Config {
     pub max_nodes: usize,
     pub max_steps: usize,
     pub max_stored_bytes: u64,
-    /// Predicted peak memory a job may need, in bytes (None: no limit); enforced at
-    /// submission and when a worker prepares the job ([`contact_core::memory`]).
+    /// Predicted peak memory a job may need, in bytes (None: no limit; default 80 % of
+    /// physical memory divided by the workers); enforced at submission and when a worker
+    /// prepares the job ([`contact_core::memory`]).
     pub max_job_memory: Option<u64>,
     /// Request body limit in bytes.
     pub max_body_bytes: usize,
@@ -59,18 +60,19 @@ pub struct Config {
 
 impl Default for Config {
     fn default() -> Self {
+        let workers = std::thread::available_parallelism().map_or(2, |n| n.get());
         Config {
             data_dir: PathBuf::from("./data"),
             store: None,
             lease_s: 30.0,
             max_attempts: 3,
-            workers: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            workers,
             node: "local".into(),
             queue_capacity: 1000,
             max_nodes: 300_000,
             max_steps: 100_000,
             max_stored_bytes: 2 << 30,
-            max_job_memory: None,
+            max_job_memory: contact_core::memory::default_limit(workers),
             max_body_bytes: 1 << 20,
             max_mesh_bytes: 64 << 20,
             study_threads: 2,

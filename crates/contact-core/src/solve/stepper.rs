@@ -284,7 +284,14 @@ impl<const D: usize> Prepared<D> {
         let geo = Geometry::new(&mesh);
         let dofs = DofMap::new(&mesh, &problem.boundary);
         let visc = problem.material.viscosity;
-        let k = assembly::viscous_stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi);
+        // The multigrid path is the one for large meshes: it assembles into the pattern and
+        // never holds the element triplets; the direct path keeps its summation order.
+        let k = match linear {
+            LinearPath::Multigrid => {
+                assembly::viscous_stiffness_in_pattern(&mesh, &geo, &dofs, visc.eta, visc.xi)
+            }
+            _ => assembly::viscous_stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi),
+        };
         let n_i = dofs.n_interior;
         let k_ii = multilevel::velocity_solver(&mesh, &dofs, k.block(0..n_i, 0..n_i), n_i, linear)
             .map_err(|source| SolveError::Factor {
