@@ -19,7 +19,8 @@ const MAX_NAME = 60;
 export function guessKind(name) {
   const n = name.toLowerCase();
   if (/clamp|fix|dirichlet|encast/.test(n)) return 'clamped';
-  if (/contact|support|foundation/.test(n)) return 'contact';
+  if (/contact|support|foundation|base|bottom|floor|ground/.test(n)) return 'contact';
+  if (/^top$|^lid$/.test(n)) return 'clamped';
   if (/trac|load|force|press|neumann/.test(n)) return 'traction';
   return 'free';
 }
@@ -35,8 +36,20 @@ export function summaryOf(answer) {
  * loads, output, ...) with its domain, mesh and boundary replaced. `bindings`: [{group, type,
  * f2}] with type free (left out: traction-free), clamped, traction or contact.
  */
-export function buildScene(base, { id, name, refine, bindings }) {
+export function buildScene(base, { id, name, refine, bindings, dim = 2 }) {
   const doc = structuredClone(base);
+  // The mesh decides the dimension: a 2D preset's vectors on a tetrahedral mesh become
+  // 3-vectors (its y, the vertical, becomes z), a 3D preset's on triangles 2-vectors.
+  const fit = (v) => {
+    if (!Array.isArray(v) || v.length === dim) return v;
+    if (v.length === 2 && dim === 3) return [v[0], 0, v[1]];
+    if (v.length === 3 && dim === 2) return [v[0], v[2]];
+    return v;
+  };
+  if (doc.loads && typeof doc.loads === 'object') {
+    for (const k of Object.keys(doc.loads)) doc.loads[k] = fit(doc.loads[k]);
+  }
+  if (doc.initial && typeof doc.initial === 'object' && 'u0' in doc.initial) doc.initial.u0 = fit(doc.initial.u0);
   if (name) doc.name = name;
   doc.domain = { mesh: id };
   doc.mesh = { refine };
@@ -168,8 +181,9 @@ export class MeshUpload {
       const kind = el('select', { class: 'kind', 'aria-label': `condition on group ${g.name}`, onchange: () => sync() },
         KINDS.map((k) => el('option', { value: k }, KIND_LABELS[k])));
       kind.value = guessKind(g.name);
+      // In 3D a traction starts as a unit push down (z is the vertical), to edit.
       const f2 = Array.from({ length: dim }, (_, i) => el('input', {
-        class: `f2 f2-${'xyz'[i]}`, value: '0', size: '5', inputmode: 'decimal', autocomplete: 'off',
+        class: `f2 f2-${'xyz'[i]}`, value: dim === 3 && i === 2 ? '-1' : '0', size: '5', inputmode: 'decimal', autocomplete: 'off',
         'aria-label': `f2 ${'xyz'[i]} on group ${g.name}`,
       }));
       const sync = () => {
@@ -232,7 +246,12 @@ export class MeshUpload {
       name: this.name.value.trim().slice(0, MAX_NAME) || undefined,
       refine,
       bindings: this.bindings(),
+      dim: this.mesh.dimension || 2,
     });
+    if (!doc.boundary.some((b) => b.type === 'clamped')) {
+      this.setStatus('Clamp at least one group: a scene needs a clamped part (Γ1).', true);
+      return;
+    }
     if (this.onScene(doc) !== false) this.setStatus('The scene is in the editor: check it and press "Run scene".');
   }
 }
