@@ -183,12 +183,12 @@ impl Cholesky {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::linalg::Csr;
 
     /// 1D Laplacian with Dirichlet ends: tridiag(-1, 2, -1).
-    fn laplace_1d(n: usize) -> Csr {
+    pub(crate) fn laplace_1d(n: usize) -> Csr {
         let mut t = Vec::new();
         for i in 0..n {
             t.push((i, i, 2.0));

@@ -140,18 +140,7 @@ pub fn solve(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn laplace_1d(n: usize) -> Csr {
-        let mut t = Vec::new();
-        for i in 0..n {
-            t.push((i, i, 2.0));
-            if i + 1 < n {
-                t.push((i, i + 1, -1.0));
-                t.push((i + 1, i, -1.0));
-            }
-        }
-        Csr::from_triplets(n, n, t)
-    }
+    use crate::linalg::cholesky::tests::laplace_1d;
 
     #[test]
     fn plain_cg_solves_in_at_most_n_steps_and_warm_start_is_free() {

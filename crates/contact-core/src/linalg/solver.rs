@@ -113,30 +113,11 @@ impl LinearSolver {
         }
     }
 
-    /// The multigrid hierarchy, when this is the iterative path.
-    pub fn hierarchy(&self) -> Option<&Arc<Hierarchy>> {
-        match self {
-            LinearSolver::Direct(_) => None,
-            LinearSolver::Multigrid(k) => Some(k.vcycle.hierarchy()),
-        }
-    }
-
     /// What the summary says: "direct (Cholesky)", "multigrid (geometric, 5 levels)", ….
     pub fn describe(&self) -> String {
         match self {
             LinearSolver::Direct(_) => "direct (Cholesky)".to_string(),
-            LinearSolver::Multigrid(k) => {
-                let h = k.vcycle.hierarchy();
-                format!("multigrid ({}, {} levels)", h.kind(), h.n_levels())
-            }
-        }
-    }
-
-    /// Bytes this solver holds beyond the matrix A itself.
-    pub fn bytes(&self) -> usize {
-        match self {
-            LinearSolver::Direct(c) => c.nnz_l() * 8 + c.n() * 24,
-            LinearSolver::Multigrid(k) => k.vcycle.hierarchy().bytes() + k.a.nrows * 8 * 4,
+            LinearSolver::Multigrid(k) => k.vcycle.hierarchy().describe(),
         }
     }
 }

@@ -155,17 +155,6 @@ impl DamageStep {
         self.krylov
     }
 
-    /// "direct (Cholesky)" or the multigrid hierarchy's description.
-    pub fn describe(&self) -> String {
-        match &self.linear {
-            Linear::Direct(_) => "direct (Cholesky)".into(),
-            Linear::Multigrid(it) => {
-                let h = it.vcycle.hierarchy();
-                format!("multigrid ({}, {} levels)", h.kind(), h.n_levels())
-            }
-        }
-    }
-
     /// Refactor H (direct path) or remake the masked H (multigrid path) with the rows and
     /// columns of `active` replaced by the identity.
     fn factor_for(&mut self, active: &[Bound]) -> Result<(), SolveError> {
@@ -471,6 +460,24 @@ mod tests {
         )
     }
 
+    /// g = M ζ_prev / k + F with F random in sign and of amplitude cycling over four decades
+    /// with `trial`: many nodes hit 0 and 1.
+    fn random_load(
+        rng: &mut TestRng,
+        m: &Csr,
+        zeta: &[f64],
+        k: f64,
+        n: usize,
+        trial: usize,
+    ) -> Vec<f64> {
+        let mut mz = vec![0.0; zeta.len()];
+        m.mul_vec(zeta, &mut mz);
+        let amp = [0.1, 1.0, 10.0, 100.0][trial % 4];
+        mz.iter()
+            .map(|v| v / k + amp * (rng.random::<f64>() - 0.5) * 2.0 / (n * n) as f64)
+            .collect()
+    }
+
     /// Independent check of the KKT conditions (not via `kkt_residual`).
     fn assert_kkt(h: &Csr, g: &[f64], z: &[f64]) {
         let mut hz = vec![0.0; z.len()];
@@ -503,14 +510,7 @@ mod tests {
             let mut zeta = vec![1.0; nn];
             solver.set_active_from(&zeta);
             for trial in 0..12 {
-                // g = M ζ_prev / k + F with F strongly signed in patches: many nodes hit 0 and 1.
-                let mut mz = vec![0.0; nn];
-                m.mul_vec(&zeta, &mut mz);
-                let amp = [0.1, 1.0, 10.0, 100.0][trial % 4];
-                let g: Vec<f64> = mz
-                    .iter()
-                    .map(|v| v / k + amp * (rng.random::<f64>() - 0.5) * 2.0 / (n * n) as f64)
-                    .collect();
+                let g = random_load(&mut rng, &m, &zeta, k, n, trial);
                 let rep = solver
                     .solve(&g, &mut zeta, &SolverSettings::default(), trial)
                     .unwrap();
@@ -542,13 +542,7 @@ mod tests {
             solver.set_active_from(&zeta);
             direct.set_active_from(&zeta);
             for trial in 0..8 {
-                let mut mz = vec![0.0; nn];
-                m.mul_vec(&zeta_d, &mut mz);
-                let amp = [0.1, 1.0, 10.0, 100.0][trial % 4];
-                let g: Vec<f64> = mz
-                    .iter()
-                    .map(|v| v / k + amp * (rng.random::<f64>() - 0.5) * 2.0 / (n * n) as f64)
-                    .collect();
+                let g = random_load(&mut rng, &m, &zeta_d, k, n, trial);
                 let rep = solver
                     .solve(&g, &mut zeta, &SolverSettings::default(), trial)
                     .unwrap();

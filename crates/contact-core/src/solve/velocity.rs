@@ -67,23 +67,6 @@ pub struct VelocityStep {
 }
 
 impl VelocityStep {
-    /// Factors the free-DOF operator `k` (numbered as in `dofs`: interior, then contact).
-    pub fn new<const D: usize>(
-        k: Csr,
-        dofs: &DofMap<D>,
-        law: FrictionLaw,
-        path: SchurPath,
-    ) -> Result<Self, SolveError> {
-        let n_i = dofs.n_interior;
-        let k_ii = LinearSolver::direct(&k.block(0..n_i, 0..n_i)).map_err(|source| {
-            SolveError::Factor {
-                what: "velocity",
-                source,
-            }
-        })?;
-        Ok(Self::with_solver(k, dofs, law, path, k_ii))
-    }
-
     /// The step with a given solver of K_II (the leading n_interior block of `k`).
     pub fn with_solver<const D: usize>(
         k: Csr,

@@ -235,14 +235,9 @@ impl Hierarchy {
         self.kind
     }
 
-    /// Σ nnz(A_l) / nnz(A_0): the operator complexity.
-    pub fn operator_complexity(&self) -> f64 {
-        let fine = self
-            .levels
-            .first()
-            .map_or(self.coarse_a.nnz(), |l| l.a.nnz());
-        let all: usize = self.levels.iter().map(|l| l.a.nnz()).sum::<usize>() + self.coarse_a.nnz();
-        all as f64 / fine.max(1) as f64
+    /// What a summary says of it: "multigrid (smoothed aggregation, 4 levels)".
+    pub fn describe(&self) -> String {
+        format!("multigrid ({}, {} levels)", self.kind, self.n_levels())
     }
 
     /// Sizes (rows) of every level, finest first.
@@ -252,21 +247,6 @@ impl Hierarchy {
             .map(|l| l.a.nrows)
             .chain(std::iter::once(self.coarse_a.nrows))
             .collect()
-    }
-
-    /// Bytes held by the hierarchy beyond the fine operator: coarse operators, prolongators
-    /// and their transposes, smoother blocks, the coarse factor, and one V-cycle's work
-    /// vectors.
-    pub fn bytes(&self) -> usize {
-        let csr = |m: &Csr| m.nnz() * 16 + (m.nrows + 1) * 8;
-        let mut b = csr(&self.coarse_a) + self.coarse.nnz_l() * 8 + self.coarse_a.nrows * 32;
-        for (i, l) in self.levels.iter().enumerate() {
-            if i > 0 {
-                b += csr(&l.a);
-            }
-            b += csr(&l.p) + csr(&l.pt) + l.a.nrows * 8 * (4 + 2 * 9);
-        }
-        b
     }
 
     /// The finest operator.
