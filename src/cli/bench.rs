@@ -16,6 +16,9 @@ pub struct BenchArgs {
     /// Repetitions per level (the fastest is reported).
     #[arg(long, default_value_t = 3)]
     pub repeat: usize,
+    /// Linear solver path of every level, overriding the scene's `solver.linear`.
+    #[arg(long = "linear-solver", value_parser = ["auto", "direct", "multigrid"])]
+    pub linear_solver: Option<String>,
     /// Instead: Tables 1 and 2 together (one shared reference) against the reference
     /// run alone.
     #[arg(long)]
@@ -48,7 +51,11 @@ pub fn main(args: BenchArgs) -> ExitCode {
             Err(e) => fail(1, &e.to_string()),
         };
     }
-    match bench::run(&args.preset, &args.levels, repeat) {
+    let linear = args
+        .linear_solver
+        .as_deref()
+        .and_then(contact_core::linalg::LinearPath::parse);
+    match bench::run(&args.preset, &args.levels, repeat, linear) {
         Ok(report) => {
             eprintln!("{}", report.table());
             println!("{}", pretty(&report));

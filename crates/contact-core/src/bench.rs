@@ -1,7 +1,10 @@
-//! Speed figures for the paper's convergence test at h = k = 1/L: end-to-end time, time per
-//! step, and per-step time divided by one forward+backward substitution with the velocity
-//! factor (a ratio that is stable on a noisy shared machine, measured in the same run).
+//! Speed figures of a preset at h = k = 1/L on either linear path: end-to-end time, time per
+//! step, and per-step time divided by one solve with K_II (a substitution pair with the
+//! direct factor, a multigrid-CG solve on the other path) and by one product with K — ratios
+//! that are stable on a noisy shared machine, measured in the same run — with the Krylov
+//! iterations and the predicted and measured peak memory of each run.
 
+use crate::linalg::LinearPath;
 use crate::scene::{self, presets, Overrides};
 use crate::solve::stepper::Simulation;
 use crate::solve::SolverSettings;
@@ -22,9 +25,20 @@ pub struct BenchLevel {
     /// Median time of one forward+backward substitution with the K_II factor.
     pub substitution_s: f64,
     pub step_over_substitution: f64,
+    /// Median time of one product with the free-DOF velocity operator K.
+    pub matvec_s: f64,
+    /// Time per step in products with K (the "matvec-equivalents").
+    pub step_over_matvec: f64,
+    /// "direct (Cholesky)", "multigrid (geometric, 4 levels)", ...
+    pub linear_solver: String,
+    /// Most Krylov iterations of one step's velocity and damage solves (0 on the direct path).
+    pub velocity_max_krylov_iterations: usize,
+    pub damage_max_krylov_iterations: usize,
     pub w_v: f64,
     pub zeta_l2: f64,
-    /// Peak resident memory of the process so far (VmHWM), MiB; None off Linux.
+    /// The peak predicted before the run ([`crate::memory::predict`]), MiB.
+    pub predicted_mib: f64,
+    /// Peak resident memory of this run (VmHWM, reset before it), MiB; None off Linux.
     pub peak_rss_mib: Option<f64>,
 }
 
@@ -38,10 +52,10 @@ pub struct BenchReport {
 impl BenchReport {
     /// A plain-text table for humans.
     pub fn table(&self) -> String {
-        let mut s = String::from("  1/h   nodes  unknowns steps  setup_s  solve_s  total_s  step_ms  subst_ms  step/subst  peak_MiB\n");
+        let mut s = String::from("  1/h   nodes  unknowns steps  setup_s  solve_s  total_s  step_ms  subst_ms  step/subst  matvec_ms  step/matvec  its_v  its_d  pred_MiB  peak_MiB  solver\n");
         for l in &self.levels {
             s += &format!(
-                "{:5} {:7} {:9} {:5} {:8.4} {:8.4} {:8.4} {:8.3} {:9.3} {:11.2} {:9}\n",
+                "{:5} {:7} {:9} {:5} {:8.4} {:8.4} {:8.4} {:8.3} {:9.3} {:11.2} {:10.3} {:12.1} {:6} {:6} {:9.0} {:9}  {}\n",
                 l.level,
                 l.nodes,
                 l.unknowns,
@@ -52,7 +66,13 @@ impl BenchReport {
                 1e3 * l.per_step_s,
                 1e3 * l.substitution_s,
                 l.step_over_substitution,
+                1e3 * l.matvec_s,
+                l.step_over_matvec,
+                l.velocity_max_krylov_iterations,
+                l.damage_max_krylov_iterations,
+                l.predicted_mib,
                 l.peak_rss_mib.map_or("-".into(), |m| format!("{m:.0}")),
+                l.linear_solver,
             );
         }
         s
@@ -63,17 +83,18 @@ impl BenchReport {
 pub const DEFAULT_PRESET: &str = "paper-convergence";
 
 /// Runs `preset` (2D or 3D) at each level, each `repeat` times (fastest end-to-end run
-/// reported).
+/// reported), on the path `linear` (None: the scene's own `solver.linear`).
 pub fn run(
     preset: &str,
     levels: &[usize],
     repeat: usize,
+    linear: Option<LinearPath>,
 ) -> Result<BenchReport, Box<dyn std::error::Error>> {
     let mut out = Vec::new();
     for &level in levels {
         let mut best: Option<BenchLevel> = None;
         for _ in 0..repeat {
-            let r = one(preset, level)?;
+            let r = one(preset, level, linear)?;
             if best.as_ref().is_none_or(|b| r.total_s < b.total_s) {
                 best = Some(r);
             }
@@ -87,9 +108,17 @@ pub fn run(
     })
 }
 
-fn one(preset: &str, level: usize) -> Result<BenchLevel, Box<dyn std::error::Error>> {
+fn one(
+    preset: &str,
+    level: usize,
+    linear: Option<LinearPath>,
+) -> Result<BenchLevel, Box<dyn std::error::Error>> {
+    reset_peak_rss();
     let start = Instant::now();
-    let problem = leveled(preset, level)?;
+    let mut problem = leveled(preset, level)?;
+    if let Some(path) = linear {
+        problem.linear = path;
+    }
     match problem.dim() {
         2 => measure::<2>(problem, level, start),
         _ => measure::<3>(problem, level, start),
@@ -124,14 +153,21 @@ fn measure<const D: usize>(
     let setup_s = start.elapsed().as_secs_f64();
     let t0 = Instant::now();
     let mut last = None;
+    let (mut its_v, mut its_d) = (0, 0);
     while !sim.finished() {
-        last = Some(sim.step()?);
+        let record = sim.step()?;
+        its_v = its_v.max(record.velocity.krylov_iterations);
+        its_d = its_d.max(record.damage.map_or(0, |d| d.krylov_iterations));
+        last = Some(record);
     }
     let solve_s = t0.elapsed().as_secs_f64();
     let total_s = start.elapsed().as_secs_f64();
     let mut subs: Vec<f64> = (0..21).map(|_| sim.time_one_substitution()).collect();
     subs.sort_by(f64::total_cmp);
     let substitution_s = subs[subs.len() / 2];
+    let mut products: Vec<f64> = (0..21).map(|_| sim.time_one_product()).collect();
+    products.sort_by(f64::total_cmp);
+    let matvec_s = products[products.len() / 2];
     let steps = sim.problem.steps;
     let last = last.ok_or("no steps")?;
     Ok(BenchLevel {
@@ -145,10 +181,22 @@ fn measure<const D: usize>(
         per_step_s: solve_s / steps as f64,
         substitution_s,
         step_over_substitution: solve_s / steps as f64 / substitution_s,
+        matvec_s,
+        step_over_matvec: solve_s / steps as f64 / matvec_s,
+        linear_solver: sim.linear_solver(),
+        velocity_max_krylov_iterations: its_v,
+        damage_max_krylov_iterations: its_d,
         w_v: last.w_v,
         zeta_l2: last.zeta_l2,
+        predicted_mib: sim.predicted_bytes as f64 / (1u64 << 20) as f64,
         peak_rss_mib: peak_rss_mib(),
     })
+}
+
+/// Resets VmHWM to the current resident size (Linux `clear_refs` 5), so that each run's
+/// peak is its own; without it the figure is the process's peak so far.
+fn reset_peak_rss() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
 }
 
 fn peak_rss_mib() -> Option<f64> {
@@ -260,7 +308,7 @@ pub fn tables(repeat: usize, threads: usize) -> Result<TablesBench, Box<dyn std:
     };
     let (mut tables_s, mut reference_alone_s) = (f64::INFINITY, f64::INFINITY);
     for _ in 0..repeat {
-        reference_alone_s = reference_alone_s.min(one("paper-convergence", 128)?.total_s);
+        reference_alone_s = reference_alone_s.min(one("paper-convergence", 128, None)?.total_s);
         let start = Instant::now();
         let cache = study::ReferenceCache::new(1);
         study::run_many(&plans, &cache, exec, &|_, _| {

@@ -11,8 +11,9 @@
 //!   unknowns);
 //! - the multigrid path: the hierarchies of K_II and H (coarse operators, prolongators and
 //!   their transposes, smoother blocks, a small coarse factor, and the set-up's products) as
-//!   multiples of the fine operators, fitted to the measured peaks of box-exp3 at 1/16 and
-//!   1/32 (within 4 % of both).
+//!   multiples of the fine operators, fitted to measured peaks of box-exp3: geometric levels
+//!   (refined bodies, generated meshes with even cell counts) at 1/8–1/32, smoothed
+//!   aggregation at 1/16 and 1/32 (odd cell counts).
 //!
 //! A slipping step on either path also holds the dense Schur complement onto Γ3 (m² values,
 //! m the tangential contact DOFs), which is not counted: it depends on the Γ3 part of the
@@ -37,6 +38,9 @@ struct Counts {
     /// Nodes coupled to a node (itself included): the rows of a nodal operator.
     stencil: f64,
     damage: bool,
+    /// The multigrid path coarsens geometrically ([`crate::fem::multilevel`]): a refined
+    /// body, or a generated rectangle or box with even cell counts.
+    geometric: bool,
 }
 
 fn counts(p: &Problem) -> Counts {
@@ -65,6 +69,17 @@ fn counts(p: &Problem) -> Counts {
         cells,
         stencil: if d == 2 { 7.0 } else { 15.0 },
         damage: p.damage.is_some(),
+        geometric: match (&p.body, p.depth_cells()) {
+            (Some(b), _) => b.refine > 0,
+            (None, Some(nz)) => {
+                let (nx, ny) = p.cells();
+                [nx, ny, nz].iter().all(|c| c % 2 == 0)
+            }
+            (None, None) => {
+                let (nx, ny) = p.cells();
+                p.pattern != crate::mesh::MeshPattern::Cross && nx % 2 == 0 && ny % 2 == 0
+            }
+        },
     }
 }
 
@@ -77,9 +92,18 @@ fn factor_entries(d: f64, n: f64) -> f64 {
     }
 }
 
-/// CSR bytes of `nnz` entries (value and index) in `rows` rows.
+/// The geometric hierarchies of K and H as a multiple of K's bytes: fitted to the measured
+/// peaks of box-exp3 at 1/8, 1/16, 1/24 and 1/32 (`contact-sim bench --linear-solver
+/// multigrid`; peak − base = 0.6–0.8 × K's bytes, prediction within 9 % of every peak).
+const GEOMETRIC_HIERARCHY: f64 = 0.6;
+
+/// The resident size of the process before a run (code, allocator, runtime), counted on the
+/// multigrid path whose small runs it dominates.
+const PROCESS: f64 = 8.0 * (1u64 << 20) as f64;
+
+/// CSR bytes of `nnz` entries (value and 32-bit index) in `rows` rows.
 fn csr(nnz: f64, rows: f64) -> f64 {
-    16.0 * nnz + 8.0 * rows
+    12.0 * nnz + 8.0 * rows
 }
 
 /// The prediction for a validated problem.
@@ -106,16 +130,22 @@ pub fn predict(p: &Problem) -> Prediction {
             });
     // K_II's lower triangle handed to the factorisation (faer's CSC copy).
     let direct = base + direct_factors + 0.5 * csr(nnz_k, n);
-    // The set-up's transients dominate: D⁻¹A, A·T and the smoothed P, then AP, PᵀAP and its
-    // transpose, beside the coarse operators kept (fitted: peak − base = 7.8 and 8.6 × K's
-    // bytes at the 1/16 and 1/32 boxes).
-    let hierarchy_k = 7.7 * csr(nnz_k, n) + 8.0 * 25.0 * n;
-    let hierarchy_h = if c.damage {
+    // Smoothed aggregation: the set-up's transients dominate: D⁻¹A, A·T and the smoothed P,
+    // then AP, PᵀAP and its transpose, beside the coarse operators kept (fitted: peak − base
+    // = 7.8 and 8.6 × K's bytes at the 1/16 and 1/32 boxes). Geometric levels: P has ≤ 2
+    // nodes per row and the coarse operators are an eighth of the finer ones (3D), so the
+    // hierarchy of K and H is GEOMETRIC_HIERARCHY × K's bytes.
+    let hierarchy_k = if c.geometric {
+        GEOMETRIC_HIERARCHY * csr(nnz_k, n)
+    } else {
+        7.7 * csr(nnz_k, n) + 8.0 * 25.0 * n
+    };
+    let hierarchy_h = if c.damage && !c.geometric {
         1.0 * csr(nnz_h, c.nodes) + 8.0 * 25.0 * c.nodes
     } else {
         0.0
     };
-    let multigrid = base + hierarchy_k + hierarchy_h;
+    let multigrid = PROCESS + base + hierarchy_k + hierarchy_h;
     // The multigrid path assembles K into its pattern: only the scalar matrices' triplets
     // (M and L, (D+1)² per cell) are ever held.
     let scalar_assembly = 24.0 * c.cells * (c.d + 1.0).powi(2);

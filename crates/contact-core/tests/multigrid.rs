@@ -1,7 +1,7 @@
 //! The multigrid path against the direct path: every per-step norm to 1e-9 relative, on the
-//! paper rectangles (smoothed aggregation), a polygon and an imported mesh as given
-//! (aggregation) and refined (geometric levels), the Kuhn box and an imported tetrahedral
-//! mesh; damage on. Friction cases that slip on the multigrid path form the Schur
+//! paper rectangles (smoothed aggregation when small, geometric levels from halving the
+//! grid), a polygon and an imported mesh as given (aggregation) and refined (geometric
+//! levels), the Kuhn box (both ways) and an imported tetrahedral mesh; damage on. Friction cases that slip on the multigrid path form the Schur
 //! complement by solves (until the full-space Newton method lands).
 
 use contact_core::linalg::LinearPath;
@@ -72,6 +72,13 @@ fn paper_rectangles_agree() {
         8,
         "multigrid (smoothed aggregation",
     );
+    // 1089 nodes: the grid is halved once (33² → 17² nodes), the coarse level factored.
+    compare::<2>(
+        "paper-convergence",
+        json!({"h": "1/32"}),
+        8,
+        "multigrid (geometric, 2 levels)",
+    );
 }
 
 #[test]
@@ -103,6 +110,13 @@ fn boxes_and_tetrahedral_meshes_agree() {
         json!({"h": "1/6"}),
         4,
         "multigrid (smoothed aggregation",
+    );
+    // 16 × 8 × 8 cubes: halved once to 8 × 4 × 4 (Kuhn boxes of h and 2h are nested).
+    compare::<3>(
+        "box-exp3",
+        json!({"h": "1/8"}),
+        4,
+        "multigrid (geometric, 2 levels)",
     );
     compare::<3>(
         "standing-cylinder",

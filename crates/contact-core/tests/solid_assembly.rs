@@ -422,7 +422,7 @@ fn the_3d_viscous_stiffness_is_symmetric() {
         let s = scale(&k);
         for r in 0..k.nrows {
             for idx in k.indptr[r]..k.indptr[r + 1] {
-                let c = k.indices[idx];
+                let c = k.indices[idx] as usize;
                 let d = (k.values[idx] - k.get(c, r)).abs();
                 assert!(d <= 1e-14 * s, "{name}: K[{r},{c}] − K[{c},{r}] = {d}");
             }

@@ -43,7 +43,7 @@ pub fn viscous_stiffness_in_pattern<const D: usize>(
     viscous_entries(mesh, geo, dofs, eta, xi, |i, j, v| {
         let row = k.indptr[i]..k.indptr[i + 1];
         let p = k.indices[row.clone()]
-            .binary_search(&j)
+            .binary_search(&(j as u32))
             .expect("entry in the pattern");
         k.values[row.start + p] += v;
     });
@@ -103,7 +103,7 @@ fn free_pattern<const D: usize>(mesh: &Mesh<D>, dofs: &DofMap<D>) -> Csr {
             cols.extend(free_of(j));
         }
         cols.sort_unstable();
-        indices.extend_from_slice(&cols);
+        indices.extend(cols.iter().map(|&c| c as u32));
         indptr.push(indices.len());
     }
     let values = vec![0.0; indices.len()];

@@ -1,26 +1,32 @@
 //! The linear solvers of a run's two SPD operators, set up from the mesh: which DOFs form a
-//! node block, the near-nullspace, and — for a mesh made by red refinement of a given one —
-//! the geometric prolongators of its nested levels.
+//! node block, the near-nullspace, and — for a mesh with nested levels — the geometric
+//! prolongators.
 //!
-//! Geometric levels (a given or polygon mesh with `mesh.refine` ≥ 1): level l's nodes are the
-//! first nodes of level l + 1 (red refinement keeps them and appends the edge midpoints), so
-//! a coarse level's DOFs are the finest level's free DOFs at its nodes, in the same contact
-//! frames. P maps them to the finer level: a kept node copies its DOF; a midpoint of edge
-//! (a, b) takes ½ of each end's vector, written in its own frame:
-//! P[(i, r), (e, s)] = ½ t_{i,r} · t_{e,s} (t the frame's unit vectors). Γ1 and the Γ3
-//! normals are thus absent on every level, and A_{l+1} = Pᵀ A_l P keeps them.
-//! Meshes without such levels (the mesh as given, generated rectangles and boxes) use
-//! smoothed aggregation with the rigid-body modes.
+//! Geometric levels come from red refinement (a given or polygon mesh with `mesh.refine`
+//! ≥ 1; the mesh as given is the coarsest level) or from halving a generated rectangle or
+//! Kuhn box (the lattices of h and 2h are nested, [`super::prolongation`]). Either way each
+//! coarse node is a node of the finer level, and a finer node's value is the P1 interpolant
+//! of the coarse ones: a stencil of coarse nodes and barycentric weights w. A coarse level's
+//! DOFs are the finest level's free DOFs at its nodes, in the same contact frames, and
+//! P[(i, r), (e, s)] = w_{ie} t_{i,r} · t_{e,s} (t the frame's unit vectors), so Γ1 and the
+//! Γ3 normals are absent on every level and A_{l+1} = Pᵀ A_l P keeps them.
+//! Meshes without such levels (a mesh as given, odd cell counts) use smoothed aggregation
+//! with the rigid-body modes.
 
 #![allow(clippy::needless_range_loop)] // Index loops over nodes, blocks and components spell out the formulas.
 
+use super::prolongation::{grid_stencils, lattice_stencils};
 use super::rigid_modes::{self, node_blocks, rigid_modes};
 use super::{DofMap, Slot};
 use crate::linalg::cholesky::FactorError;
 use crate::linalg::multigrid::{Blocks, Coarsening};
 use crate::linalg::{Csr, LinearPath, LinearSolver};
-use crate::mesh::Mesh;
+use crate::mesh::{Grid, Lattice, Mesh, MeshPattern};
 use std::sync::Arc;
+
+/// A generated rectangle or box is halved while its finer level has more nodes than this;
+/// the last level is factored directly (a few thousand DOFs).
+const COARSE_NODES: usize = 700;
 
 /// The solver of the leading block (the first `lead` free DOFs: the interior ones) of a
 /// velocity-type operator `a` on the path given (`Auto` is resolved by the caller).
@@ -35,7 +41,7 @@ pub fn velocity_solver<const D: usize>(
         return LinearSolver::direct(&a);
     }
     let blocks = restrict(&node_blocks(mesh, dofs), lead);
-    let coarsening = if mesh.nesting.is_empty() {
+    let coarsening = geometric_velocity(mesh, dofs, lead).unwrap_or_else(|| {
         let k = rigid_modes::count(D);
         let mut modes = rigid_modes(mesh, dofs);
         modes.truncate(lead * k);
@@ -43,30 +49,74 @@ pub fn velocity_solver<const D: usize>(
             nullspace: modes,
             k,
         }
-    } else {
-        let (prolongators, blocks) = geometric(mesh, dofs, lead);
-        Coarsening::Geometric {
-            prolongators,
-            blocks,
-        }
-    };
+    });
     LinearSolver::multigrid(Arc::new(a), blocks, coarsening)
 }
 
-/// The solver of a scalar nodal operator (the damage matrix H) on the path given.
-pub fn scalar_solver(a: Csr, path: LinearPath) -> Result<LinearSolver, FactorError> {
+/// The geometric coarsening of a velocity-type operator on the first `lead` free DOFs, None
+/// when the mesh has no nested levels.
+pub fn geometric_velocity<const D: usize>(
+    mesh: &Mesh<D>,
+    dofs: &DofMap<D>,
+    lead: usize,
+) -> Option<Coarsening> {
+    let levels = node_levels(mesh, COARSE_NODES);
+    if levels.is_empty() {
+        return None;
+    }
+    let (prolongators, blocks) = geometric(dofs, lead, &levels);
+    Some(Coarsening::Geometric {
+        prolongators,
+        blocks,
+    })
+}
+
+/// The geometric coarsening of a scalar nodal operator, None when the mesh has no nested
+/// levels: P is the node stencils themselves.
+pub fn geometric_scalar<const D: usize>(mesh: &Mesh<D>) -> Option<Coarsening> {
+    let levels = node_levels(mesh, COARSE_NODES);
+    if levels.is_empty() {
+        return None;
+    }
+    let mut fine_nodes = mesh.n_nodes();
+    let mut prolongators = Vec::new();
+    let mut blocks = Vec::new();
+    for level in &levels {
+        let nc = level.fine_of.len();
+        let t = (0..fine_nodes)
+            .flat_map(|i| {
+                level.stencil[level.ptr[i]..level.ptr[i + 1]]
+                    .iter()
+                    .map(move |&(c, w)| (i, c, w))
+            })
+            .collect();
+        prolongators.push(Csr::from_triplets(fine_nodes, nc, t));
+        blocks.push(Blocks::scalar(nc));
+        fine_nodes = nc;
+    }
+    Some(Coarsening::Geometric {
+        prolongators,
+        blocks,
+    })
+}
+
+/// The solver of a scalar nodal operator on `mesh` (the damage matrix H) on the path given:
+/// geometric levels where the mesh has them (P the node stencils themselves), else smoothed
+/// aggregation with the constants as near-nullspace.
+pub fn scalar_solver<const D: usize>(
+    mesh: &Mesh<D>,
+    a: Csr,
+    path: LinearPath,
+) -> Result<LinearSolver, FactorError> {
     if path != LinearPath::Multigrid {
         return LinearSolver::direct(&a);
     }
     let n = a.nrows;
-    LinearSolver::multigrid(
-        Arc::new(a),
-        Blocks::scalar(n),
-        Coarsening::Aggregation {
-            nullspace: vec![1.0; n],
-            k: 1,
-        },
-    )
+    let coarsening = geometric_scalar(mesh).unwrap_or_else(|| Coarsening::Aggregation {
+        nullspace: vec![1.0; n],
+        k: 1,
+    });
+    LinearSolver::multigrid(Arc::new(a), Blocks::scalar(n), coarsening)
 }
 
 /// The blocks with only DOFs below `lead`.
@@ -82,72 +132,229 @@ fn restrict(blocks: &Blocks, lead: usize) -> Blocks {
     Blocks::from_block_of(&of, blocks.len())
 }
 
-/// The prolongators of the refinement levels, finest first, and each coarser level's blocks.
-fn geometric<const D: usize>(
-    mesh: &Mesh<D>,
-    dofs: &DofMap<D>,
-    lead: usize,
-) -> (Vec<Csr>, Vec<Blocks>) {
-    // The finest free DOFs kept, as (node, local component), in free order.
-    let mut kept = vec![(0usize, 0usize); lead];
-    for (dof, s) in dofs.slot.iter().enumerate() {
-        if let Slot::Free(f) = *s {
-            if f < lead {
-                kept[f] = (dof / D, dof % D);
-            }
+/// One coarsening of a nested node hierarchy: the coarse nodes are nodes of the finer level
+/// (`fine_of[c]`), and each finer node's P1 stencil (coarse node, weight) interpolates.
+struct NodeLevel {
+    fine_of: Vec<usize>,
+    /// CSR over the finer level's nodes.
+    ptr: Vec<usize>,
+    stencil: Vec<(usize, f64)>,
+}
+
+impl NodeLevel {
+    fn from_stencils(
+        fine_of: Vec<usize>,
+        visit: impl FnOnce(&mut dyn FnMut(&[(usize, f64)])),
+    ) -> Self {
+        let (mut ptr, mut stencil) = (vec![0], Vec::new());
+        visit(&mut |w: &[(usize, f64)]| {
+            stencil.extend(w.iter().copied().filter(|&(_, v)| v != 0.0));
+            ptr.push(stencil.len());
+        });
+        NodeLevel {
+            fine_of,
+            ptr,
+            stencil,
         }
     }
+}
+
+/// The node levels of a mesh, finest first: its red refinements (the mesh as given is the
+/// coarsest), else the halvings of a generated rectangle or box while every cell count is
+/// even and the finer level has more than `coarse_nodes` nodes. Empty if there are none.
+fn node_levels<const D: usize>(mesh: &Mesh<D>, coarse_nodes: usize) -> Vec<NodeLevel> {
+    if !mesh.nesting.is_empty() {
+        return mesh
+            .nesting
+            .iter()
+            .rev()
+            .map(|nest| {
+                let nc = nest.coarse_nodes;
+                NodeLevel::from_stencils((0..nc).collect(), |visit| {
+                    for i in 0..nc {
+                        visit(&[(i, 1.0)]);
+                    }
+                    for &[a, b] in &nest.midpoints {
+                        visit(&[(a, 0.5), (b, 0.5)]);
+                    }
+                })
+            })
+            .collect();
+    }
+    let mut levels = Vec::new();
+    if let Some(mut fine) = mesh.lattice {
+        let nodes = |l: &Lattice| l.cells.iter().map(|c| c + 1).product::<usize>();
+        while fine.cells.iter().all(|c| c % 2 == 0) && nodes(&fine) > coarse_nodes {
+            let coarse = Lattice {
+                size: fine.size,
+                cells: fine.cells.map(|c| c / 2),
+            };
+            let [fx, fy, _] = fine.cells;
+            let [cx, cy, cz] = coarse.cells;
+            let mut fine_of = Vec::with_capacity(nodes(&coarse));
+            for k in 0..=cz {
+                for j in 0..=cy {
+                    for i in 0..=cx {
+                        fine_of.push(2 * i + (fx + 1) * (2 * j + (fy + 1) * 2 * k));
+                    }
+                }
+            }
+            levels.push(NodeLevel::from_stencils(fine_of, |visit| {
+                lattice_stencils(&coarse, &fine, visit)
+            }));
+            fine = coarse;
+        }
+    } else if let Some(mut fine) = mesh.grid {
+        let nodes = |g: &Grid| (g.nx + 1) * (g.ny + 1);
+        while fine.pattern != MeshPattern::Cross
+            && fine.nx % 2 == 0
+            && fine.ny % 2 == 0
+            && nodes(&fine) > coarse_nodes
+        {
+            let coarse = Grid {
+                nx: fine.nx / 2,
+                ny: fine.ny / 2,
+                ..fine
+            };
+            let mut fine_of = Vec::with_capacity(nodes(&coarse));
+            for j in 0..=coarse.ny {
+                for i in 0..=coarse.nx {
+                    fine_of.push(2 * j * (fine.nx + 1) + 2 * i);
+                }
+            }
+            levels.push(NodeLevel::from_stencils(fine_of, |visit| {
+                grid_stencils(&coarse, &fine, visit)
+            }));
+            fine = coarse;
+        }
+    }
+    levels
+}
+
+/// The prolongators of the node levels, finest first, and each coarser level's blocks.
+///
+/// A level's DOFs are the finest level's free DOFs (below `lead`) at the finest nodes that
+/// its nodes are, in their frames; on each level they are numbered node by node.
+fn geometric<const D: usize>(
+    dofs: &DofMap<D>,
+    lead: usize,
+    levels: &[NodeLevel],
+) -> (Vec<Csr>, Vec<Blocks>) {
     let axis = |node: usize, r: usize| -> [f64; D] {
         match dofs.frame(node) {
             Some(rows) => rows[r],
             None => std::array::from_fn(|c| if c == r { 1.0 } else { 0.0 }),
         }
     };
+    // The finest level: its free DOFs as (finest node, component) in free order, and per
+    // node its (component, level DOF) list.
+    let n_nodes = dofs.slot.len() / D;
+    let mut level_dofs = vec![(0usize, 0usize); lead];
+    let mut at: Vec<Vec<(usize, usize)>> = vec![Vec::new(); n_nodes];
+    for (dof, s) in dofs.slot.iter().enumerate() {
+        if let Slot::Free(f) = *s {
+            if f < lead {
+                level_dofs[f] = (dof / D, dof % D);
+                at[dof / D].push((dof % D, f));
+            }
+        }
+    }
+    // The finest node of each node of the current level.
+    let mut finest: Vec<usize> = (0..n_nodes).collect();
     let mut prolongators = Vec::new();
     let mut coarse_blocks = Vec::new();
-    let mut fine_nodes = mesh.n_nodes();
-    for nest in mesh.nesting.iter().rev() {
-        let nc = nest.coarse_nodes;
-        // Level-local numbering of the kept DOFs on the fine and coarse levels.
-        let fine: Vec<usize> = (0..lead).filter(|&f| kept[f].0 < fine_nodes).collect();
-        let mut coarse_index = vec![usize::MAX; lead];
-        let mut coarse_of_node: Vec<Vec<(usize, usize)>> = vec![Vec::new(); nc];
-        let mut nc_dofs = 0;
-        for &f in &fine {
-            let (node, r) = kept[f];
-            if node < nc {
-                coarse_index[f] = nc_dofs;
-                coarse_of_node[node].push((r, nc_dofs));
-                nc_dofs += 1;
+    for level in levels {
+        let nc = level.fine_of.len();
+        let mut coarse_dofs = Vec::new();
+        let mut coarse_at: Vec<Vec<(usize, usize)>> = vec![Vec::new(); nc];
+        let mut block_of = Vec::new();
+        for (c, &f) in level.fine_of.iter().enumerate() {
+            for &(r, _) in &at[f] {
+                coarse_at[c].push((r, coarse_dofs.len()));
+                coarse_dofs.push((finest[f], r));
+                block_of.push(c as u32);
             }
         }
         let mut t = Vec::new();
-        for (fi, &f) in fine.iter().enumerate() {
-            let (node, r) = kept[f];
-            if node < nc {
-                t.push((fi, coarse_index[f], 1.0));
-                continue;
-            }
-            let ti = axis(node, r);
-            for &e in &nest.midpoints[node - nc] {
-                for &(s, ci) in &coarse_of_node[e] {
-                    let te = axis(e, s);
-                    let v: f64 = (0..D).map(|c| ti[c] * te[c]).sum();
-                    if v != 0.0 {
-                        t.push((fi, ci, 0.5 * v));
+        for (fine_node, list) in at.iter().enumerate() {
+            let stencil = &level.stencil[level.ptr[fine_node]..level.ptr[fine_node + 1]];
+            for &(r, fi) in list {
+                let ti = axis(finest[fine_node], r);
+                for &(c, w) in stencil {
+                    for &(s, ci) in &coarse_at[c] {
+                        let te = axis(finest[level.fine_of[c]], s);
+                        let v: f64 = (0..D).map(|k| ti[k] * te[k]).sum();
+                        if v != 0.0 {
+                            t.push((fi, ci, w * v));
+                        }
                     }
                 }
             }
         }
-        prolongators.push(Csr::from_triplets(fine.len(), nc_dofs, t));
-        let mut block_of = vec![0u32; nc_dofs];
-        for (node, list) in coarse_of_node.iter().enumerate() {
-            for &(_, ci) in list {
-                block_of[ci] = node as u32;
-            }
-        }
+        prolongators.push(Csr::from_triplets(level_dofs.len(), coarse_dofs.len(), t));
         coarse_blocks.push(Blocks::from_block_of(&block_of, nc));
-        fine_nodes = nc;
+        finest = level.fine_of.iter().map(|&f| finest[f]).collect();
+        level_dofs = coarse_dofs;
+        at = coarse_at;
     }
     (prolongators, coarse_blocks)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The values of the linear field v(x) = A x + b at the given nodes, D per node.
+    fn linear_field<const D: usize>(nodes: &[[f64; D]], seed: f64) -> Vec<f64> {
+        let a = |r: usize, c: usize| ((r * D + c) as f64 * 0.731 + seed).sin();
+        nodes
+            .iter()
+            .flat_map(|x| {
+                (0..D).map(move |r| {
+                    (0..D).map(|c| a(r, c) * x[c]).sum::<f64>() + a(r, r) * 0.3 + seed
+                })
+            })
+            .collect()
+    }
+
+    /// P1 interpolation is exact for linear fields: on every level, P times the field at the
+    /// coarse nodes is the field at the finer nodes (all DOFs free, node-major order).
+    fn prolongators_reproduce_linear_fields<const D: usize>(mesh: &Mesh<D>, expect_levels: usize) {
+        let dofs = DofMap::all_free(mesh);
+        let levels = node_levels(mesh, 10);
+        assert_eq!(levels.len(), expect_levels);
+        let (ps, blocks) = geometric(&dofs, dofs.n_free(), &levels);
+        let mut finest: Vec<usize> = (0..mesh.n_nodes()).collect();
+        for ((level, p), b) in levels.iter().zip(&ps).zip(&blocks) {
+            let fine_x: Vec<[f64; D]> = finest.iter().map(|&i| mesh.nodes[i]).collect();
+            finest = level.fine_of.iter().map(|&f| finest[f]).collect();
+            let coarse_x: Vec<[f64; D]> = finest.iter().map(|&i| mesh.nodes[i]).collect();
+            assert_eq!((p.nrows, p.ncols), (D * fine_x.len(), D * coarse_x.len()));
+            assert_eq!(b.len(), coarse_x.len());
+            for seed in [0.0, 1.3] {
+                let mut pv = vec![0.0; p.nrows];
+                p.mul_vec(&linear_field(&coarse_x, seed), &mut pv);
+                for (u, v) in pv.iter().zip(linear_field(&fine_x, seed)) {
+                    assert!((u - v).abs() < 1e-12, "{u} vs {v}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn halved_grids_boxes_and_refinements_prolongate_exactly() {
+        for pattern in [MeshPattern::Diagonal, MeshPattern::AntiDiagonal] {
+            // 8 × 4 cells: halved to 4 × 2 and 2 × 1.
+            prolongators_reproduce_linear_fields(&Mesh::rectangle(2.0, 1.0, 8, 4, pattern), 2);
+        }
+        prolongators_reproduce_linear_fields(&Mesh::cuboid(2.0, 1.0, 1.0, 4, 2, 2), 1);
+        // An odd count stops the halving; the cross pattern is not nested.
+        assert!(node_levels(&Mesh::cuboid(1.0, 1.0, 1.0, 4, 3, 4), 10).is_empty());
+        let cross = Mesh::rectangle(1.0, 1.0, 4, 4, MeshPattern::Cross);
+        assert!(node_levels(&cross, 10).is_empty());
+        let refined = Mesh::rectangle(1.0, 1.0, 3, 3, MeshPattern::Diagonal)
+            .refine()
+            .refine();
+        prolongators_reproduce_linear_fields(&refined, 2);
+    }
 }

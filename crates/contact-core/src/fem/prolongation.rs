@@ -51,13 +51,50 @@ pub fn prolongate<const D: usize>(
 
 /// Rectangles: the fine nodes' values, in the fine node order (see [`Mesh::rectangle`]).
 fn grid_values(coarse: &Grid, fine: &Grid, coarse_values: &[f64], comps: usize) -> Vec<f64> {
+    let mut out = Vec::with_capacity((fine.nx + 1) * (fine.ny + 1) * comps);
+    grid_stencils(coarse, fine, |w| {
+        interpolate(w, coarse_values, comps, &mut out)
+    });
+    out
+}
+
+/// Boxes: the fine nodes' values, in the fine node order (see [`Mesh::cuboid`]).
+fn lattice_values(
+    coarse: &Lattice,
+    fine: &Lattice,
+    coarse_values: &[f64],
+    comps: usize,
+) -> Vec<f64> {
+    let [fx, fy, fz] = fine.cells;
+    let mut out = Vec::with_capacity((fx + 1) * (fy + 1) * (fz + 1) * comps);
+    lattice_stencils(coarse, fine, |w| {
+        interpolate(w, coarse_values, comps, &mut out)
+    });
+    out
+}
+
+/// Appends Σ w_n v_n per component for one fine node's stencil.
+fn interpolate(stencil: &[(usize, f64)], coarse_values: &[f64], comps: usize, out: &mut Vec<f64>) {
+    for c in 0..comps {
+        out.push(
+            stencil
+                .iter()
+                .map(|&(n, wt)| wt * coarse_values[comps * n + c])
+                .sum(),
+        );
+    }
+}
+
+/// Rectangles: visits the P1 interpolation stencil (coarse node, barycentric weight) of
+/// every fine node, in the fine node order; the three weights of the coarse triangle that
+/// contains the node, zeros included, computed from integer indices so nested nodes are hit
+/// exactly. The "cross" pattern is not nested and not supported.
+pub fn grid_stencils(coarse: &Grid, fine: &Grid, mut visit: impl FnMut(&[(usize, f64)])) {
     let (rx, ry) = (fine.nx / coarse.nx, fine.ny / coarse.ny);
     let cgrid = |i: usize, j: usize| j * (coarse.nx + 1) + i;
-    let mut out = Vec::with_capacity((fine.nx + 1) * (fine.ny + 1) * comps);
     for j in 0..=fine.ny {
         for i in 0..=fine.nx {
-            // Coarse cell containing the fine node, and local coordinates (s, t) in [0, 1]²,
-            // computed from integer indices so nested nodes are hit exactly.
+            // Coarse cell containing the fine node, and local coordinates (s, t) in [0, 1]².
             let (ci, cj) = ((i / rx).min(coarse.nx - 1), (j / ry).min(coarse.ny - 1));
             let s = (i - ci * rx) as f64 / rx as f64;
             let t = (j - cj * ry) as f64 / ry as f64;
@@ -74,38 +111,27 @@ fn grid_values(coarse: &Grid, fine: &Grid, coarse_values: &[f64], comps: usize) 
                 _ if s + t <= 1.0 => [(v00, 1.0 - s - t), (v10, s), (v01, t)],
                 _ => [(v10, 1.0 - t), (v11, s + t - 1.0), (v01, 1.0 - s)],
             };
-            for c in 0..comps {
-                out.push(
-                    w.iter()
-                        .map(|&(n, wt)| wt * coarse_values[comps * n + c])
-                        .sum(),
-                );
-            }
+            visit(&w);
         }
     }
-    out
 }
 
-/// Boxes: the fine nodes' values, in the fine node order (see [`Mesh::cuboid`]).
+/// Boxes: visits the P1 interpolation stencil of every fine node, in the fine node order
+/// (see [`Mesh::cuboid`]); the four weights of the containing Kuhn tetrahedron, zeros
+/// included.
 ///
 /// With (s_a ≥ s_b ≥ s_c) the fine node's local coordinates in its coarse cube sorted
 /// descending, the node lies in the Kuhn tetrahedron of the path (a, b, c), whose vertices
 /// v000, v000 + e_a, v000 + e_a + e_b, v111 have the barycentric weights 1 − s_a, s_a − s_b,
 /// s_b − s_c, s_c. The coordinates are kept as integers over the common denominator
 /// rx·ry·rz, so the order and the ties are exact.
-fn lattice_values(
-    coarse: &Lattice,
-    fine: &Lattice,
-    coarse_values: &[f64],
-    comps: usize,
-) -> Vec<f64> {
+pub fn lattice_stencils(coarse: &Lattice, fine: &Lattice, mut visit: impl FnMut(&[(usize, f64)])) {
     let [cx, cy, _] = coarse.cells;
     let r: [usize; 3] = std::array::from_fn(|a| fine.cells[a] / coarse.cells[a]);
     let den = r[0] * r[1] * r[2];
     let cnode = |c: [usize; 3]| c[0] + (cx + 1) * (c[1] + (cy + 1) * c[2]);
     let step = [1, cx + 1, (cx + 1) * (cy + 1)];
     let [fx, fy, fz] = fine.cells;
-    let mut out = Vec::with_capacity((fx + 1) * (fy + 1) * (fz + 1) * comps);
     for k in 0..=fz {
         for j in 0..=fy {
             for i in 0..=fx {
@@ -123,24 +149,15 @@ fn lattice_values(
                 let v2 = v1 + step[b];
                 let v3 = v0 + step[0] + step[1] + step[2];
                 let w = |num: usize| num as f64 / den as f64;
-                let weights = [
+                visit(&[
                     (v0, w(den - s[a])),
                     (v1, w(s[a] - s[b])),
                     (v2, w(s[b] - s[c])),
                     (v3, w(s[c])),
-                ];
-                for comp in 0..comps {
-                    out.push(
-                        weights
-                            .iter()
-                            .map(|&(n, wt)| wt * coarse_values[comps * n + comp])
-                            .sum(),
-                    );
-                }
+                ]);
             }
         }
     }
-    out
 }
 
 /// The grids of two structured meshes of one rectangle whose cells nest (same diagonal

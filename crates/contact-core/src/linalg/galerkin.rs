@@ -12,18 +12,18 @@ use super::Csr;
 pub fn transpose(a: &Csr) -> Csr {
     let mut indptr = vec![0usize; a.ncols + 1];
     for &c in &a.indices {
-        indptr[c + 1] += 1;
+        indptr[c as usize + 1] += 1;
     }
     for c in 0..a.ncols {
         indptr[c + 1] += indptr[c];
     }
     let mut next = indptr.clone();
-    let mut indices = vec![0usize; a.nnz()];
+    let mut indices = vec![0u32; a.nnz()];
     let mut values = vec![0.0; a.nnz()];
     for r in 0..a.nrows {
         for p in a.indptr[r]..a.indptr[r + 1] {
-            let c = a.indices[p];
-            indices[next[c]] = r;
+            let c = a.indices[p] as usize;
+            indices[next[c]] = r as u32;
             values[next[c]] = a.values[p];
             next[c] += 1;
         }
@@ -50,9 +50,9 @@ pub fn product(a: &Csr, b: &Csr) -> Csr {
     for r in 0..a.nrows {
         row.clear();
         for p in a.indptr[r]..a.indptr[r + 1] {
-            let (m, av) = (a.indices[p], a.values[p]);
+            let (m, av) = (a.indices[p] as usize, a.values[p]);
             for q in b.indptr[m]..b.indptr[m + 1] {
-                let c = b.indices[q];
+                let c = b.indices[q] as usize;
                 if seen[c] != r {
                     seen[c] = r;
                     acc[c] = 0.0;
@@ -63,7 +63,7 @@ pub fn product(a: &Csr, b: &Csr) -> Csr {
         }
         row.sort_unstable();
         for &c in &row {
-            indices.push(c);
+            indices.push(c as u32);
             values.push(acc[c]);
         }
         indptr.push(indices.len());
@@ -88,8 +88,8 @@ pub fn add(alpha: f64, a: &Csr, beta: f64, b: &Csr) -> Csr {
         let (mut p, pe) = (a.indptr[r], a.indptr[r + 1]);
         let (mut q, qe) = (b.indptr[r], b.indptr[r + 1]);
         while p < pe || q < qe {
-            let ca = if p < pe { a.indices[p] } else { usize::MAX };
-            let cb = if q < qe { b.indices[q] } else { usize::MAX };
+            let ca = if p < pe { a.indices[p] } else { u32::MAX };
+            let cb = if q < qe { b.indices[q] } else { u32::MAX };
             if ca == cb {
                 indices.push(ca);
                 values.push(alpha * a.values[p] + beta * b.values[q]);
@@ -133,7 +133,7 @@ mod tests {
         let mut d = vec![vec![0.0; a.ncols]; a.nrows];
         for (r, row) in d.iter_mut().enumerate() {
             for p in a.indptr[r]..a.indptr[r + 1] {
-                row[a.indices[p]] += a.values[p];
+                row[a.indices[p] as usize] += a.values[p];
             }
         }
         d

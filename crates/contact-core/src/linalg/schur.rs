@@ -71,7 +71,7 @@ pub fn schur_by_solves(
         rhs.iter_mut().for_each(|v| *v = 0.0);
         // Column c of K_IC is row c of K_CI (K is symmetric).
         for p in k_ci.indptr[c]..k_ci.indptr[c + 1] {
-            rhs[k_ci.indices[p]] = k_ci.values[p];
+            rhs[k_ci.indices[p] as usize] = k_ci.values[p];
         }
         let scale = rhs.iter().fold(f64::MIN_POSITIVE, |a, v| a.max(v.abs()));
         sol.iter_mut().for_each(|v| *v = 0.0);
@@ -143,7 +143,7 @@ fn blocked_solves(k: &Csr, lead: usize, k_ii: &Cholesky) -> DMatrix<f64> {
         for c in 0..cols {
             let row = start + c;
             for p in k_ci.indptr[row]..k_ci.indptr[row + 1] {
-                z[c * n_i + k_ci.indices[p]] = k_ci.values[p];
+                z[c * n_i + k_ci.indices[p] as usize] = k_ci.values[p];
             }
         }
         k_ii.solve_block_in_place(&mut z, cols);

@@ -164,7 +164,7 @@ impl DamageStep {
                 let h = &self.h;
                 for r in 0..h.nrows {
                     for p in h.indptr[r]..h.indptr[r + 1] {
-                        let c = h.indices[p];
+                        let c = h.indices[p] as usize;
                         it.masked.values[p] =
                             if active[r] != Bound::Free || active[c] != Bound::Free {
                                 if r == c {
@@ -448,8 +448,12 @@ mod tests {
     use proptest::prelude::RngExt;
     use proptest::test_runner::{RngAlgorithm, TestRng};
 
+    fn square(n: usize) -> Mesh {
+        Mesh::rectangle(1.0, 1.0, n, n, MeshPattern::Diagonal)
+    }
+
     fn h_matrix(n: usize, k: f64, kappa: f64) -> (Csr, Csr, usize) {
-        let mesh = Mesh::rectangle(1.0, 1.0, n, n, MeshPattern::Diagonal);
+        let mesh = square(n);
         let geo = Geometry::new(&mesh);
         let m = assembly::mass(&mesh, &geo);
         let lap = assembly::laplacian(&mesh, &geo);
@@ -528,9 +532,12 @@ mod tests {
             (24, 1.0 / 128.0, 0.5),
             (16, 1.0, 1e-2),
             (20, 1.0 / 4096.0, 100.0),
+            // Large enough for geometric levels (the square halved twice).
+            (64, 1.0 / 64.0, 1.0),
         ] {
             let (h, m, nn) = h_matrix(n, k, kappa);
             let mg = crate::fem::multilevel::scalar_solver(
+                &square(n),
                 h.clone(),
                 crate::linalg::LinearPath::Multigrid,
             )

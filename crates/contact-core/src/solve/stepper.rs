@@ -401,13 +401,12 @@ impl<const D: usize> Simulation<D> {
                 );
                 let mut solver = match linear {
                     LinearPath::Multigrid => {
-                        let mg =
-                            multilevel::scalar_solver(h.clone(), linear).map_err(|source| {
-                                SolveError::Factor {
-                                    what: "damage",
-                                    source,
-                                }
-                            })?;
+                        let mg = multilevel::scalar_solver(&mesh, h.clone(), linear).map_err(
+                            |source| SolveError::Factor {
+                                what: "damage",
+                                source,
+                            },
+                        )?;
                         DamageStep::with_solver(h, Some(mg))?
                     }
                     _ => DamageStep::new(h)?,
@@ -725,6 +724,19 @@ impl<const D: usize> Simulation<D> {
         let start = Instant::now();
         self.velocity.solver.substitute(&mut v);
         start.elapsed().as_secs_f64()
+    }
+
+    /// One product with the free-DOF velocity operator K on a copy of the current load (the
+    /// unit of the benchmark's matvec-equivalents).
+    pub fn time_one_product(&self) -> f64 {
+        let (k, _) = self.velocity.solver.operator();
+        let x = &self.velocity.load_free;
+        let mut y = vec![0.0; k.nrows];
+        let start = Instant::now();
+        k.mul_vec(x, &mut y);
+        let secs = start.elapsed().as_secs_f64();
+        std::hint::black_box(&y);
+        secs
     }
 
     /// Damage refactorisations so far (0 without damage).

@@ -385,7 +385,7 @@ impl VelocityStep {
             let s: f64 = k.indices[row.clone()]
                 .iter()
                 .zip(&k.values[row])
-                .map(|(&j, v)| (v * w[j]).abs())
+                .map(|(&j, v)| (v * w[j as usize]).abs())
                 .sum();
             m.max(s)
         });

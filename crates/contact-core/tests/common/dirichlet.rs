@@ -49,7 +49,7 @@ pub fn solve<const D: usize>(
         }
         b[index[r]] = rhs[r] - kw[r];
         for j in k.indptr[r]..k.indptr[r + 1] {
-            let c = k.indices[j];
+            let c = k.indices[j] as usize;
             if index[c] != usize::MAX {
                 t.push((index[r], index[c], k.values[j]));
             }

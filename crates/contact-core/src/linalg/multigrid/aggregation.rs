@@ -37,7 +37,7 @@ pub fn strength(a: &Csr, blocks: &Blocks, theta: f64) -> (Vec<usize>, Vec<usize>
     for b in 0..nb {
         for &r in blocks.dofs(b) {
             for p in a.indptr[r]..a.indptr[r + 1] {
-                if block_of[a.indices[p]] as usize == b {
+                if block_of[a.indices[p] as usize] as usize == b {
                     norm2[b] += a.values[p] * a.values[p];
                 }
             }
@@ -50,7 +50,7 @@ pub fn strength(a: &Csr, blocks: &Blocks, theta: f64) -> (Vec<usize>, Vec<usize>
         touched.clear();
         for &r in blocks.dofs(b) {
             for p in a.indptr[r]..a.indptr[r + 1] {
-                let c = block_of[a.indices[p]] as usize;
+                let c = block_of[a.indices[p] as usize] as usize;
                 if c == b {
                     continue;
                 }

@@ -205,7 +205,10 @@ impl Chebyshev {
         self.hi
     }
 
-    /// x ← x + q(D⁻¹A) D⁻¹ (b − A x). `r`, `d`, `t` are work vectors of length n.
+    /// x ← x + q(D⁻¹A) D⁻¹ (b − A x). `r`, `d`, `t` are work vectors of length n. With
+    /// `zero_start` the caller promises x = 0, and the product A x is skipped (the
+    /// pre-smoother of a V-cycle: m − 1 products for degree m instead of m).
+    #[allow(clippy::too_many_arguments)] // The vectors are the caller's scratch, as in faer.
     pub fn smooth(
         &self,
         a: &Csr,
@@ -214,14 +217,19 @@ impl Chebyshev {
         r: &mut [f64],
         d: &mut [f64],
         t: &mut [f64],
+        zero_start: bool,
     ) {
         let theta = 0.5 * (self.hi + self.lo);
         let delta = 0.5 * (self.hi - self.lo);
         let sigma = theta / delta;
         let mut rho = 1.0 / sigma;
         // r = D⁻¹ (b − A x)
-        a.mul_vec(x, t);
-        t.iter_mut().zip(b).for_each(|(t, b)| *t = b - *t);
+        if zero_start {
+            t.copy_from_slice(b);
+        } else {
+            a.mul_vec(x, t);
+            t.iter_mut().zip(b).for_each(|(t, b)| *t = b - *t);
+        }
         self.jacobi.solve(t, r);
         d.iter_mut().zip(r.iter()).for_each(|(d, r)| *d = r / theta);
         for k in 0..self.degree {
