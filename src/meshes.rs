@@ -100,10 +100,6 @@ pub struct Meshes {
     /// Uploads parsed at the same time (each holds its file and its mesh in memory); the
     /// handler waits for a slot before handing an upload to the blocking pool.
     pub parse_slots: tokio::sync::Semaphore,
-    /// Held while a file and its row change together (an upload writes the file then the
-    /// row; a delete removes the row then the file), so that an upload and a delete of the
-    /// same mesh at the same instant never leave a row without its file.
-    files_and_rows: Mutex<()>,
 }
 
 impl Meshes {
@@ -113,7 +109,6 @@ impl Meshes {
             blobs,
             cache: Mutex::new(Vec::new()),
             parse_slots: tokio::sync::Semaphore::new(PARSES),
-            files_and_rows: Mutex::new(()),
         }
     }
 
@@ -122,8 +117,11 @@ impl Meshes {
     ///
     /// A file that is not a usable mesh is a 422 whose detail is the reader's or the
     /// checker's message (section and line, or the offending cell). The file is written
-    /// before its row, so a row never names a file that was not written (a crash in between
-    /// leaves an unlisted file, replaced by the next upload of the same bytes).
+    /// under a temporary name first, then renamed into place inside the store's transaction
+    /// that records it (`Store::add_mesh_with_file`), which a deletion of the same mesh on
+    /// any node cannot interleave with: a record never names a missing file, and a file is
+    /// never left without its record (but by a crash between the rename and the commit:
+    /// an unlisted file, put back to use by the next upload of the same bytes).
     pub fn upload(&self, bytes: &[u8]) -> Result<(MeshRecord, bool), Problem> {
         if bytes.is_empty() {
             return Err(Problem::new(
@@ -135,32 +133,30 @@ impl Meshes {
         }
         let id = mesh_id(bytes);
         let io = |e: std::io::Error| Problem::internal(format!("mesh file {id}: {e}"));
-        if let Some(existing) = self.store.get_mesh(&id)? {
-            // Repair a file lost or damaged after its row was written (a delete racing an
-            // upload, a disk gone wrong): the bytes are at hand.
-            if !matches!(self.blobs.read(&id), Ok(Some(_))) {
-                self.blobs.write(&id, bytes).map_err(io)?;
+        let summary = match self.store.get_mesh(&id)? {
+            // Stored and whole: nothing to do.
+            Some(existing) if matches!(self.blobs.read(&id), Ok(Some(_))) => {
+                return Ok((existing, false))
             }
-            return Ok((existing, false));
-        }
-        let summary = summarize(bytes).map_err(|e| {
-            Problem::new(
-                StatusCode::UNPROCESSABLE_ENTITY,
-                "invalid mesh",
-                e.to_string(),
-            )
-            .with_type("/problems/invalid-mesh")
-        })?;
-        let summary =
-            serde_json::to_value(&summary).map_err(|e| Problem::internal(e.to_string()))?;
-        let _together = self.files_and_rows.lock().unwrap();
-        self.blobs.write(&id, bytes).map_err(io)?;
-        let (record, new) = self.store.add_mesh(&id, bytes.len() as u64, &summary)?;
-        if !self.blobs.exists(&id) {
-            // Deleted and re-added between our write and our row: write it again.
-            self.blobs.write(&id, bytes).map_err(io)?;
-        }
-        Ok((record, new))
+            // Stored, but the file was lost or damaged (a disk gone wrong): the bytes are at
+            // hand to repair it, in the same transaction as a new upload.
+            Some(existing) => existing.summary,
+            None => {
+                let summary = summarize(bytes).map_err(|e| {
+                    Problem::new(
+                        StatusCode::UNPROCESSABLE_ENTITY,
+                        "invalid mesh",
+                        e.to_string(),
+                    )
+                    .with_type("/problems/invalid-mesh")
+                })?;
+                serde_json::to_value(&summary).map_err(|e| Problem::internal(e.to_string()))?
+            }
+        };
+        let staged = self.blobs.stage(&id, bytes).map_err(io)?;
+        Ok(self
+            .store
+            .add_mesh_with_file(&id, bytes.len() as u64, &summary, &mut || staged.place())?)
     }
 
     /// [`Meshes::upload`] for `owner` (`""`: anonymous): the mesh becomes theirs too. The
@@ -189,15 +185,32 @@ impl Meshes {
         if !is_mesh_id(id) {
             return Ok(MeshDeletion::Absent);
         }
-        let _together = self.files_and_rows.lock().unwrap();
-        let (outcome, orphan) = self.store.release_mesh(owner, id)?;
-        if orphan {
-            self.blobs
-                .remove(id)
+        let mut buried = None;
+        let released = self.store.release_mesh_with_file(owner, id, &mut || {
+            buried = self.blobs.bury(id)?;
+            Ok(())
+        });
+        let deleted = matches!(released, Ok((MeshDeletion::Deleted, true)));
+        self.settle(id, buried, deleted)?;
+        Ok(released?.0)
+    }
+
+    /// After a record's deletion: the file moved aside by [`MeshBlobs::bury`] goes if the
+    /// deletion committed and comes back if it did not; the cached copy goes with it.
+    fn settle(
+        &self,
+        id: &str,
+        buried: Option<crate::store::meshes::Buried>,
+        deleted: bool,
+    ) -> Result<(), Problem> {
+        if let Some(b) = buried {
+            b.finish(deleted)
                 .map_err(|e| Problem::internal(format!("mesh file {id}: {e}")))?;
+        }
+        if deleted {
             self.cache.lock().unwrap().retain(|(k, _)| k != id);
         }
-        Ok(outcome)
+        Ok(())
     }
 
     pub fn get(&self, id: &str) -> Result<Option<MeshRecord>, StoreError> {
@@ -214,26 +227,30 @@ impl Meshes {
         }
         match self.blobs.read(id) {
             Ok(Some(b)) => Ok(Some(b)),
+            // Deleted between the two reads: the mesh is gone, not broken.
+            Ok(None) if self.get(id)?.is_none() => Ok(None),
             Ok(None) => Err(missing_file(id)),
             Err(e) => Err(Problem::internal(e.to_string())),
         }
     }
 
-    /// Deletes a mesh unless a queued or running job uses it: the row, then the file, then
-    /// this node's cached copy.
+    /// Deletes a mesh unless a queued or running job uses it: the record and the file in
+    /// one store transaction (`Store::delete_mesh_with_file`), then this node's cached copy.
     pub fn delete(&self, id: &str) -> Result<MeshDeletion, Problem> {
         if !is_mesh_id(id) {
             return Ok(MeshDeletion::Absent);
         }
-        let _together = self.files_and_rows.lock().unwrap();
-        let outcome = self.store.delete_mesh(id)?;
-        if outcome == MeshDeletion::Deleted {
-            self.blobs
-                .remove(id)
-                .map_err(|e| Problem::internal(format!("mesh file {id}: {e}")))?;
-            self.cache.lock().unwrap().retain(|(k, _)| k != id);
-        }
-        Ok(outcome)
+        let mut buried = None;
+        let outcome = self.store.delete_mesh_with_file(id, &mut || {
+            buried = self.blobs.bury(id)?;
+            Ok(())
+        });
+        self.settle(
+            id,
+            buried,
+            outcome.as_ref().is_ok_and(|o| *o == MeshDeletion::Deleted),
+        )?;
+        Ok(outcome?)
     }
 
     /// The checked 2D mesh of an uploaded id or a bundled name, cached.

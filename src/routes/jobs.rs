@@ -629,34 +629,59 @@ pub async fn cancel(
     Ok(json_response(status, &job_view(&rec, &state)))
 }
 
-/// How long `DELETE /jobs/{id}` waits for a job whose cancel was requested to stop.
-const STOP_WAIT: std::time::Duration = std::time::Duration::from_secs(30);
+/// Longest `DELETE /jobs/{id}` waits for a job whose cancel was requested to stop (its
+/// worker ends the current time step first; a worker on another node sees the cancel at its
+/// next heartbeat, a third of a lease).
+const STOP_WAIT: Duration = Duration::from_secs(30);
 
+/// The wait a request asks for with `Prefer: wait=N` (RFC 7240), in seconds, if any.
+fn preferred_wait(headers: &HeaderMap) -> Option<Duration> {
+    headers
+        .get_all("prefer")
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split([',', ';']))
+        .find_map(|p| {
+            let (name, value) = p.split_once('=')?;
+            let value = value.trim().trim_matches('"');
+            (name.trim().eq_ignore_ascii_case("wait"))
+                .then(|| value.parse::<u64>().ok())
+                .flatten()
+        })
+        .map(Duration::from_secs)
+}
+
+/// `DELETE /jobs/{id}`: removes a finished job and its results (204). A job whose cancel
+/// was requested but whose worker is still ending its current step is waited for, up to
+/// [`STOP_WAIT`] or the request's `Prefer: wait=N`, then 409 with `Retry-After`; a job
+/// running or queued without a cancel is 409 at once.
 pub async fn delete_job(
     State(state): State<AppState>,
     Path(id): Path<String>,
+    headers: HeaderMap,
 ) -> Result<Response, Problem> {
     let id = parse_id(&id)?;
     let mut rec = load_job(&state, id).await?;
-    // Right after a cancel the worker is finishing its current step: wait for it to stop
-    // (a step takes seconds at most) rather than answer 409.
-    let deadline = std::time::Instant::now() + STOP_WAIT;
+    let wait = preferred_wait(&headers).map_or(STOP_WAIT, |w| w.min(STOP_WAIT));
+    let deadline = std::time::Instant::now() + wait;
     while !rec.status.is_finished() && rec.cancel_requested && std::time::Instant::now() < deadline
     {
-        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        tokio::time::sleep(Duration::from_millis(50)).await;
         rec = load_job(&state, id).await?;
     }
     if !rec.status.is_finished() {
-        let detail = if rec.cancel_requested {
-            format!("job {id} is cancelled but still stopping; retry shortly")
-        } else {
-            format!("job {id} is {}; cancel it first", rec.status.as_str())
-        };
-        let p = Problem::conflict(detail);
         return Err(if rec.cancel_requested {
-            p.retry_after(2)
+            Problem::conflict(format!(
+                "job {id} is cancelled but its worker is still ending its current time step \
+                 (waited {} s); retry after Retry-After seconds",
+                wait.as_secs()
+            ))
+            .retry_after(2)
         } else {
-            p
+            Problem::conflict(format!(
+                "job {id} is {}; cancel it first (POST /jobs/{id}/cancel), then delete it",
+                rec.status.as_str()
+            ))
         });
     }
     let store = state.store().clone();

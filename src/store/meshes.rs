@@ -8,12 +8,12 @@
 //! digits): no separators, nothing that could address a path outside the directory.
 
 use std::fs;
-use std::io;
+use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
 
-use super::results::{remove_temp_files, sync_dir, write_atomic_in, STALE_TEMP};
+use super::results::{remove_temp_files, sync_dir, write_atomic_in, STALE_TEMP, TEMP_PREFIX};
 
 /// Whether `s` is a mesh id: 64 lowercase hexadecimal digits (a SHA-256).
 pub fn is_mesh_id(s: &str) -> bool {
@@ -110,6 +110,59 @@ impl MeshBlobs {
         Ok(Some(bytes))
     }
 
+    /// Writes `bytes`, the mesh whose SHA-256 is `id`, to a temporary file (fsynced) for
+    /// [`Staged::place`] to rename into place: the slow part of a write, done before the
+    /// store's transaction (see `Store::add_mesh_with_file`), the rename inside it.
+    pub fn stage(&self, id: &str, bytes: &[u8]) -> io::Result<Staged> {
+        if !is_mesh_id(id) || mesh_id(bytes) != id {
+            return Err(invalid_id(id));
+        }
+        let temp = self.temp_path(id, "upload");
+        let written = (|| {
+            let mut f = fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&temp)?;
+            f.write_all(bytes)?;
+            f.sync_all()
+        })();
+        if let Err(e) = written {
+            let _ = fs::remove_file(&temp);
+            return Err(e);
+        }
+        Ok(Staged {
+            temp,
+            target: self.root.join(format!("{id}.msh")),
+            root: self.root.clone(),
+        })
+    }
+
+    /// A temporary name in the directory for mesh `id` (removed at start, as every
+    /// temporary file; see [`MeshBlobs::shared`]).
+    fn temp_path(&self, id: &str, what: &str) -> PathBuf {
+        self.root.join(format!(
+            "{TEMP_PREFIX}{id}.msh-{what}-{}",
+            uuid::Uuid::new_v4().simple()
+        ))
+    }
+
+    /// Moves the file of mesh `id` out of the way (the first step of a deletion, inside the
+    /// store's transaction): Some(its new name), for [`Buried::finish`] to remove once the
+    /// record's deletion committed or to restore if it did not; None if there is no file.
+    pub fn bury(&self, id: &str) -> io::Result<Option<Buried>> {
+        let path = self.path(id).ok_or_else(|| invalid_id(id))?;
+        let tomb = self.temp_path(id, "deleted");
+        match fs::rename(&path, &tomb) {
+            Ok(()) => Ok(Some(Buried {
+                tomb,
+                path,
+                root: self.root.clone(),
+            })),
+            Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(e),
+        }
+    }
+
     /// Removes the file of mesh `id`; Ok if it does not exist.
     pub fn remove(&self, id: &str) -> io::Result<()> {
         let path = self.path(id).ok_or_else(|| invalid_id(id))?;
@@ -117,6 +170,55 @@ impl MeshBlobs {
             Err(e) if e.kind() != io::ErrorKind::NotFound => Err(e),
             _ => sync_dir(&self.root),
         }
+    }
+}
+
+/// A mesh file written under a temporary name ([`MeshBlobs::stage`]); removed on drop
+/// unless placed.
+#[derive(Debug)]
+pub struct Staged {
+    temp: PathBuf,
+    target: PathBuf,
+    root: PathBuf,
+}
+
+impl Staged {
+    /// Renames the file into place (atomically replacing a file of the same id, whose
+    /// bytes are the same) and fsyncs the directory. Again after a first success, it puts
+    /// nothing more in place.
+    pub fn place(&self) -> io::Result<()> {
+        match fs::rename(&self.temp, &self.target) {
+            Err(e) if e.kind() == io::ErrorKind::NotFound && self.target.is_file() => {}
+            other => other?,
+        }
+        sync_dir(&self.root)
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        let _ = fs::remove_file(&self.temp);
+    }
+}
+
+/// A mesh file moved out of the way by [`MeshBlobs::bury`].
+#[derive(Debug)]
+pub struct Buried {
+    tomb: PathBuf,
+    path: PathBuf,
+    root: PathBuf,
+}
+
+impl Buried {
+    /// Removes the file if `deleted` (the record's deletion committed), else puts it back
+    /// under its name.
+    pub fn finish(self, deleted: bool) -> io::Result<()> {
+        if deleted {
+            fs::remove_file(&self.tomb)?;
+        } else {
+            fs::rename(&self.tomb, &self.path)?;
+        }
+        sync_dir(&self.root)
     }
 }
 
@@ -198,6 +300,44 @@ mod tests {
         blobs.remove(&id).unwrap();
         assert_eq!(blobs.read(&id).unwrap(), None);
         assert_eq!(fs::read_dir(blobs.root()).unwrap().count(), 0);
+    }
+
+    /// The steps of a change made inside a store transaction: staged, placed; buried, then
+    /// restored or removed; a staged file never placed leaves nothing.
+    #[test]
+    fn stage_place_bury_restore_remove() {
+        let dir = TempDir::new();
+        let blobs = MeshBlobs::new(&dir.0).unwrap();
+        let bytes = b"$MeshFormat\n4.1 0 8\n$EndMeshFormat\n";
+        let id = mesh_id(bytes);
+        let names = || {
+            let mut n: Vec<String> = fs::read_dir(blobs.root())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            n.sort();
+            n
+        };
+        assert_eq!(
+            blobs.stage(&mesh_id(b"x"), bytes).unwrap_err().kind(),
+            io::ErrorKind::InvalidInput
+        );
+        drop(blobs.stage(&id, bytes).unwrap());
+        assert!(names().is_empty());
+        let staged = blobs.stage(&id, bytes).unwrap();
+        assert!(!blobs.exists(&id));
+        assert!(names()[0].starts_with(TEMP_PREFIX));
+        staged.place().unwrap();
+        staged.place().unwrap();
+        drop(staged);
+        assert_eq!(names(), vec![format!("{id}.msh")]);
+        let buried = blobs.bury(&id).unwrap().unwrap();
+        assert!(!blobs.exists(&id));
+        assert!(blobs.bury(&id).unwrap().is_none());
+        buried.finish(false).unwrap();
+        assert_eq!(blobs.read(&id).unwrap().unwrap(), bytes);
+        blobs.bury(&id).unwrap().unwrap().finish(true).unwrap();
+        assert!(names().is_empty());
     }
 
     #[test]

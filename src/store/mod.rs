@@ -186,6 +186,14 @@ pub enum StoreError {
     Unavailable(String),
 }
 
+/// What changes a mesh's file together with its record: called inside the store's
+/// transaction, after the record changed and before the commit, while every other change of
+/// that mesh's record — on any node sharing the store — waits (SQLite: the database's write
+/// lock; PostgreSQL: a transaction advisory lock on the mesh id). An error rolls the change
+/// back. So an upload and a delete of the same mesh at the same instant run one after the
+/// other, file and record together, and never leave a record without its file.
+pub type MeshFileStep<'a> = &'a mut dyn FnMut() -> std::io::Result<()>;
+
 /// Wakes a process's idle workers; returns false once nobody needs waking any more (the
 /// watcher then stops).
 pub type Wake = std::sync::Arc<dyn Fn() -> bool + Send + Sync>;
@@ -301,6 +309,17 @@ pub trait Store: owners::Owners + Send + Sync + 'static {
         id: &str,
         bytes: u64,
         summary: &serde_json::Value,
+    ) -> Result<(MeshRecord, bool), StoreError> {
+        self.add_mesh_with_file(id, bytes, summary, &mut || Ok(()))
+    }
+    /// [`Store::add_mesh`] that puts the mesh's file in place with `file`, inside the
+    /// transaction (see [`MeshFileStep`]).
+    fn add_mesh_with_file(
+        &self,
+        id: &str,
+        bytes: u64,
+        summary: &serde_json::Value,
+        file: MeshFileStep<'_>,
     ) -> Result<(MeshRecord, bool), StoreError>;
     fn get_mesh(&self, id: &str) -> Result<Option<MeshRecord>, StoreError>;
     /// Newest first, with cursors as [`Store::list`]'s.
@@ -308,7 +327,16 @@ pub trait Store: owners::Owners + Send + Sync + 'static {
     /// Removes a mesh's record unless a queued or running job uses it (atomically with
     /// `enqueue`: a job is never enqueued on a mesh being deleted). Its file is the caller's
     /// to remove.
-    fn delete_mesh(&self, id: &str) -> Result<MeshDeletion, StoreError>;
+    fn delete_mesh(&self, id: &str) -> Result<MeshDeletion, StoreError> {
+        self.delete_mesh_with_file(id, &mut || Ok(()))
+    }
+    /// [`Store::delete_mesh`] that takes the mesh's file away with `file`, inside the
+    /// transaction (see [`MeshFileStep`]); `file` runs only when the record is deleted.
+    fn delete_mesh_with_file(
+        &self,
+        id: &str,
+        file: MeshFileStep<'_>,
+    ) -> Result<MeshDeletion, StoreError>;
     /// Calls `wake` whenever another process may have made a job claimable (a submission
     /// on another node), until `wake` returns false. A backend only ever written by this
     /// process (SQLite: the API wakes its own workers) does nothing.

@@ -128,5 +128,15 @@ pub trait Owners {
     /// Ends `owner`'s ownership of mesh `id`, unless one of `owner`'s queued or running
     /// jobs uses it. When no owner is left and no unfinished job uses it, the mesh record
     /// goes too and the second value is true: its file is the caller's to remove.
-    fn release_mesh(&self, owner: &str, id: &str) -> Result<(MeshDeletion, bool), StoreError>;
+    fn release_mesh(&self, owner: &str, id: &str) -> Result<(MeshDeletion, bool), StoreError> {
+        self.release_mesh_with_file(owner, id, &mut || Ok(()))
+    }
+    /// [`Owners::release_mesh`] that takes the file away with `file` inside the transaction
+    /// when the mesh record goes (see [`super::MeshFileStep`]).
+    fn release_mesh_with_file(
+        &self,
+        owner: &str,
+        id: &str,
+        file: super::MeshFileStep<'_>,
+    ) -> Result<(MeshDeletion, bool), StoreError>;
 }

@@ -4,9 +4,9 @@
 use postgres::Row;
 
 use super::owners::{KeyAdded, KeyRecord, Owners, Quotas, Usage, KEY_COLS};
-use super::postgres::{raw_mesh, select_mesh, select_one, PgStore, NOW_S};
-use super::row::{into_mesh_page, page_bounds, RawMesh, UNFINISHED};
-use super::{MeshDeletion, MeshPage, MeshRecord, StoreError};
+use super::postgres::{classify, lock_mesh, raw_mesh, select_mesh, select_one, PgStore, NOW_S};
+use super::row::{into_mesh_page, page_bounds, RawJob, RawMesh, UNFINISHED};
+use super::{MeshDeletion, MeshFileStep, MeshPage, MeshRecord, StoreError};
 
 /// An owner's view of a mesh: its ownership's time and sequence number.
 const OWNED_MESH_COLS: &str = "m.id, m.bytes, o.created_at, m.summary, o.seq";
@@ -231,47 +231,27 @@ impl Owners for PgStore {
         into_mesh_page(raws, limit)
     }
 
-    /// Locks the mesh row exclusively first (as `delete_mesh`), so that an `enqueue` or an
-    /// `add_mesh_owner` of the same mesh either waits or has committed.
-    fn release_mesh(&self, owner: &str, id: &str) -> Result<(MeshDeletion, bool), StoreError> {
-        let outcome = self.exec(|c| {
-            let mut tx = c.transaction()?;
-            if select_mesh(&mut tx, id, "FOR UPDATE")?.is_none() {
-                return Ok(None);
+    /// Takes the mesh's advisory lock and locks its row exclusively first (as
+    /// `delete_mesh`), so that an upload, an `enqueue` or an `add_mesh_owner` of the same
+    /// mesh either waits or has committed.
+    fn release_mesh_with_file(
+        &self,
+        owner: &str,
+        id: &str,
+        file: MeshFileStep<'_>,
+    ) -> Result<(MeshDeletion, bool), StoreError> {
+        let outcome = self.run(|c| {
+            let mut tx = c.transaction().map_err(classify)?;
+            lock_mesh(&mut tx, id).map_err(classify)?;
+            let decided = released(&mut tx, owner, id).map_err(classify)?;
+            if let Some((None, true)) = decided {
+                file()?;
             }
-            let n = tx.execute(
-                "DELETE FROM mesh_owners WHERE owner = $1 AND id = $2",
-                &[&owner, &id],
-            )?;
-            if n == 0 {
-                return Ok(None);
+            if matches!(decided, Some((None, _))) {
+                tx.commit().map_err(classify)?;
             }
-            let user = select_one(
-                &mut tx,
-                &format!("owner = $1 AND mesh = $2 AND status IN {UNFINISHED} ORDER BY seq"),
-                &[&owner, &id],
-            )?;
-            if user.is_some() {
-                tx.rollback()?;
-                return Ok(Some((user, false)));
-            }
-            let left: i64 = tx
-                .query_one(
-                    format!(
-                        "SELECT (SELECT count(*) FROM mesh_owners WHERE id = $1)
-                              + (SELECT count(*) FROM jobs WHERE mesh = $1
-                                 AND status IN {UNFINISHED})"
-                    )
-                    .as_str(),
-                    &[&id],
-                )?
-                .try_get(0)?;
-            let orphan = left == 0;
-            if orphan {
-                tx.execute("DELETE FROM meshes WHERE id = $1", &[&id])?;
-            }
-            tx.commit()?;
-            Ok(Some((None, orphan)))
+            // Otherwise dropping the transaction rolls it back.
+            Ok(decided)
         })?;
         Ok(match outcome {
             None => (MeshDeletion::Absent, false),
@@ -279,4 +259,48 @@ impl Owners for PgStore {
             Some((None, orphan)) => (MeshDeletion::Deleted, orphan),
         })
     }
+}
+
+/// The release of [`Owners::release_mesh`] inside `tx` (not committed): None if `owner` does
+/// not have the mesh, `Some((Some(job), _))` if one of `owner`'s unfinished jobs uses it
+/// (roll back), `Some((None, orphan))` if released (`orphan`: the mesh record went too).
+fn released(
+    tx: &mut postgres::Transaction<'_>,
+    owner: &str,
+    id: &str,
+) -> Result<Option<(Option<RawJob>, bool)>, postgres::Error> {
+    if select_mesh(tx, id, "FOR UPDATE")?.is_none() {
+        return Ok(None);
+    }
+    let n = tx.execute(
+        "DELETE FROM mesh_owners WHERE owner = $1 AND id = $2",
+        &[&owner, &id],
+    )?;
+    if n == 0 {
+        return Ok(None);
+    }
+    let user = select_one(
+        tx,
+        &format!("owner = $1 AND mesh = $2 AND status IN {UNFINISHED} ORDER BY seq"),
+        &[&owner, &id],
+    )?;
+    if user.is_some() {
+        return Ok(Some((user, false)));
+    }
+    let left: i64 = tx
+        .query_one(
+            format!(
+                "SELECT (SELECT count(*) FROM mesh_owners WHERE id = $1)
+                      + (SELECT count(*) FROM jobs WHERE mesh = $1
+                         AND status IN {UNFINISHED})"
+            )
+            .as_str(),
+            &[&id],
+        )?
+        .try_get(0)?;
+    let orphan = left == 0;
+    if orphan {
+        tx.execute("DELETE FROM meshes WHERE id = $1", &[&id])?;
+    }
+    Ok(Some((None, orphan)))
 }

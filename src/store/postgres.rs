@@ -46,8 +46,8 @@ use super::row::{
     to_usize, RawJob, RawMesh, FINISHED, UNFINISHED,
 };
 use super::{
-    Enqueued, JobRecord, JobStatus, MeshDeletion, MeshPage, MeshRecord, NewJob, Page, Progress,
-    Store, StoreError, Wake,
+    Enqueued, JobRecord, JobStatus, MeshDeletion, MeshFileStep, MeshPage, MeshRecord, NewJob, Page,
+    Progress, Store, StoreError, Wake,
 };
 
 /// Schema migrations; entry `i` brings the schema from version `i` to `i + 1`.
@@ -220,6 +220,22 @@ pub(super) fn select_mesh(
     c.query_opt(sql.as_str(), &[&id])?
         .map(|r| raw_mesh(&r))
         .transpose()
+}
+
+/// Class of the transaction advisory locks that serialise the changes of one mesh's record
+/// and file ("mesh" in ASCII; two-key advisory locks do not share the migration lock's
+/// key space).
+const MESH_LOCK: i32 = 0x6d65_7368;
+
+/// Takes the transaction advisory lock of mesh `id`: held until the transaction ends, so
+/// the uploads, deletions and releases of one mesh run one after the other on every node.
+/// The key is the id's first 8 hex digits (two meshes sharing them merely wait for each
+/// other).
+pub(super) fn lock_mesh(c: &mut impl GenericClient, id: &str) -> Result<(), postgres::Error> {
+    let key = u32::from_str_radix(id.get(..8).unwrap_or("0"), 16).unwrap_or(0);
+    let key = i32::from_ne_bytes(key.to_ne_bytes());
+    c.execute("SELECT pg_advisory_xact_lock($1, $2)", &[&MESH_LOCK, &key])?;
+    Ok(())
 }
 
 /// Whether the error means "the database is not reachable right now" rather than "this
@@ -948,20 +964,23 @@ impl Store for PgStore {
         usize::try_from(n).map_err(|_| StoreError::Db(format!("{n} rows")))
     }
 
-    /// `ON CONFLICT DO NOTHING`, then the stored row; should the row be deleted in between
-    /// (a concurrent `delete_mesh`), the insert is tried again.
-    fn add_mesh(
+    /// `ON CONFLICT DO NOTHING`, then the stored row, and the file placed, under the mesh's
+    /// advisory lock ([`lock_mesh`]).
+    fn add_mesh_with_file(
         &self,
         id: &str,
         bytes: u64,
         summary: &serde_json::Value,
+        file: MeshFileStep<'_>,
     ) -> Result<(MeshRecord, bool), StoreError> {
         let bytes = i64::try_from(bytes)
             .map_err(|_| StoreError::Db(format!("mesh size {bytes} out of range")))?;
         let summary = json_text(summary)?;
-        for _ in 0..3 {
-            let got = self.exec(|c| {
-                let inserted = c.query_opt(
+        let (raw, new) = self.run(|c| {
+            let mut tx = c.transaction().map_err(classify)?;
+            lock_mesh(&mut tx, id).map_err(classify)?;
+            let inserted = tx
+                .query_opt(
                     format!(
                         "INSERT INTO meshes (id, bytes, created_at, summary)
                          VALUES ($1, $2, {NOW_S}, $3)
@@ -970,19 +989,23 @@ impl Store for PgStore {
                     )
                     .as_str(),
                     &[&id, &bytes, &summary],
-                )?;
-                match inserted {
-                    Some(row) => Ok(Some((raw_mesh(&row)?, true))),
-                    None => Ok(select_mesh(c, id, "")?.map(|raw| (raw, false))),
+                )
+                .map_err(classify)?;
+            let got = match inserted {
+                Some(row) => (raw_mesh(&row).map_err(classify)?, true),
+                None => {
+                    let raw = select_mesh(&mut tx, id, "").map_err(classify)?;
+                    let raw = raw.ok_or_else(|| {
+                        StoreError::Db(format!("mesh {id} missing right after insert"))
+                    })?;
+                    (raw, false)
                 }
-            })?;
-            if let Some((raw, new)) = got {
-                return Ok((raw.into_record()?, new));
-            }
-        }
-        Err(StoreError::Db(format!(
-            "mesh {id} was deleted and added concurrently, three times in a row"
-        )))
+            };
+            file()?;
+            tx.commit().map_err(classify)?;
+            Ok(got)
+        })?;
+        Ok((raw.into_record()?, new))
     }
 
     fn get_mesh(&self, id: &str) -> Result<Option<MeshRecord>, StoreError> {
@@ -1011,23 +1034,36 @@ impl Store for PgStore {
         into_mesh_page(raws, limit)
     }
 
-    /// Locks the mesh row exclusively, then looks for a job that needs it (see `enqueue`).
-    fn delete_mesh(&self, id: &str) -> Result<MeshDeletion, StoreError> {
-        let outcome = self.exec(|c| {
-            let mut tx = c.transaction()?;
-            if select_mesh(&mut tx, id, "FOR UPDATE")?.is_none() {
+    /// Takes the mesh's advisory lock ([`lock_mesh`]) and locks its row exclusively, then
+    /// looks for a job that needs it (see `enqueue`).
+    fn delete_mesh_with_file(
+        &self,
+        id: &str,
+        file: MeshFileStep<'_>,
+    ) -> Result<MeshDeletion, StoreError> {
+        let outcome = self.run(|c| {
+            let mut tx = c.transaction().map_err(classify)?;
+            lock_mesh(&mut tx, id).map_err(classify)?;
+            if select_mesh(&mut tx, id, "FOR UPDATE")
+                .map_err(classify)?
+                .is_none()
+            {
                 return Ok(None);
             }
             let user = select_one(
                 &mut tx,
                 &format!("mesh = $1 AND status IN {UNFINISHED} ORDER BY seq"),
                 &[&id],
-            )?;
+            )
+            .map_err(classify)?;
             if user.is_none() {
-                tx.execute("DELETE FROM meshes WHERE id = $1", &[&id])?;
-                tx.execute("DELETE FROM mesh_owners WHERE id = $1", &[&id])?;
+                tx.execute("DELETE FROM meshes WHERE id = $1", &[&id])
+                    .map_err(classify)?;
+                tx.execute("DELETE FROM mesh_owners WHERE id = $1", &[&id])
+                    .map_err(classify)?;
+                file()?;
             }
-            tx.commit()?;
+            tx.commit().map_err(classify)?;
             Ok(Some(user))
         })?;
         Ok(match outcome {

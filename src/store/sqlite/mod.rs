@@ -7,7 +7,8 @@
 //!   statements), so serialising them through one [`Connection`] in a [`Mutex`] is simple,
 //!   correct and fast enough for an embedded store; it also means no `SQLITE_BUSY` between
 //!   our own threads. `busy_timeout` (5 s) still covers a second process opening the same
-//!   file (e.g. an admin tool).
+//!   file (e.g. an admin tool); past it, as when the file cannot be opened or written, the
+//!   store is [`StoreError::Unavailable`].
 //! * **Every mutation is one committed transaction.** Read-modify-write sequences (enqueue
 //!   with an idempotency key, claim, heartbeat, cancel) run in `BEGIN IMMEDIATE`
 //!   transactions, which take the write lock up front, so they are atomic even against
@@ -48,8 +49,8 @@ use super::row::{
     to_usize, RawJob, RawMesh, FINISHED, UNFINISHED,
 };
 use super::{
-    now, Enqueued, JobRecord, JobStatus, MeshDeletion, MeshPage, MeshRecord, NewJob, Page,
-    Progress, Store, StoreError,
+    now, Enqueued, JobRecord, JobStatus, MeshDeletion, MeshFileStep, MeshPage, MeshRecord, NewJob,
+    Page, Progress, Store, StoreError,
 };
 
 /// Schema migrations; entry `i` brings the database from `user_version` `i` to `i + 1`.
@@ -215,6 +216,21 @@ impl From<rusqlite::Error> for StoreError {
                     std::io::ErrorKind::StorageFull,
                     e.to_string(),
                 ))
+            }
+            // Another process holds the database's write lock past `busy_timeout`, or the
+            // file cannot be opened, written or read just now: the store is out, not the
+            // request at fault (the API answers 503 with Retry-After, workers retry).
+            rusqlite::Error::SqliteFailure(f, _)
+                if matches!(
+                    f.code,
+                    rusqlite::ErrorCode::DatabaseBusy
+                        | rusqlite::ErrorCode::DatabaseLocked
+                        | rusqlite::ErrorCode::ReadOnly
+                        | rusqlite::ErrorCode::CannotOpen
+                        | rusqlite::ErrorCode::SystemIoFailure
+                ) =>
+            {
+                StoreError::Unavailable(e.to_string())
             }
             other => StoreError::Db(other.to_string()),
         }
@@ -837,12 +853,13 @@ impl Store for SqliteStore {
         raw.map(RawJob::into_record).transpose()
     }
 
-    /// Inserts unless the id is stored, in one immediate transaction.
-    fn add_mesh(
+    /// Inserts unless the id is stored, and places the file, in one immediate transaction.
+    fn add_mesh_with_file(
         &self,
         id: &str,
         bytes: u64,
         summary: &serde_json::Value,
+        file: MeshFileStep<'_>,
     ) -> Result<(MeshRecord, bool), StoreError> {
         let bytes = i64::try_from(bytes)
             .map_err(|_| StoreError::Db(format!("mesh size {bytes} out of range")))?;
@@ -856,6 +873,7 @@ impl Store for SqliteStore {
         )?;
         let record = select_mesh(&tx, id)?
             .ok_or_else(|| StoreError::Db(format!("mesh {id} missing right after insert")))?;
+        file()?;
         tx.commit()?;
         Ok((record, inserted > 0))
     }
@@ -883,9 +901,13 @@ impl Store for SqliteStore {
         into_mesh_page(raws, limit)
     }
 
-    /// The check and the delete share one immediate transaction, which `enqueue`'s look-up
-    /// of the mesh cannot interleave with.
-    fn delete_mesh(&self, id: &str) -> Result<MeshDeletion, StoreError> {
+    /// The check, the delete and the file's removal share one immediate transaction, which
+    /// `enqueue`'s look-up of the mesh and an upload cannot interleave with.
+    fn delete_mesh_with_file(
+        &self,
+        id: &str,
+        file: MeshFileStep<'_>,
+    ) -> Result<MeshDeletion, StoreError> {
         let mut conn = self.lock();
         let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
         if select_mesh(&tx, id)?.is_none() {
@@ -901,6 +923,7 @@ impl Store for SqliteStore {
         }
         tx.execute("DELETE FROM meshes WHERE id = ?1", params![id])?;
         tx.execute("DELETE FROM mesh_owners WHERE id = ?1", params![id])?;
+        file()?;
         tx.commit()?;
         Ok(MeshDeletion::Deleted)
     }

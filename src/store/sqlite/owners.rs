@@ -6,7 +6,7 @@ use rusqlite::{params, OptionalExtension, Row, TransactionBehavior};
 use super::{select_mesh, SqliteStore};
 use crate::store::owners::{KeyAdded, KeyRecord, Owners, Quotas, Usage, KEY_COLS};
 use crate::store::row::{into_mesh_page, page_bounds, RawMesh, UNFINISHED};
-use crate::store::{now, MeshDeletion, MeshPage, MeshRecord, StoreError};
+use crate::store::{now, MeshDeletion, MeshFileStep, MeshPage, MeshRecord, StoreError};
 
 fn key_from_row(r: &Row<'_>) -> rusqlite::Result<(KeyRecord, String)> {
     Ok((
@@ -204,7 +204,12 @@ impl Owners for SqliteStore {
         into_mesh_page(raws, limit)
     }
 
-    fn release_mesh(&self, owner: &str, id: &str) -> Result<(MeshDeletion, bool), StoreError> {
+    fn release_mesh_with_file(
+        &self,
+        owner: &str,
+        id: &str,
+        file: MeshFileStep<'_>,
+    ) -> Result<(MeshDeletion, bool), StoreError> {
         let mut conn = self.lock();
         let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
         let owned: Option<i64> = tx
@@ -242,6 +247,7 @@ impl Owners for SqliteStore {
         let orphan = others == 0 && used == 0;
         if orphan {
             tx.execute("DELETE FROM meshes WHERE id = ?1", params![id])?;
+            file()?;
         }
         tx.commit()?;
         Ok((MeshDeletion::Deleted, orphan))
