@@ -395,6 +395,17 @@ new MeshUpload($('#mesh-upload'), {
   },
 });
 
+// "Upload the mesh file again" in the view of a job whose mesh was deleted: the mesh panel,
+// open, with its file chooser.
+document.addEventListener('mesh-upload-wanted', () => {
+  const panel = $('#mesh-panel');
+  panel.open = true;
+  panel.scrollIntoView({ block: 'nearest' });
+  const input = $('#mesh-file');
+  input.focus();
+  input.click();
+});
+
 /**
  * The description of the selected preset, and, when h, k or T are typed, the values the run
  * will use (the description quotes the preset's own).

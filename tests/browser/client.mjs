@@ -329,6 +329,19 @@ async function testSimulation() {
     const r = await page.request.get(base + href);
     check(r.status() === 200, `download ${href} answers 200`);
   }
+  // Each download says its size: the VTU and the summary exactly (their Content-Length, in
+  // the page's units), the streamed archive as an estimate within 5 % of its real length.
+  await page.waitForFunction(() => ['#dl-vtu', '#dl-paraview', '#dl-summary'].every((s) => document.querySelector(s)?.dataset.bytes), null, { timeout: 10_000 });
+  const { fmtBytes } = await import(new URL('../../api/client/util.js', import.meta.url).href);
+  const said = await page.$$eval('.downloads a', (as) => Object.fromEntries(as.map((a) => [a.id, { text: a.textContent, bytes: Number(a.dataset.bytes) }])));
+  const vtuBytes = (await (await page.request.get(base + vtu)).body()).length;
+  const sumBytes = (await (await page.request.get(`${base}/jobs/${jobId}/summary`)).body()).length;
+  const tarBytes = (await (await page.request.get(base + pv)).body()).length;
+  check(said['dl-vtu'].bytes === vtuBytes && said['dl-vtu'].text === `VTU (this step, ${fmtBytes(vtuBytes)})`, `the VTU link says its size: "${said['dl-vtu'].text}" (${vtuBytes} bytes)`);
+  check(said['dl-summary'].bytes === sumBytes && said['dl-summary'].text === `summary JSON (${fmtBytes(sumBytes)})`, `the summary link says its size: "${said['dl-summary'].text}" (${sumBytes} bytes)`);
+  check(Math.abs(said['dl-paraview'].bytes - tarBytes) <= 0.05 * tarBytes && said['dl-paraview'].text.includes(`about ${fmtBytes(said['dl-paraview'].bytes)}`),
+    `the archive link says about how large it is: "${said['dl-paraview'].text}" (estimate ${said['dl-paraview'].bytes}, real ${tarBytes} bytes)`);
+  check(fmtBytes(812) === '812 B' && fmtBytes(12_345) === '12 kB' && fmtBytes(2_437_000) === '2.4 MB' && fmtBytes(999_999) === '1 MB', 'sizes read as 812 B, 12 kB, 2.4 MB, 1 MB');
   await page.screenshot({ path: path.join(outDir, 'client-exp2-step8.png'), fullPage: true });
 
   // The slider: Home goes to the first step of the PVD, the initial state (step 0, t = 0,
@@ -471,6 +484,12 @@ async function testInvalidScene() {
   const rowTop = ta.y + 6 + line * 20 - (await page.$eval('#scene-text', (t) => t.scrollTop));
   check(nb && Math.abs(nb.y - rowTop) < 3 && nb.x > ta.x, `note drawn on that row (y ${nb?.y.toFixed(0)} vs ${rowTop.toFixed(0)})`);
   check(nb.y >= ta.y && nb.y + nb.height <= ta.y + ta.height, 'the note is inside the visible part of the editor');
+  // The editor is wide enough for the note: none of it is cut or hidden past the edge.
+  const fits = await note.evaluate((n) => {
+    const main = n.closest('.editor-main').getBoundingClientRect();
+    return { cut: n.scrollWidth - n.clientWidth, right: n.getBoundingClientRect().right, edge: main.right, width: main.width };
+  });
+  check(fits.cut <= 1 && fits.right <= fits.edge + 1, `the whole note fits in the editor (${fits.width.toFixed(0)} px wide; note ends at ${fits.right.toFixed(0)} of ${fits.edge.toFixed(0)}, ${fits.cut} px cut)`);
   const item = await page.textContent('#scene-errors li[data-pointer="/mesh/h"]');
   check(item.includes('/mesh/h') && item.includes(err.message), `error list entry: "${item}"`);
   await page.screenshot({ path: path.join(outDir, 'client-invalid-scene.png'), fullPage: true });
@@ -1003,6 +1022,27 @@ async function testMeshUpload() {
   await real.waitForSelector('#viewer[data-state="ready"]', { timeout: 60_000 });
   check((await real.textContent('.run-info')).includes('406 nodes · 724 triangles'), 'the scene on the uploaded mesh runs and is shown');
   await real.screenshot({ path: path.join(outDir, 'client-mesh-upload-real.png'), fullPage: true });
+
+  // (c) The mesh deleted after the run: the job still shows its summary and norms, says in
+  // words how to get the picture back, and uploading the file again brings it back.
+  const ranId = await real.getAttribute('#viewer', 'data-job');
+  const del = await context.request.delete(`${base}/meshes/${built.domain.mesh}`);
+  check(del.status() === 204, `the uploaded mesh is deleted after the run (${del.status()})`);
+  await real.reload();
+  await real.waitForSelector(`#viewer[data-state="ready"][data-job="${ranId}"]`, { timeout: 15_000 });
+  const missing = await real.locator('#mesh-missing').textContent().catch(() => '');
+  check(/upload the same \.msh file again/.test(missing) && !/POST|\/meshes|409|API/.test(await real.textContent('#viewer')),
+    `the view says to upload the file again, with no API hint: "${missing.trim().slice(0, 90)}…"`);
+  check((await real.textContent('.run-info')).includes('406 nodes · 724 triangles') && (await real.locator('#plots svg.plot path').count()) === 4,
+    'the summary and the four norm plots are still shown');
+  check((await real.locator('#mesh-canvas, #dl-vtu, #dl-paraview').count()) === 0 && (await real.locator('#dl-summary').count()) === 1,
+    'no picture and no VTU/ParaView links, the summary JSON link stays');
+  await axeCheck(real, 'on a job whose mesh was deleted');
+  const [chooser] = await Promise.all([real.waitForEvent('filechooser'), real.click('#mesh-upload-again')]);
+  check(await real.$eval('#mesh-panel', (d) => d.open), '"Upload the mesh file again" opens the mesh panel and its file chooser');
+  await chooser.setFiles(plateMsh);
+  await real.waitForSelector(`#viewer[data-state="ready"][data-job="${ranId}"] #mesh-canvas`, { timeout: 20_000 });
+  check((await real.locator('#mesh-missing').count()) === 0, 'the same file uploaded again: the picture is back');
   await real.close();
 }
 
@@ -1313,12 +1353,23 @@ async function testViewer3d() {
   const opts = await page.$$eval('#quantity option', (os) => os.map((o) => o.textContent));
   check(opts.some((o) => o.includes('per tetrahedron')), `von Mises is per tetrahedron: ${opts.join(' / ')}`);
 
-  const zeta = await stats3d(page);
+  // The first view shows the body's shape: from above (30°), the front and a side, with the
+  // box filling the view; Γ3 (the bottom) is hidden until "View Γ3".
+  const top = await stats3d(page);
+  const cam0 = JSON.parse(top.camera);
+  const off = cam0.position.map((x, i) => x - cam0.target[i]);
+  const elevation = (Math.atan2(off[2], Math.hypot(off[0], off[1])) * 180) / Math.PI;
+  check(elevation > 20 && elevation < 45 && off[1] < 0 && off[0] > 0, `the first view looks from above the front right (elevation ${elevation.toFixed(1)}°)`);
+  check(top.drawn > 0.12 * top.pixels && top.middle > 0.9 * top.middleArea, `the first view shows the body in the middle (${(100 * top.drawn / top.pixels).toFixed(1)}% of the canvas)`);
+  const zeta = await afterFrame(page, () => page.click('#view-contact'));
+  const camC = JSON.parse(zeta.camera);
+  check(camC.position[2] < camC.target[2], `"View Γ3" looks at the downward contact face from below (camera z ${camC.position[2]} < ${camC.target[2]})`);
   console.log('  3D canvas, ζ at step 4:', JSON.stringify({ ...zeta, camera: undefined }));
   check(zeta.drawn > 0.12 * zeta.pixels, `the body covers ${(100 * zeta.drawn / zeta.pixels).toFixed(1)}% of the canvas (> 12%)`);
   check(zeta.middle > 0.9 * zeta.middleArea, `the middle of the canvas is the body (${zeta.middle} of ${zeta.middleArea} pixels)`);
   check(zeta.distinct >= 24 && zeta.indexMax - zeta.indexMin >= 128, `ζ colouring not uniform: ${zeta.distinct} colour-map entries, ${zeta.indexMin}..${zeta.indexMax}`);
   check(zeta.slipPx > 20 && zeta.stickPx > 20, `Γ3 nodes drawn by state: ${zeta.slipPx} slip and ${zeta.stickPx} stick pixels (the view looks at the downward contact face)`);
+  check(top.slipPx + top.stickPx < (zeta.slipPx + zeta.stickPx) / 4, `from above the bottom contact face is hidden (${top.slipPx + top.stickPx} stick or slip pixels)`);
   const cb = await page.textContent('#colorbar');
   check(/damage ζ: min 0\.4, max 1/.test(cb), `colour bar: ${cb.trim()}`);
 
@@ -1338,8 +1389,13 @@ async function testViewer3d() {
   check(!same(noArrows, vm) && noArrows.slipPx < vm.slipPx, `without the slip direction lines: fewer slip-coloured pixels (${noArrows.slipPx} < ${vm.slipPx})`);
   const arrowsBack = await afterFrame(page, () => page.check('#show-arrows'));
   check(same(arrowsBack, vm), 'lines back: the same picture');
-  const base = await afterFrame(page, () => page.selectOption('#quantity', 'zeta'));
-  check(same(base, zeta), 'back to ζ: the same picture as before');
+  const backToZeta = await afterFrame(page, () => page.selectOption('#quantity', 'zeta'));
+  check(same(backToZeta, zeta), 'back to ζ: the same picture as before');
+  const base = await afterFrame(page, async () => {
+    await page.click('#view-reset');
+    await cameraIs(page, top.camera, true);
+  });
+  check(same(base, top), 'Reset view: the first view again');
 
   // The value under the pointer, at the centre of the canvas (on the body).
   const cbox = await page.locator('#mesh-canvas-3d').boundingBox();
@@ -1744,7 +1800,8 @@ async function testNewcomer() {
     const rest = new URL(route.request().url()).pathname.slice(`/jobs/${id}`.length);
     if (rest === '') return route.fulfill({ status: 200, contentType: 'application/json', body: JSON.stringify(job) });
     if (rest === '/summary') return route.fulfill({ status: 200, contentType: 'application/json', body: JSON.stringify(summary) });
-    if (rest === '/report.svg') return route.fulfill({ status: 200, contentType: 'image/svg+xml', body: '<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"/>' });
+    // The server's report is 980 × 470 with 11 px labels (report_svg.rs).
+    if (rest === '/report.svg') return route.fulfill({ status: 200, contentType: 'image/svg+xml', body: '<svg xmlns="http://www.w3.org/2000/svg" width="980" height="470"><text x="10" y="20" font-size="11">1/16</text></svg>' });
     return route.fulfill({ status: 404, contentType: 'application/problem+json', body: '{"title":"not found","status":404}' });
   });
   await phone.goto(`${base}/#job=${id}`);
@@ -1756,6 +1813,13 @@ async function testNewcomer() {
   const wrap = await phone.$eval('#viewer .table-wrap', (w) => ({ scroll: w.scrollWidth, client: w.clientWidth, page: document.documentElement.scrollWidth, note: getComputedStyle(w.querySelector('caption')).display, tab: w.tabIndex }));
   check(wrap.scroll > wrap.client && wrap.page <= 390 && wrap.note !== 'none' && wrap.tab === 0,
     `on a phone the table scrolls inside its frame and says so (${wrap.client} of ${wrap.scroll} px; page ${wrap.page} px)`);
+  await phone.waitForFunction(() => document.querySelector('img.report')?.complete && document.querySelector('img.report').naturalWidth > 0);
+  const rep = await phone.$eval('#report-wrap', (w) => {
+    const img = w.querySelector('img');
+    return { shown: img.getBoundingClientRect().width, natural: img.naturalWidth, scroll: w.scrollWidth, client: w.clientWidth, note: getComputedStyle(w.querySelector('.scroll-note')).display, page: document.documentElement.scrollWidth };
+  });
+  check(rep.shown >= 0.95 * rep.natural && rep.scroll > rep.client && rep.note !== 'none' && rep.page <= 390,
+    `on a phone the report keeps its size (${rep.shown} of ${rep.natural} px: 11 px labels stay 11 px) and scrolls in its frame (${rep.client} px), saying so`);
   await axeCheck(phone, 'on a paper study on a phone');
   await phone.screenshot({ path: path.join(outDir, 'client-study-phone.png'), fullPage: true });
   await phone.close();
