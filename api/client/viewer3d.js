@@ -408,7 +408,7 @@ export class View3D {
 
   /** Whether the body has a contact boundary Γ3 to look at (viewContact). */
   get hasContact() {
-    return this.contactDir !== null;
+    return !!this.contactDir;
   }
 
   /** The whole body in view, looking at Γ3 from outside the body. */

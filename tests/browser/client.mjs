@@ -585,7 +585,6 @@ async function testInvalidScene() {
   await page.reload();
   await page.waitForSelector('body[data-ready="true"]', { timeout: 15_000 });
   const after = { preset: await page.inputValue('#preset-select'), h: await page.inputValue('#ov-h'), name: await page.inputValue('#job-name'), text: await page.inputValue('#scene-text') };
-  if (after.text !== kept) console.log(`DEBUG kept ${kept.length} chars, after ${after.text.length}: ${after.text.slice(0, 300)}`);
   check(after.preset === 'paper-exp2' && after.h === '1/4' && after.name === 'my exp2 at 1/4' && after.text === kept, `a reload keeps the form and the edited scene (${after.preset}, h ${after.h}, "${after.name}")`);
   page.once('dialog', (d) => d.dismiss());
   await page.click('#edit-preset');
@@ -1058,6 +1057,7 @@ async function testMeshUpload() {
     'the summary and the four norm plots are still shown');
   check((await real.locator('#mesh-canvas, #dl-vtu, #dl-paraview').count()) === 0 && (await real.locator('#dl-summary').count()) === 1,
     'no picture and no VTU/ParaView links, the summary JSON link stays');
+  await real.screenshot({ path: path.join(outDir, 'client-mesh-deleted.png'), fullPage: true });
   await axeCheck(real, 'on a job whose mesh was deleted');
   const [chooser] = await Promise.all([real.waitForEvent('filechooser'), real.click('#mesh-upload-again')]);
   check(await real.$eval('#mesh-panel', (d) => d.open), '"Upload the mesh file again" opens the mesh panel and its file chooser');
