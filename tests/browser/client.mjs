@@ -22,9 +22,12 @@
 //    bounding box off the origin) fits; mesh lines redraw fast at 16k triangles.
 // 6. Mesh upload: the summary and group form against a mocked POST /meshes (nested and
 //    top-level summaries, a refused file's detail, drag and drop), and, when the server under
-//    test has POST /meshes, the real upload of plate-with-hole.msh run as a scene.
+//    test has POST /meshes, the real upload of plate-with-hole.msh run as a scene; once that
+//    mesh is deleted the job still shows its summary and norms and asks (in words) for the
+//    file again, whose upload brings the picture back.
 // 7. The 3D viewer (three.js, WebGL in SwiftShader) against a mocked 3D job (page.route), and
-//    a real 3D job of the server (box-exp3): the body is drawn and coloured.
+//    a real 3D job of the server (box-exp3): the body is drawn and coloured, the first view
+//    from above the front right, "View Γ3" turns to the contact face.
 // 7 (detail). The 3D viewer against a mocked 3D job: page.route
 //    answers the job, list, summary, stored steps and fields of a fake id with a Kuhn box
 //    (generated here) and synthetic fields; from the WebGL canvas's pixels: the body is
