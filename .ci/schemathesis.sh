@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Checks the served HTTP contract (GET /openapi.yaml) against the debug server with
-# schemathesis: the coverage, fuzzing and stateful phases (the stateful one follows the links
-# from POST /jobs to the job routes), a fixed seed and a bounded number of examples. Any
-# failure fails CI. The server runs on an ephemeral loopback port with a throwaway data
+# schemathesis: every check (`--checks all`: status codes, content types, headers and bodies
+# against the contract, schema-valid requests accepted and invalid ones refused, Allow on 405,
+# use after delete, ...; the per-route exceptions are in schemathesis.toml), the coverage,
+# fuzzing and stateful phases (the stateful one follows the links from POST /jobs to the job
+# routes), a fixed seed and a bounded number of examples. Any failure fails CI. The server runs on an ephemeral loopback port with a throwaway data
 # directory, one worker and small per-job limits, so the jobs it accepts finish in
 # milliseconds.
 # Needs python3 with venv (.ci/run installs it) and the package registry for pip.
@@ -49,7 +51,7 @@ fi
 status=0
 "$venv/bin/schemathesis" --config-file .ci/schemathesis.toml run \
   "$url/openapi.yaml" --wait-for-schema 30 \
-  --phases coverage,fuzzing,stateful --seed "$seed" --max-examples "$examples" \
+  --checks all --phases coverage,fuzzing,stateful --seed "$seed" --max-examples "$examples" \
   --workers 1 --no-color --report-dir target/schemathesis-report --report junit \
   || status=$?
 if grep -q panicked "$data/server.log"; then

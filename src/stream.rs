@@ -2,8 +2,9 @@
 //! body, so large fields (JSON, VTU, archives) are never built whole in memory and the
 //! rendering runs on the blocking pool, not on the async runtime's threads.
 
+use crate::problem::Problem;
 use axum::body::{Body, Bytes};
-use axum::http::{header, HeaderValue};
+use axum::http::{header, HeaderValue, Method};
 use axum::response::Response;
 use std::io::{self, Write};
 use tokio::sync::mpsc;
@@ -47,4 +48,43 @@ pub fn blocking_body(
     resp.headers_mut()
         .insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
     resp
+}
+
+/// Counts the bytes written to it, keeping none.
+struct Counter(u64);
+
+impl Write for Counter {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.0 += buf.len() as u64;
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+/// [`blocking_body`] for GET; for HEAD the same headers with the body's length
+/// (`Content-Length`, counted by running `render` on a blocking thread into a counter) and no
+/// body, so a client can say how large a download is before fetching it.
+pub async fn blocking_body_or_length(
+    method: &Method,
+    content_type: &'static str,
+    render: impl FnOnce(&mut dyn Write) -> io::Result<()> + Send + 'static,
+) -> Result<Response, Problem> {
+    if method != Method::HEAD {
+        return Ok(blocking_body(content_type, render));
+    }
+    let bytes = tokio::task::spawn_blocking(move || {
+        let mut counter = Counter(0);
+        render(&mut counter).map(|_| counter.0)
+    })
+    .await
+    .map_err(|e| Problem::internal(format!("rendering task failed: {e}")))?
+    .map_err(|e| Problem::internal(e.to_string()))?;
+    let mut resp = Response::new(Body::empty());
+    let h = resp.headers_mut();
+    h.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+    h.insert(header::CONTENT_LENGTH, HeaderValue::from(bytes));
+    Ok(resp)
 }

@@ -194,6 +194,19 @@ fn whole_lifecycle_over_http() {
             && vtu.contains(&format!("NumberOfCells=\"{triangles}\""))
     );
     check_vtu_arrays(&vtu, nodes, triangles);
+    // HEAD says the streamed VTU's length (the browser shows it beside the link), no body.
+    let head = http(a, "HEAD", &format!("/jobs/{id}/fields/8.vtu"), &[], b"");
+    assert_eq!(head.status, 200);
+    assert_eq!(head.header("content-type"), Some("application/xml"));
+    assert_eq!(
+        head.header("content-length"),
+        Some(vtu.len().to_string().as_str())
+    );
+    assert!(head.body.is_empty());
+    assert_eq!(
+        http(a, "HEAD", &format!("/jobs/{id}/fields/99.vtu"), &[], b"").status,
+        404
+    );
     // σ is the cells' symmetric tensor (xx, yy, zz, xy, yz, xz): the stored (xx, yy, xy) of
     // the fields JSON, bit for bit, and zeros.
     let xml = roxmltree::Document::parse(&vtu).expect("the VTU is well-formed XML");

@@ -2,6 +2,8 @@
 // an RFC 9457 problem+json document; it is thrown as an ApiProblem so callers can show
 // `detail` and, for an invalid scene (422), the `errors[]` entries with their JSON pointers.
 
+import { fmtBytes } from './util.js';
+
 export class ApiProblem extends Error {
   constructor(status, problem) {
     super(problem.detail || problem.title || `HTTP ${status}`);
@@ -180,6 +182,29 @@ export async function keyedImage(img, path) {
   }
   const resp = await authFetch(path);
   if (resp.ok) img.src = URL.createObjectURL(await resp.blob());
+}
+
+/**
+ * The size in bytes of the resource at `path` (its Content-Length, from a HEAD request), or
+ * null when the server does not say (a streamed archive) or refuses.
+ */
+export async function contentLength(path) {
+  try {
+    const resp = await authFetch(path, { method: 'HEAD' });
+    const n = Number(resp.headers.get('Content-Length'));
+    return resp.ok && resp.headers.has('Content-Length') && Number.isFinite(n) ? n : null;
+  } catch {
+    return null;
+  }
+}
+
+/** Appends the size of the resource at `path` to link `a`'s `text` ("summary JSON (12 kB)") once known. */
+export async function sizeInto(a, text, path) {
+  const bytes = await contentLength(path);
+  if (bytes !== null) {
+    a.textContent = `${text} (${fmtBytes(bytes)})`;
+    a.dataset.bytes = String(bytes);
+  }
 }
 
 export const getJson = async (path) => (await request('GET', path)).body;

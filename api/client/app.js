@@ -324,10 +324,15 @@ async function presetDoc(withH = true) {
   return doc;
 }
 
-/** Loads the selected preset into the editor, with the form's h, k, T written into it. */
-async function loadPresetIntoEditor(open) {
+/**
+ * Loads the selected preset into the editor, with the form's h, k, T written into it.
+ * `following`: only while the editor still follows the form once the preset is read (the
+ * user may have typed into it meanwhile).
+ */
+async function loadPresetIntoEditor(open, following = false) {
   try {
     const doc = await presetDoc();
+    if (following && (editor.edited || !editorFromForm)) return;
     editor.text = JSON.stringify(doc, null, 2);
     editorFromForm = true;
     if (open) {
@@ -395,6 +400,17 @@ new MeshUpload($('#mesh-upload'), {
   },
 });
 
+// "Upload the mesh file again" in the view of a job whose mesh was deleted: the mesh panel,
+// open, with its file chooser.
+document.addEventListener('mesh-upload-wanted', () => {
+  const panel = $('#mesh-panel');
+  panel.open = true;
+  panel.scrollIntoView({ block: 'nearest' });
+  const input = $('#mesh-file');
+  input.focus();
+  input.click();
+});
+
 /**
  * The description of the selected preset, and, when h, k or T are typed, the values the run
  * will use (the description quotes the preset's own).
@@ -434,7 +450,7 @@ let follow = 0;
 function editorFollowsForm() {
   clearTimeout(follow);
   follow = setTimeout(() => {
-    if (!editor.edited && editorFromForm) loadPresetIntoEditor(false);
+    if (!editor.edited && editorFromForm) loadPresetIntoEditor(false, true);
   }, 150);
 }
 

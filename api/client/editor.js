@@ -87,7 +87,14 @@ export class SceneEditor {
 
   /** Shows the server's field errors ([{pointer, message}]). */
   showErrors(errors) {
-    this.errors = errors.slice();
+    // The same message twice for one pointer is said once.
+    const seen = new Set();
+    this.errors = errors.filter((e) => {
+      const key = `${e.pointer}\n${e.message}`;
+      if (seen.has(key)) return false;
+      seen.add(key);
+      return true;
+    });
     this.render();
     // Bring the first error into view: users should not have to hunt for it.
     const first = this.notes.querySelector('.note');
@@ -158,7 +165,11 @@ export class SceneEditor {
               dataset: { line: String(line), pointer: errs.map((e) => e.pointer ?? '').join(' ') },
               title: errs.map((e) => e.message).join('\n'),
             },
-            errs.map((e) => (e.pointer === null ? e.message : `${e.pointer}: ${e.message}`)).join(' · '),
+            // On the line of its own key a message needs no pointer (it would take a third
+            // of the room); one placed elsewhere, or beside another key's, names its key.
+            errs.map((e) => (e.pointer === null || (e.exact && new Set(errs.map((x) => x.pointer)).size === 1)
+              ? e.message
+              : `${e.pointer}: ${e.message}`)).join(' · '),
           ),
         ),
       ),

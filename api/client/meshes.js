@@ -154,6 +154,8 @@ export class MeshUpload {
       : `Uploaded ${file.name}: mesh ${String(s.id).slice(0, 12)}.`);
     this.show();
     this.root.dataset.state = 'ready';
+    // A job shown without its (deleted) mesh may be drawable again.
+    document.dispatchEvent(new CustomEvent('mesh-uploaded', { detail: { id: s.id } }));
   }
 
   /** The summary table and the group form. */

@@ -32,6 +32,12 @@ const PAPER = {
   },
 };
 
+/** A download link that works with a key and says its size once known. */
+function sized(a) {
+  api.sizeInto(a, a.textContent, a.getAttribute('href'));
+  return api.keyedLink(a);
+}
+
 export class StudyView {
   constructor(root) {
     this.root = root;
@@ -81,8 +87,8 @@ export class StudyView {
       el('div', { class: 'view-head' },
         el('h2', {}, job.scene || 'study', ' ', el('small', {}, id.slice(0, 8))),
         el('nav', { class: 'downloads', 'aria-label': 'downloads' },
-          api.keyedLink(el('a', { href: `/jobs/${id}/summary`, download: `study-${id.slice(0, 8)}.json` }, 'summary JSON')),
-          api.keyedLink(el('a', { href: report, download: `report-${id.slice(0, 8)}.svg` }, 'report SVG')))),
+          sized(el('a', { id: 'dl-summary', href: `/jobs/${id}/summary`, download: `study-${id.slice(0, 8)}.json` }, 'summary JSON')),
+          sized(el('a', { id: 'dl-report', href: report, download: `report-${id.slice(0, 8)}.svg` }, 'report SVG')))),
       el('p', { class: 'run-info' },
         `Convergence in ${vary === 'hk' ? 'h = k' : vary || '?'} against the reference h = ${fmtStep(ref.h)}, k = ${fmtStep(ref.k)} `,
         `(|w|_V = ${fmt(ref.w_V, 10)}, |ζ|_Z0 = ${fmt(ref.zeta_Z0, 10)}, ${fmtSeconds(ref.seconds)}). `,
@@ -96,7 +102,11 @@ export class StudyView {
           el('caption', { class: 'scroll-note' }, 'Scroll sideways for every column →'),
           el('thead', {}, el('tr', {}, heads.map((h) => el('th', { scope: 'col' }, h)))),
           el('tbody', {}, rows))),
-      img,
+      // On a phone the report keeps its own size (its 11 px labels would shrink to 4 px at
+      // the screen's width) and scrolls sideways in its frame, as the table does.
+      el('div', { class: 'report-wrap', id: 'report-wrap', tabindex: '0', role: 'region', 'aria-label': 'report (scrolls sideways on a narrow screen)' },
+        el('p', { class: 'scroll-note' }, 'Scroll sideways for the whole report →'),
+        img),
     );
     api.keyedImage(img, report);
     this.root.dataset.state = 'ready';

@@ -66,3 +66,17 @@ export function fmtSeconds(s) {
   if (s < 120) return `${s.toFixed(1)} s`;
   return `${Math.floor(s / 60)} min ${Math.round(s % 60)} s`;
 }
+
+/** A size in bytes as people read it: "812 B", "12 kB", "2.4 MB" (SI units, 2 significant digits). */
+export function fmtBytes(n) {
+  if (typeof n !== 'number' || !Number.isFinite(n) || n < 0) return '–';
+  if (n < 995) return `${Math.round(n)} B`;
+  const units = ['kB', 'MB', 'GB', 'TB'];
+  let v = n / 1000;
+  let i = 0;
+  while (v >= 995 && i < units.length - 1) {
+    v /= 1000;
+    i++;
+  }
+  return `${Number(v.toPrecision(2))} ${units[i]}`;
+}

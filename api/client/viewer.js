@@ -15,7 +15,7 @@
 // same, with u, w of three components per node and von Mises per tetrahedron.
 
 import * as api from './api.js';
-import { el, fmt, fmtStep, fmtSeconds, distinctDigits, tickDigits } from './util.js';
+import { el, fmt, fmtBytes, fmtStep, fmtSeconds, distinctDigits, tickDigits } from './util.js';
 import { drawField, probe, partKinds, edgeKind, boundingBox, KINDS, STICK, SLIP } from './render.js';
 import { cssGradient, niceRange, niceTicks, LUT } from './colormap.js';
 import { linePlot } from './plots.js';
@@ -47,16 +47,21 @@ export class SimulationView {
     this.root.dataset.state = 'loading';
     this.root.dataset.job = id;
     this.root.replaceChildren(el('p', { class: 'hint' }, 'Loading results…'));
-    let summary, steps, first;
-    try {
-      [summary, steps, first] = await Promise.all([api.summary(id), api.storedSteps(id), api.fields(id, 'last', true)]);
-    } catch (e) {
-      if (this.job !== job) return;
-      this.root.dataset.state = 'error';
-      this.root.replaceChildren(el('p', { class: 'error' }, `Cannot load the results: ${e.message}`));
+    const answers = await Promise.allSettled([api.summary(id), api.storedSteps(id), api.fields(id, 'last', true)]);
+    if (this.job !== job) return; // another job was opened meanwhile
+    const [summary, steps, first] = answers.map((a) => a.value);
+    const refused = answers.find((a) => a.status === 'rejected')?.reason;
+    // An uploaded mesh deleted after the run: the summary (and the norms in it) are kept,
+    // while everything drawn on the mesh answers 409 until the file is uploaded again.
+    if (summary && answers[2].status === 'rejected' && refused?.status === 409) {
+      this.openWithoutMesh(job, summary);
       return;
     }
-    if (this.job !== job) return; // another job was opened meanwhile
+    if (refused) {
+      this.root.dataset.state = 'error';
+      this.root.replaceChildren(el('p', { class: 'error' }, `Cannot load the results: ${refused.message}`));
+      return;
+    }
     this.mesh = first.mesh;
     delete first.mesh;
     this.dim = this.mesh.dim === 3 ? 3 : 2;
@@ -86,10 +91,83 @@ export class SimulationView {
     this.root.dataset.state = 'ready';
   }
 
+  /**
+   * The view of a job whose uploaded mesh was deleted: what the summary holds (run info,
+   * warnings, the norms over time) and how to get the picture back. Uploading a mesh (any:
+   * the server knows whether it is this job's) opens the job again.
+   */
+  openWithoutMesh(job, summary) {
+    const id = job.id;
+    this.summary = summary;
+    this.meshUploaded = () => {
+      if (this.job === job) this.open(job);
+    };
+    document.addEventListener('mesh-uploaded', this.meshUploaded);
+    const plots = el('div', { class: 'plots', id: 'plots' });
+    this.root.replaceChildren(
+      el('div', { class: 'view-head' },
+        el('h2', {}, job.scene || 'simulation', ' ', el('small', {}, id.slice(0, 8))),
+        el('nav', { class: 'downloads', 'aria-label': 'downloads' }, this.summaryLink(id))),
+      this.runInfo(summary, null),
+      ...(summary.warnings || []).map((w) => el('p', { class: 'warning' }, w)),
+      el('div', { class: 'mesh-missing', id: 'mesh-missing' },
+        el('p', {}, 'The mesh file this job ran on has been deleted, so its picture, the time slider and the VTU and ParaView downloads are not available. '
+          + 'The summary and the norms over time below are kept.'),
+        el('p', {}, 'To see the picture again, upload the same .msh file again: ',
+          el('button', {
+            id: 'mesh-upload-again', type: 'button', class: 'small',
+            onclick: () => document.dispatchEvent(new CustomEvent('mesh-upload-wanted')),
+          }, 'Upload the mesh file again'))),
+      el('h3', { class: 'plots-title' }, 'Norms over time'),
+      plots,
+    );
+    this.normPlots(plots, summary, null);
+    this.root.dataset.mesh = 'missing';
+    this.root.dataset.state = 'ready';
+  }
+
+  /** The run's figures from its summary (`mesh`: the fields' mesh when it was read). */
+  runInfo(summary, mesh) {
+    const m = summary.mesh || {};
+    const t = summary.time || {};
+    const tets = mesh?.tetrahedra?.length ?? m.tetrahedra;
+    let cells;
+    if (mesh?.dim === 3) cells = `${mesh.nodes.length} nodes · ${tets ?? '?'} tetrahedra · ${mesh.boundary_faces.length} boundary triangles`;
+    else if (tets != null) cells = `${m.nodes} nodes · ${tets} tetrahedra`;
+    else cells = `${m.nodes} nodes · ${m.triangles} triangles`;
+    return el('p', { class: 'run-info' },
+      `${cells} · h = ${fmtStep(m.h)} · k = ${fmtStep(t.k)} · ${t.steps} steps · `,
+      `solved in ${fmtSeconds(summary.timing?.solve_s)} · ${summary.stats?.steps_with_slip ?? 0} steps with slip`);
+  }
+
+  /** The norms over time from the summary, in `root`; `onPick(t)`: a click shows that time. */
+  normPlots(root, summary, onPick) {
+    const s = summary.steps || [];
+    const ts = s.map((r) => r.t);
+    return [
+      ['|w|_V', 'w_V', '#1864ab'],
+      ['|u|_V', 'u_V', '#5f3dc4'],
+      ['|ζ|_Z0', 'zeta_L2', '#2b8a3e'],
+      ['min ζ', 'zeta_min', '#c92a2a'],
+    ].map(([title, key, colour]) => linePlot(root, { title, xs: ts, ys: s.map((r) => r[key]), colour, ...(onPick ? { onPick } : {}) }));
+  }
+
+  /** The summary's download link, with its size once known. */
+  summaryLink(id) {
+    const path = `/jobs/${id}/summary`;
+    const a = api.keyedLink(el('a', { id: 'dl-summary', href: path, download: `summary-${id.slice(0, 8)}.json` }, 'summary JSON'));
+    api.sizeInto(a, 'summary JSON', path);
+    return a;
+  }
+
   close() {
+    this.playing = false; // stopped, not paused: nothing is asked about this job any more
     this.stop();
     this.token++;
     this.job = null;
+    if (this.meshUploaded) document.removeEventListener('mesh-uploaded', this.meshUploaded);
+    this.meshUploaded = null;
+    delete this.root.dataset.mesh;
     this.d3?.dispose();
     this.d3 = null;
     this.resizeObserver?.disconnect();
@@ -125,7 +203,11 @@ export class SimulationView {
     const viewButtons = el('span', { class: 'view-buttons', role: 'group', 'aria-label': 'view' },
       el('button', { id: 'zoom-out', type: 'button', class: 'small', title: 'zoom out', 'aria-label': 'zoom out', onclick: () => this.zoomBy(1 / 1.5) }, '−'),
       el('button', { id: 'zoom-in', type: 'button', class: 'small', title: 'zoom in', 'aria-label': 'zoom in', onclick: () => this.zoomBy(1.5) }, '+'),
-      el('button', { id: 'view-reset', type: 'button', class: 'small', title: this.d3 ? 'show the whole body from the initial direction (Home on the picture)' : 'show the whole body', onclick: () => this.resetView() }, 'Reset view'));
+      el('button', { id: 'view-reset', type: 'button', class: 'small', title: this.d3 ? 'show the whole body from the initial direction (Home on the picture)' : 'show the whole body', onclick: () => this.resetView() }, 'Reset view'),
+      // 3D: the initial view is from above; Γ3 (often the bottom) is one click away.
+      this.d3?.hasContact
+        ? el('button', { id: 'view-contact', type: 'button', class: 'small', title: 'look at the contact boundary Γ3 (stick and slip) from outside the body', onclick: () => this.d3.viewContact() }, 'View Γ3')
+        : null);
     // 3D only: faces coloured by the kind of their boundary part; the slip direction.
     this.partsBox = el('input', { id: 'show-parts', type: 'checkbox', onchange: () => this.draw() });
     this.arrowsBox = el('input', { id: 'show-arrows', type: 'checkbox', checked: true, onchange: () => this.draw() });
@@ -141,19 +223,20 @@ export class SimulationView {
     this.playBtn = el('button', { id: 'play', type: 'button', class: 'small', onclick: () => (this.playing ? this.stop() : this.play()) }, '▶ Play');
     this.stepLabel = el('span', { id: 'step-label', 'aria-live': 'off' });
     this.vtuLink = api.keyedLink(el('a', { id: 'dl-vtu', download: '' }, 'VTU (this step)'));
+    // ParaView needs the collection and its VTU files side by side: the archive has both,
+    // with the PVD naming the files by relative paths, so it opens offline.
+    this.archiveLink = api.keyedLink(el('a', {
+      id: 'dl-paraview', href: `/jobs/${id}/archive.tar`, download: `contact-sim-${id.slice(0, 8)}.tar`,
+      title: 'a folder with result.pvd and every stored step as VTU: extract it and open result.pvd in ParaView',
+    }, 'ParaView (PVD + VTU, .tar)'));
+    this.sizes = new Map(); // step -> bytes of its VTU
+    this.estimateArchive();
     const plots = el('div', { class: 'plots', id: 'plots' });
     this.gammaPlots = el('div', { class: 'plots', id: 'gamma3-plots' });
     this.gammaNote = el('p', { class: 'hint', id: 'gamma3-note' });
     const picture = this.d3 ? this.d3.element : el('div', { class: 'canvas-wrap' }, this.canvas, this.probeBox);
 
-    const m = summary.mesh || {};
-    const t = summary.time || {};
-    const cells = this.d3
-      ? `${this.mesh.nodes.length} nodes · ${this.mesh.tetrahedra?.length ?? m.tetrahedra ?? '?'} tetrahedra · ${this.mesh.boundary_faces.length} boundary triangles`
-      : `${m.nodes} nodes · ${m.triangles} triangles`;
-    const info = el('p', { class: 'run-info' },
-      `${cells} · h = ${fmtStep(m.h)} · k = ${fmtStep(t.k)} · ${t.steps} steps · `,
-      `solved in ${fmtSeconds(summary.timing?.solve_s)} · ${summary.stats?.steps_with_slip ?? 0} steps with slip`);
+    const info = this.runInfo(summary, this.mesh);
     const warnings = (summary.warnings || []).map((w) => el('p', { class: 'warning' }, w));
     // The (2h, 2k) error bar, when the scene asked for one ("error_estimate": true).
     const est = summary.error_estimate?.final;
@@ -170,11 +253,8 @@ export class SimulationView {
         el('h2', {}, job.scene || 'simulation', ' ', el('small', {}, id.slice(0, 8))),
         el('nav', { class: 'downloads', 'aria-label': 'downloads' },
           this.vtuLink,
-          // ParaView needs the collection and its VTU files side by side: the archive has
-          // both, with the PVD naming the files by relative paths, so it opens offline.
-          api.keyedLink(el('a', { id: 'dl-paraview', href: `/jobs/${id}/archive.tar`, download: `contact-sim-${id.slice(0, 8)}.tar`,
-            title: 'a folder with result.pvd and every stored step as VTU: extract it and open result.pvd in ParaView' }, 'ParaView (PVD + VTU, .tar)')),
-          api.keyedLink(el('a', { href: `/jobs/${id}/summary`, download: `summary-${id.slice(0, 8)}.json` }, 'summary JSON')),
+          this.archiveLink,
+          this.summaryLink(id),
           el('button', { id: 'export-png', type: 'button', class: 'small', title: 'the picture with its colour bar, as a PNG file', onclick: () => this.exportPng() }, 'PNG of the view'))),
       info,
       ...(estimate ? [estimate] : []),
@@ -197,7 +277,7 @@ export class SimulationView {
         'Γ3 contact: ', el('span', { class: 'swatch', style: `background:${STICK}` }), ' stick ',
         el('span', { class: 'swatch', style: `background:${SLIP}` }), ' slip ', this.contactInfo,
         el('span', { class: 'hint' }, this.d3
-          ? ' · lines from slipping nodes: tangential velocity · grey: edges of the reference configuration · drag orbits, right drag pans, wheel zooms; on the focused picture the arrow keys orbit, Shift + arrows pan, + − zoom, Home resets'
+          ? ' · lines from slipping nodes: tangential velocity · grey: edges of the reference configuration · "View Γ3" looks at the contact face · drag orbits, right drag pans, wheel zooms; on the focused picture the arrow keys orbit, Shift + arrows pan, + − zoom, Home resets'
           : ' · dashed: reference configuration')),
       el('div', { class: 'time' }, this.playBtn, this.slider, this.stepLabel),
       el('h3', { class: 'plots-title' }, 'Norms over time ', el('span', { class: 'hint' }, '(click to show that time)')),
@@ -209,14 +289,7 @@ export class SimulationView {
     this.onRangeInputs(false);
 
     // Norms over time, with a marker at the displayed step.
-    const s = summary.steps || [];
-    const ts = s.map((r) => r.t);
-    this.plots = [
-      ['|w|_V', 'w_V', '#1864ab'],
-      ['|u|_V', 'u_V', '#5f3dc4'],
-      ['|ζ|_Z0', 'zeta_L2', '#2b8a3e'],
-      ['min ζ', 'zeta_min', '#c92a2a'],
-    ].map(([title, key, colour]) => linePlot(plots, { title, xs: ts, ys: s.map((r) => r[key]), colour, onPick: (t) => this.seek(t) }));
+    this.plots = this.normPlots(plots, summary, (t) => this.seek(t));
 
     // Redraw at the new size when the layout changes (window resize, narrow screens). The
     // wrapper's width is watched, not the canvas, whose height draw() itself sets.
@@ -405,10 +478,53 @@ export class SimulationView {
     this.stepLabel.textContent = `step ${doc.n} of ${this.summary.time?.steps ?? '?'} · t = ${fmt(doc.t)}`;
     this.vtuLink.href = `/jobs/${this.job.id}/fields/${doc.n}.vtu`;
     this.vtuLink.download = `contact-sim-${this.job.id.slice(0, 8)}-step-${doc.n}.vtu`;
+    this.vtuSize(doc.n);
     this.slider.setAttribute('aria-valuetext', `step ${doc.n}, t = ${fmt(doc.t)}`);
     for (const p of this.plots) p.setMarker(doc.t);
     this.drawGamma3();
     this.draw();
+  }
+
+  /** The size in bytes of step n's VTU (one HEAD request per step), or null. */
+  vtuBytes(n) {
+    if (!this.sizes.has(n)) this.sizes.set(n, api.contentLength(`/jobs/${this.job.id}/fields/${n}.vtu`));
+    return this.sizes.get(n);
+  }
+
+  /**
+   * Says the size of the shown step's VTU in its link; not while playing (every frame would
+   * ask): the link says it when the playback stops.
+   */
+  async vtuSize(n) {
+    const link = this.vtuLink;
+    const job = this.job;
+    link.textContent = 'VTU (this step)';
+    delete link.dataset.bytes;
+    if (this.playing && !this.sizes.has(n)) return;
+    const bytes = await this.vtuBytes(n);
+    if (bytes === null || this.job !== job || this.current?.n !== n) return;
+    link.textContent = `VTU (this step, ${fmtBytes(bytes)})`;
+    link.dataset.bytes = String(bytes);
+  }
+
+  /**
+   * Says about how large the ParaView archive is: the server streams it (no length), so it
+   * is estimated from the VTU sizes of the first and the last stored step (every step stores
+   * the same arrays; the initial state may store fewer) and the tar framing.
+   */
+  async estimateArchive() {
+    const job = this.job;
+    const steps = this.steps;
+    const first = steps[0].n, last = steps[steps.length - 1].n;
+    const [a, b, summary] = await Promise.all([this.vtuBytes(first), this.vtuBytes(last), api.contentLength(`/jobs/${job.id}/summary`)]);
+    if (a === null || b === null || this.job !== job) return;
+    // A tar member is a 512-byte header and its data padded to 512 bytes.
+    const member = (bytes) => 512 + Math.ceil(bytes / 512) * 512;
+    const vtus = steps.length > 1 ? member(a) + (steps.length - 1) * member(b) : member(b);
+    // scene.json (a few kB), summary.json, result.pvd (one line per step) and the end blocks.
+    const total = vtus + member(2048) + member(summary ?? 0) + member(100 + 90 * steps.length) + 1024;
+    this.archiveLink.textContent = `ParaView (PVD + VTU, .tar, about ${fmtBytes(total)})`;
+    this.archiveLink.dataset.bytes = String(total);
   }
 
   /** Shows the stored step nearest to time t (a click on a norm plot). */
@@ -733,7 +849,9 @@ export class SimulationView {
   }
 
   stop() {
+    const was = this.playing;
     this.playing = false;
     if (this.playBtn) this.playBtn.textContent = '▶ Play';
+    if (was && this.current && this.sizes) this.vtuSize(this.current.n);
   }
 }

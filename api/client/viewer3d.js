@@ -26,8 +26,11 @@ import { LUT } from './colormap.js';
 import { KINDS, STICK, SLIP, partKinds, edgeKind } from './render.js';
 import { el, fmt } from './util.js';
 
-/** Direction from the body's centre to the camera in the initial view (z is up; see viewDir). */
-const VIEW_DIR = new THREE.Vector3(0.55, -1.25, 0.7).normalize();
+/**
+ * Direction from the body's centre to the camera in the initial view (z is up): from the
+ * front right and 30° above, so the top, front and right faces show the body's shape.
+ */
+const VIEW_DIR = new THREE.Vector3(1, -1.6, 1.1).normalize();
 const FOV = 30;
 /** Orbit step of the arrow keys (radians) and pan step (fraction of the view's height). */
 const KEY_ANGLE = Math.PI / 18;
@@ -258,8 +261,8 @@ export class View3D {
     this.points = new THREE.Points(new THREE.BufferGeometry(), this.pointMaterial);
     this.arrows = new THREE.LineSegments(new THREE.BufferGeometry(), lineMaterial(SLIP, 1));
     this.nodeNormals = this.boundaryNormals();
-    // The initial view looks from above, or from below when the contact faces (Γ3, where
-    // stick and slip are shown) face downwards (their mean normal).
+    // The initial view looks from above; "Contact face" looks at Γ3 (where stick and slip
+    // are shown) from outside, along its mean outward normal: from below when it faces down.
     const down = new THREE.Vector3();
     const a = new THREE.Vector3(), b = new THREE.Vector3(), c = new THREE.Vector3();
     const contactNodes = new Set();
@@ -275,7 +278,15 @@ export class View3D {
     // The typical distance between contact nodes (the square root of Γ3's area per node).
     this.contactSpacing = contactNodes.size ? Math.sqrt(area / contactNodes.size) : this.size / 20;
     this.viewDir = VIEW_DIR.clone();
-    if (down.lengthSq() > 0 && down.normalize().z < -0.5) this.viewDir.z *= -1;
+    this.contactDir = null;
+    if (down.lengthSq() > 0) {
+      const n = down.normalize();
+      // Γ3 seen obliquely, as the initial view sees the top: the initial direction mirrored
+      // when Γ3 faces down, else between its normal and the initial direction.
+      if (n.z < -0.5) this.contactDir = new THREE.Vector3(VIEW_DIR.x, VIEW_DIR.y, -VIEW_DIR.z);
+      else if (n.z > 0.5) this.contactDir = VIEW_DIR.clone();
+      else this.contactDir = n.clone().multiplyScalar(1.5).add(VIEW_DIR).normalize();
+    }
 
     this.scene = new THREE.Scene();
     this.scene.add(this.surface, this.edgeLines, this.reference, this.points, this.arrows);
@@ -395,18 +406,32 @@ export class View3D {
     this.requestRender();
   }
 
+  /** Whether the body has a contact boundary Γ3 to look at (viewContact). */
+  get hasContact() {
+    return !!this.contactDir;
+  }
+
+  /** The whole body in view, looking at Γ3 from outside the body. */
+  viewContact() {
+    if (!this.ok || !this.contactDir) return;
+    this.fit(this.contactDir);
+    this.controls.update();
+    this.requestRender();
+  }
+
   /**
-   * Looks at the body from `viewDir`, from the least distance at which the reference body and
-   * the deformed surface (at the current factor) are inside the view with a small margin.
+   * Looks at the body from direction `dir` (default: the initial one), from the least
+   * distance at which the reference body and the deformed surface (at the current factor)
+   * are inside the view with a small margin.
    */
-  fit() {
+  fit(dir = this.viewDir) {
     const p = this.positions.array;
     const box = this.box.clone();
     const v = new THREE.Vector3();
     for (let i = 0; i < p.length; i += 3) box.expandByPoint(v.set(p[i], p[i + 1], p[i + 2]));
     const centre = box.getCenter(new THREE.Vector3());
     // The camera's axes: `back` towards the camera, `right` and `up` on the screen.
-    const back = this.viewDir;
+    const back = dir;
     const right = new THREE.Vector3().crossVectors(this.camera.up, back).normalize();
     const up = new THREE.Vector3().crossVectors(back, right);
     const tv = 0.9 * Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2));

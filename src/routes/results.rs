@@ -14,9 +14,9 @@ use crate::meshes::Meshes;
 use crate::problem::Problem;
 use crate::state::AppState;
 use crate::store::{JobRecord, JobStatus};
-use crate::stream::blocking_body;
+use crate::stream::{blocking_body, blocking_body_or_length};
 use axum::extract::{Path, State};
-use axum::http::{header, HeaderValue};
+use axum::http::{header, HeaderValue, Method};
 use axum::response::{IntoResponse, Response};
 use contact_core::mesh::AnyMesh;
 use contact_core::output::fields::MeshJson;
@@ -385,10 +385,11 @@ pub async fn fields(
     }))
 }
 
-/// `/jobs/{id}/fields/{N|last}.vtu` (0.vtu: the initial state).
+/// `/jobs/{id}/fields/{N|last}.vtu` (0.vtu: the initial state); HEAD answers its length.
 pub async fn vtu(
     State(state): State<AppState>,
     Path((id, file)): Path<(String, String)>,
+    method: Method,
 ) -> Result<Response, Problem> {
     let spec = file
         .strip_suffix(".vtu")
@@ -406,9 +407,11 @@ pub async fn vtu(
         Ok((load_step(&st, &rec, n)?, mesh_of(&st.rt.meshes, &rec)?.0))
     })
     .await?;
-    Ok(blocking_body("application/xml", move |w| {
+    // HEAD says the file's length (the browser shows it beside the link).
+    blocking_body_or_length(&method, "application/xml", move |w| {
         write_mesh_vtu(w, &mesh, &f)
-    }))
+    })
+    .await
 }
 
 /// `/jobs/{id}/result.pvd`: step 0 (t = 0) and every stored step, each referencing its VTU by

@@ -22,9 +22,12 @@
 //    bounding box off the origin) fits; mesh lines redraw fast at 16k triangles.
 // 6. Mesh upload: the summary and group form against a mocked POST /meshes (nested and
 //    top-level summaries, a refused file's detail, drag and drop), and, when the server under
-//    test has POST /meshes, the real upload of plate-with-hole.msh run as a scene.
+//    test has POST /meshes, the real upload of plate-with-hole.msh run as a scene; once that
+//    mesh is deleted the job still shows its summary and norms and asks (in words) for the
+//    file again, whose upload brings the picture back.
 // 7. The 3D viewer (three.js, WebGL in SwiftShader) against a mocked 3D job (page.route), and
-//    a real 3D job of the server (box-exp3): the body is drawn and coloured.
+//    a real 3D job of the server (box-exp3): the body is drawn and coloured, the first view
+//    from above the front right, "View Γ3" turns to the contact face.
 // 7 (detail). The 3D viewer against a mocked 3D job: page.route
 //    answers the job, list, summary, stored steps and fields of a fake id with a Kuhn box
 //    (generated here) and synthetic fields; from the WebGL canvas's pixels: the body is
@@ -329,6 +332,19 @@ async function testSimulation() {
     const r = await page.request.get(base + href);
     check(r.status() === 200, `download ${href} answers 200`);
   }
+  // Each download says its size: the VTU and the summary exactly (their Content-Length, in
+  // the page's units), the streamed archive as an estimate within 5 % of its real length.
+  await page.waitForFunction(() => ['#dl-vtu', '#dl-paraview', '#dl-summary'].every((s) => document.querySelector(s)?.dataset.bytes), null, { timeout: 10_000 });
+  const { fmtBytes } = await import(new URL('../../api/client/util.js', import.meta.url).href);
+  const said = await page.$$eval('.downloads a', (as) => Object.fromEntries(as.map((a) => [a.id, { text: a.textContent, bytes: Number(a.dataset.bytes) }])));
+  const vtuBytes = (await (await page.request.get(base + vtu)).body()).length;
+  const sumBytes = (await (await page.request.get(`${base}/jobs/${jobId}/summary`)).body()).length;
+  const tarBytes = (await (await page.request.get(base + pv)).body()).length;
+  check(said['dl-vtu'].bytes === vtuBytes && said['dl-vtu'].text === `VTU (this step, ${fmtBytes(vtuBytes)})`, `the VTU link says its size: "${said['dl-vtu'].text}" (${vtuBytes} bytes)`);
+  check(said['dl-summary'].bytes === sumBytes && said['dl-summary'].text === `summary JSON (${fmtBytes(sumBytes)})`, `the summary link says its size: "${said['dl-summary'].text}" (${sumBytes} bytes)`);
+  check(Math.abs(said['dl-paraview'].bytes - tarBytes) <= 0.05 * tarBytes && said['dl-paraview'].text.includes(`about ${fmtBytes(said['dl-paraview'].bytes)}`),
+    `the archive link says about how large it is: "${said['dl-paraview'].text}" (estimate ${said['dl-paraview'].bytes}, real ${tarBytes} bytes)`);
+  check(fmtBytes(812) === '812 B' && fmtBytes(12_345) === '12 kB' && fmtBytes(2_437_000) === '2.4 MB' && fmtBytes(999_999) === '1 MB', 'sizes read as 812 B, 12 kB, 2.4 MB, 1 MB');
   await page.screenshot({ path: path.join(outDir, 'client-exp2-step8.png'), fullPage: true });
 
   // The slider: Home goes to the first step of the PVD, the initial state (step 0, t = 0,
@@ -471,9 +487,35 @@ async function testInvalidScene() {
   const rowTop = ta.y + 6 + line * 20 - (await page.$eval('#scene-text', (t) => t.scrollTop));
   check(nb && Math.abs(nb.y - rowTop) < 3 && nb.x > ta.x, `note drawn on that row (y ${nb?.y.toFixed(0)} vs ${rowTop.toFixed(0)})`);
   check(nb.y >= ta.y && nb.y + nb.height <= ta.y + ta.height, 'the note is inside the visible part of the editor');
+  // The editor is wide enough for the note: none of it is cut or hidden past the edge.
+  const fits = await note.evaluate((n) => {
+    const main = n.closest('.editor-main').getBoundingClientRect();
+    return { cut: n.scrollWidth - n.clientWidth, right: n.getBoundingClientRect().right, edge: main.right, width: main.width };
+  });
+  check(fits.cut <= 1 && fits.right <= fits.edge + 1, `the whole note fits in the editor (${fits.width.toFixed(0)} px wide; note ends at ${fits.right.toFixed(0)} of ${fits.edge.toFixed(0)}, ${fits.cut} px cut)`);
   const item = await page.textContent('#scene-errors li[data-pointer="/mesh/h"]');
   check(item.includes('/mesh/h') && item.includes(err.message), `error list entry: "${item}"`);
   await page.screenshot({ path: path.join(outDir, 'client-invalid-scene.png'), fullPage: true });
+
+  // A longer message (a segment off the rectangle: 72 characters) fits as well, beside its
+  // key without repeating the pointer; the same error reported twice is listed once.
+  const off = JSON.parse(text);
+  off.mesh.h = '1/4';
+  off.boundary[0].from = [5, 5];
+  off.mesh.hh = 1;
+  await page.fill('#scene-text', JSON.stringify(off, null, 2));
+  await page.click('#submit-scene');
+  const note2 = page.locator('.editor-notes .note[data-pointer~="/boundary/0/from"]');
+  await note2.waitFor({ timeout: 10_000 });
+  const text2 = await note2.textContent();
+  const fits2 = await note2.evaluate((n) => {
+    const main = n.closest('.editor-main').getBoundingClientRect();
+    return { cut: n.scrollWidth - n.clientWidth, right: n.getBoundingClientRect().right, edge: main.right };
+  });
+  check(text2.length >= 60 && !text2.startsWith('/boundary') && fits2.cut <= 1 && fits2.right <= fits2.edge + 1,
+    `a ${text2.length}-character note fits (ends at ${fits2.right.toFixed(0)} of ${fits2.edge.toFixed(0)}): "${text2}"`);
+  const hh = await page.locator('#scene-errors li[data-pointer="/mesh/hh"]').count();
+  check(hh === 1, `an error the server reports twice is listed once (${hh})`);
 
   // The preset form: overrides.h = -1 is reported under the h input.
   const want = await page.evaluate(async () => {
@@ -1003,6 +1045,28 @@ async function testMeshUpload() {
   await real.waitForSelector('#viewer[data-state="ready"]', { timeout: 60_000 });
   check((await real.textContent('.run-info')).includes('406 nodes · 724 triangles'), 'the scene on the uploaded mesh runs and is shown');
   await real.screenshot({ path: path.join(outDir, 'client-mesh-upload-real.png'), fullPage: true });
+
+  // (c) The mesh deleted after the run: the job still shows its summary and norms, says in
+  // words how to get the picture back, and uploading the file again brings it back.
+  const ranId = await real.getAttribute('#viewer', 'data-job');
+  const del = await context.request.delete(`${base}/meshes/${built.domain.mesh}`);
+  check(del.status() === 204, `the uploaded mesh is deleted after the run (${del.status()})`);
+  await real.reload();
+  await real.waitForSelector(`#viewer[data-state="ready"][data-job="${ranId}"]`, { timeout: 15_000 });
+  const missing = await real.locator('#mesh-missing').textContent().catch(() => '');
+  check(/upload the same \.msh file again/.test(missing) && !/POST|\/meshes|409|API/.test(await real.textContent('#viewer')),
+    `the view says to upload the file again, with no API hint: "${missing.trim().slice(0, 90)}…"`);
+  check((await real.textContent('.run-info')).includes('406 nodes · 724 triangles') && (await real.locator('#plots svg.plot path').count()) === 4,
+    'the summary and the four norm plots are still shown');
+  check((await real.locator('#mesh-canvas, #dl-vtu, #dl-paraview').count()) === 0 && (await real.locator('#dl-summary').count()) === 1,
+    'no picture and no VTU/ParaView links, the summary JSON link stays');
+  await real.screenshot({ path: path.join(outDir, 'client-mesh-deleted.png'), fullPage: true });
+  await axeCheck(real, 'on a job whose mesh was deleted');
+  const [chooser] = await Promise.all([real.waitForEvent('filechooser'), real.click('#mesh-upload-again')]);
+  check(await real.$eval('#mesh-panel', (d) => d.open), '"Upload the mesh file again" opens the mesh panel and its file chooser');
+  await chooser.setFiles(plateMsh);
+  await real.waitForSelector(`#viewer[data-state="ready"][data-job="${ranId}"] #mesh-canvas`, { timeout: 20_000 });
+  check((await real.locator('#mesh-missing').count()) === 0, 'the same file uploaded again: the picture is back');
   await real.close();
 }
 
@@ -1313,12 +1377,24 @@ async function testViewer3d() {
   const opts = await page.$$eval('#quantity option', (os) => os.map((o) => o.textContent));
   check(opts.some((o) => o.includes('per tetrahedron')), `von Mises is per tetrahedron: ${opts.join(' / ')}`);
 
-  const zeta = await stats3d(page);
+  // The first view shows the body's shape: from above (30°), the front and a side, with the
+  // box filling the view; Γ3 (the bottom) is hidden until "View Γ3".
+  const top = await stats3d(page);
+  await page.locator('#mesh-canvas-3d').screenshot({ path: path.join(outDir, 'client-3d-first-view.png') });
+  const cam0 = JSON.parse(top.camera);
+  const off = cam0.position.map((x, i) => x - cam0.target[i]);
+  const elevation = (Math.atan2(off[2], Math.hypot(off[0], off[1])) * 180) / Math.PI;
+  check(elevation > 20 && elevation < 45 && off[1] < 0 && off[0] > 0, `the first view looks from above the front right (elevation ${elevation.toFixed(1)}°)`);
+  check(top.drawn > 0.12 * top.pixels && top.middle > 0.9 * top.middleArea, `the first view shows the body in the middle (${(100 * top.drawn / top.pixels).toFixed(1)}% of the canvas)`);
+  const zeta = await afterFrame(page, () => page.click('#view-contact'));
+  const camC = JSON.parse(zeta.camera);
+  check(camC.position[2] < camC.target[2], `"View Γ3" looks at the downward contact face from below (camera z ${camC.position[2]} < ${camC.target[2]})`);
   console.log('  3D canvas, ζ at step 4:', JSON.stringify({ ...zeta, camera: undefined }));
   check(zeta.drawn > 0.12 * zeta.pixels, `the body covers ${(100 * zeta.drawn / zeta.pixels).toFixed(1)}% of the canvas (> 12%)`);
   check(zeta.middle > 0.9 * zeta.middleArea, `the middle of the canvas is the body (${zeta.middle} of ${zeta.middleArea} pixels)`);
   check(zeta.distinct >= 24 && zeta.indexMax - zeta.indexMin >= 128, `ζ colouring not uniform: ${zeta.distinct} colour-map entries, ${zeta.indexMin}..${zeta.indexMax}`);
   check(zeta.slipPx > 20 && zeta.stickPx > 20, `Γ3 nodes drawn by state: ${zeta.slipPx} slip and ${zeta.stickPx} stick pixels (the view looks at the downward contact face)`);
+  check(zeta.stickPx > 2 * top.stickPx, `"View Γ3" shows the contact face's stick nodes that the first view hides (${zeta.stickPx} stick pixels, ${top.stickPx} from above: its edges only)`);
   const cb = await page.textContent('#colorbar');
   check(/damage ζ: min 0\.4, max 1/.test(cb), `colour bar: ${cb.trim()}`);
 
@@ -1338,8 +1414,13 @@ async function testViewer3d() {
   check(!same(noArrows, vm) && noArrows.slipPx < vm.slipPx, `without the slip direction lines: fewer slip-coloured pixels (${noArrows.slipPx} < ${vm.slipPx})`);
   const arrowsBack = await afterFrame(page, () => page.check('#show-arrows'));
   check(same(arrowsBack, vm), 'lines back: the same picture');
-  const base = await afterFrame(page, () => page.selectOption('#quantity', 'zeta'));
-  check(same(base, zeta), 'back to ζ: the same picture as before');
+  const backToZeta = await afterFrame(page, () => page.selectOption('#quantity', 'zeta'));
+  check(same(backToZeta, zeta), 'back to ζ: the same picture as before');
+  const base = await afterFrame(page, async () => {
+    await page.click('#view-reset');
+    await cameraIs(page, top.camera, true);
+  });
+  check(same(base, top), 'Reset view: the first view again');
 
   // The value under the pointer, at the centre of the canvas (on the body).
   const cbox = await page.locator('#mesh-canvas-3d').boundingBox();
@@ -1397,13 +1478,17 @@ async function testViewer3d() {
   const again = await afterFrame(page, () => page.fill('#factor', String(factor)));
   check(same(again, base), `factor ${factor} again: the same picture`);
 
-  // The time slider: Home → step 0 (ζ0 = 1: one colour, no contact state).
+  // The time slider: Home → step 0 (ζ0 = 1: one colour, no contact state), seen from "View
+  // Γ3": in the first view the three faces' shades round the one colour into 5 map entries
+  // over 114..129 (measured), too wide for the 4-entry bound of this check.
+  const contactView = await afterFrame(page, () => page.click('#view-contact'));
+  check(same(contactView, zeta), '"View Γ3" again: the same picture as the first time');
   await page.focus('#step-slider');
   const s0 = await afterFrame(page, async () => {
     await page.keyboard.press('Home');
     await page.waitForSelector('#viewer[data-step="0"]', { timeout: 10_000 });
   });
-  check(!same(s0, base), 'step 0 draws another picture');
+  check(!same(s0, zeta), 'step 0 draws another picture');
   check((await page.textContent('#colorbar')).includes('(uniform)') && s0.distinct <= 4 && s0.indexMax - s0.indexMin <= 4,
     `ζ is uniform at step 0: ${s0.distinct} neighbouring colour-map entries (${s0.indexMin}..${s0.indexMax}; shading rounds the chromaticity)`);
   check(s0.slipPx === 0, 'no slip at step 0 (no contact state stored)');
@@ -1419,7 +1504,11 @@ async function testViewer3d() {
     await page.keyboard.press('End');
     await page.waitForSelector('#viewer[data-step="4"]', { timeout: 10_000 });
   });
-  check(same(s4, base), 'End: step 4 again, the same picture');
+  check(same(s4, zeta), 'End: step 4 again, the same picture');
+  await afterFrame(page, async () => {
+    await page.click('#view-reset');
+    await cameraIs(page, base.camera, true);
+  });
 
   // The screenshot shows the body: decoded, its canvas area is not background.
   const shot = decodePng(await page.locator('#mesh-canvas-3d').screenshot());
@@ -1744,7 +1833,8 @@ async function testNewcomer() {
     const rest = new URL(route.request().url()).pathname.slice(`/jobs/${id}`.length);
     if (rest === '') return route.fulfill({ status: 200, contentType: 'application/json', body: JSON.stringify(job) });
     if (rest === '/summary') return route.fulfill({ status: 200, contentType: 'application/json', body: JSON.stringify(summary) });
-    if (rest === '/report.svg') return route.fulfill({ status: 200, contentType: 'image/svg+xml', body: '<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"/>' });
+    // The server's report is 980 × 470 with 11 px labels (report_svg.rs).
+    if (rest === '/report.svg') return route.fulfill({ status: 200, contentType: 'image/svg+xml', body: '<svg xmlns="http://www.w3.org/2000/svg" width="980" height="470"><text x="10" y="20" font-size="11">1/16</text></svg>' });
     return route.fulfill({ status: 404, contentType: 'application/problem+json', body: '{"title":"not found","status":404}' });
   });
   await phone.goto(`${base}/#job=${id}`);
@@ -1756,6 +1846,13 @@ async function testNewcomer() {
   const wrap = await phone.$eval('#viewer .table-wrap', (w) => ({ scroll: w.scrollWidth, client: w.clientWidth, page: document.documentElement.scrollWidth, note: getComputedStyle(w.querySelector('caption')).display, tab: w.tabIndex }));
   check(wrap.scroll > wrap.client && wrap.page <= 390 && wrap.note !== 'none' && wrap.tab === 0,
     `on a phone the table scrolls inside its frame and says so (${wrap.client} of ${wrap.scroll} px; page ${wrap.page} px)`);
+  await phone.waitForFunction(() => document.querySelector('img.report')?.complete && document.querySelector('img.report').naturalWidth > 0);
+  const rep = await phone.$eval('#report-wrap', (w) => {
+    const img = w.querySelector('img');
+    return { shown: img.getBoundingClientRect().width, natural: img.naturalWidth, scroll: w.scrollWidth, client: w.clientWidth, note: getComputedStyle(w.querySelector('.scroll-note')).display, page: document.documentElement.scrollWidth };
+  });
+  check(rep.shown >= 0.95 * rep.natural && rep.scroll > rep.client && rep.note !== 'none' && rep.page <= 390,
+    `on a phone the report keeps its size (${rep.shown} of ${rep.natural} px: 11 px labels stay 11 px) and scrolls in its frame (${rep.client} px), saying so`);
   await axeCheck(phone, 'on a paper study on a phone');
   await phone.screenshot({ path: path.join(outDir, 'client-study-phone.png'), fullPage: true });
   await phone.close();
