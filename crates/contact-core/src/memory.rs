@@ -93,9 +93,9 @@ fn factor_entries(d: f64, n: f64) -> f64 {
 }
 
 /// The geometric hierarchies of K and H as a multiple of K's bytes: fitted to the measured
-/// peaks of box-exp3 at 1/8, 1/16, 1/24 and 1/32 (`contact-sim bench --linear-solver
-/// multigrid`; peak − base = 0.6–0.8 × K's bytes, prediction within 9 % of every peak).
-const GEOMETRIC_HIERARCHY: f64 = 0.6;
+/// peaks of box-exp3 at 1/16, 1/24, 1/32 and 1/48 (`contact-sim bench --linear-solver
+/// multigrid`: 84, 280, 606 and 1,958 MiB; predicted 80, 262, 607 and 2,014 MiB).
+const GEOMETRIC_HIERARCHY: f64 = 1.0;
 
 /// The resident size of the process before a run (code, allocator, runtime), counted on the
 /// multigrid path whose small runs it dominates.

@@ -24,13 +24,23 @@ pub(super) struct Cx {
 
 impl Cx {
     pub(super) fn err(&mut self, pointer: &str, message: impl Into<String>) {
+        let message = message.into();
+        // A field read by two readers (e.g. the mesh by its own reader and by the domain's)
+        // is reported once.
+        if self
+            .errors
+            .iter()
+            .any(|e| e.pointer == pointer && e.message == message)
+        {
+            return;
+        }
         if self.errors.len() >= MAX_ERRORS {
             self.dropped += 1;
             return;
         }
         self.errors.push(FieldError {
             pointer: pointer.to_string(),
-            message: message.into(),
+            message,
         });
     }
 

@@ -264,6 +264,11 @@ fn unknown_fields_are_reported_with_their_pointer() {
     assert_error(&doc, "/boundary/0/f3", "unknown field 'f3'");
     assert_error(&doc, "/weird~1key~0", "unknown field");
     assert_eq!(errors(&doc).len(), 4);
+    // The mesh object is read twice (mesh and domain); its typo is reported once.
+    let mut doc = example();
+    doc["mesh"]["hh"] = json!("1/8");
+    assert_error(&doc, "/mesh/hh", "did you mean 'h'?");
+    assert_eq!(errors(&doc).len(), 1, "{:?}", errors(&doc));
 }
 
 #[test]
