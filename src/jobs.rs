@@ -680,9 +680,8 @@ impl Runtime {
         cancel: &AtomicBool,
     ) -> Result<Outcome, Problem> {
         let id = job.id;
-        let (spec, _) =
-            study::target::parse_with(&job.scene["study"], "/study", &*self.meshes)
-                .map_err(|e| failure("stored study no longer validates", &e.to_string()))?;
+        let (spec, _) = study::target::parse_with(&job.scene["study"], "/study", &*self.meshes)
+            .map_err(|e| failure("stored study no longer validates", &e.to_string()))?;
         let last_beat = Mutex::new(Instant::now());
         let stopped: Mutex<Option<Outcome>> = Mutex::new(None);
         let progress = |done: usize, total: usize| {

@@ -373,8 +373,8 @@ fn validated(doc: Value, state: &AppState) -> Result<(Value, usize, u64), Proble
 /// unreachable target fails the job (422 problem at `/study/target/error` in its error)
 /// before the expensive run. Its progress scale starts at the first pilots' steps.
 fn validated_target(study: &Value, state: &AppState) -> Result<(Value, usize, u64), Problem> {
-    let (spec, expanded) = study::target::parse_with(study, "/study", &*state.rt.meshes)
-        .map_err(|e| {
+    let (spec, expanded) =
+        study::target::parse_with(study, "/study", &*state.rt.meshes).map_err(|e| {
             crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))
         })?;
     let cfg = &state.rt.config;

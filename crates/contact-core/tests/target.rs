@@ -140,7 +140,10 @@ fn a_given_mesh_and_a_box_are_planned_the_same_way() {
     )
     .unwrap();
     eprintln!("{}", plate.text_table());
-    let refine = plate.chosen.refine.expect("a given mesh reports its refinement");
+    let refine = plate
+        .chosen
+        .refine
+        .expect("a given mesh reports its refinement");
     assert_eq!(plate.scene["mesh"]["refine"], json!(refine));
     assert!(plate.chosen.check_passed && plate.chosen.estimated_error <= 0.2);
     assert!(plate.error_model.h.order.is_some() && plate.error_model.k.order.is_some());
@@ -177,7 +180,10 @@ fn an_unreachable_target_is_refused_with_the_reason() {
         panic!("{err}")
     };
     eprintln!("{message}");
-    assert!(message.contains("more nodes than this server's limit"), "{message}");
+    assert!(
+        message.contains("more nodes than this server's limit"),
+        "{message}"
+    );
     assert!(message.contains("the best reachable"), "{message}");
     assert!(best_error.unwrap() > 0.02 && best_seconds.unwrap() > 0.0);
     // A budget too small for any candidate is refused the same way.

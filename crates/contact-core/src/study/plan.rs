@@ -78,8 +78,7 @@ pub fn fit_part(points: &[(f64, f64)]) -> PartFit {
             observed_order: None,
             points: points.to_vec(),
             note: Some(
-                "no difference between the levels: this part of the error is taken as zero"
-                    .into(),
+                "no difference between the levels: this part of the error is taken as zero".into(),
             ),
         };
     };
@@ -184,7 +183,9 @@ pub fn fit_cost(runs: &[Timing]) -> CostModel {
                 .partial_cmp(&(b.unknowns * b.steps as f64))
                 .unwrap_or(std::cmp::Ordering::Equal)
         })
-        .map_or(0.0, |r| r.seconds / (r.unknowns.powf(alpha) * r.steps as f64));
+        .map_or(0.0, |r| {
+            r.seconds / (r.unknowns.powf(alpha) * r.steps as f64)
+        });
     CostModel {
         c,
         alpha,
@@ -324,7 +325,12 @@ mod tests {
             predicted_error: e,
             predicted_seconds: t,
         };
-        let all = [c(4, 0.2, 1.0), c(8, 0.09, 2.0), c(16, 0.05, 8.0), c(32, 0.02, 64.0)];
+        let all = [
+            c(4, 0.2, 1.0),
+            c(8, 0.09, 2.0),
+            c(16, 0.05, 8.0),
+            c(32, 0.02, 64.0),
+        ];
         assert_eq!(cheapest(&all, 0.1).unwrap().n, 16, "0.09 > 0.1/1.25");
         assert_eq!(cheapest(&all, 0.2).unwrap().n, 8);
         assert!(cheapest(&all, 0.01).is_none());

@@ -634,8 +634,7 @@ fn run_chosen<const D: usize>(
     tick: &(dyn Fn() -> ControlFlow<()> + Sync),
 ) -> Result<(LevelRun<D>, Summary), StudyError> {
     let start = Instant::now();
-    let mut sim =
-        Simulation::<D>::new(problem.clone(), exec.settings).map_err(RunError::from)?;
+    let mut sim = Simulation::<D>::new(problem.clone(), exec.settings).map_err(RunError::from)?;
     let solve_start = Instant::now();
     let mut acc = StatsAccumulator::new(exec.settings);
     let mut reports = Vec::with_capacity(problem.steps);
@@ -655,7 +654,11 @@ fn run_chosen<const D: usize>(
         step: problem.steps,
         w: sim.w.clone(),
         zeta: sim.state.zeta.clone(),
-        u: if keep_u { sim.state.u.clone() } else { Vec::new() },
+        u: if keep_u {
+            sim.state.u.clone()
+        } else {
+            Vec::new()
+        },
     };
     let run = LevelRun {
         unknowns: sim.dofs.n_free(),
@@ -686,7 +689,10 @@ fn run_in<const D: usize>(
     // The ladders cross at their third levels: each is run where the other parameter is
     // already resolved a little (at the coarsest one, the other part's interaction
     // distorts it: on the paper's test, k barely matters on a 2 × 2 mesh).
-    let (n_k, s_h) = (n0 << (FIRST_PILOT_LEVELS - 1), s0 << (FIRST_PILOT_LEVELS - 1));
+    let (n_k, s_h) = (
+        n0 << (FIRST_PILOT_LEVELS - 1),
+        s0 << (FIRST_PILOT_LEVELS - 1),
+    );
     let done_steps = AtomicUsize::new(0);
     let total_steps = AtomicUsize::new(0);
     let tick = || {
@@ -742,14 +748,12 @@ fn run_in<const D: usize>(
                 .collect::<Vec<_>>()
         };
         let model = ErrorModel {
-            h: plan::fit_part(&diffs(
-                h_ladder.iter().map(|&n| (n, s_h)).collect(),
-                &|l| planner.h(l.0),
-            )),
-            k: plan::fit_part(&diffs(
-                k_ladder.iter().map(|&s| (n_k, s)).collect(),
-                &|l| planner.k(l.1),
-            )),
+            h: plan::fit_part(&diffs(h_ladder.iter().map(|&n| (n, s_h)).collect(), &|l| {
+                planner.h(l.0)
+            })),
+            k: plan::fit_part(&diffs(k_ladder.iter().map(|&s| (n_k, s)).collect(), &|l| {
+                planner.k(l.1)
+            })),
         };
         let timings: Vec<Timing> = runs
             .iter()
@@ -772,8 +776,7 @@ fn run_in<const D: usize>(
         // run within the limits: a pre-asymptotic fit may be what puts the target out of reach.
         if let Some(c) = choice.or_else(|| plan::most_accurate(&feasible)) {
             let affordable = |level: (usize, usize)| {
-                cost.predict(planner.unknowns(level), level.1)
-                    <= PILOT_SHARE * c.predicted_seconds
+                cost.predict(planner.unknowns(level), level.1) <= PILOT_SHARE * c.predicted_seconds
                     && planner.breaks(level).is_none()
             };
             let next_h = (h_ladder.last().unwrap() * 2, s_h);
@@ -812,7 +815,12 @@ fn run_in<const D: usize>(
         let problem = planner.problem(level);
         sink.restart().map_err(StudyError::Output)?;
         total_steps.fetch_add(
-            level.1 + if reused.is_some() { 0 } else { companion_level.1 },
+            level.1
+                + if reused.is_some() {
+                    0
+                } else {
+                    companion_level.1
+                },
             Ordering::Relaxed,
         );
         let companion_work = Work {
@@ -826,7 +834,8 @@ fn run_in<const D: usize>(
             (run_chosen::<D>(&problem, exec, keep_u, sink, &tick)?, None)
         } else if exec.threads >= 2 {
             std::thread::scope(|s| {
-                let c = s.spawn(|| levels::run_level::<D>(&companion_work, exec.settings, &tick, None));
+                let c =
+                    s.spawn(|| levels::run_level::<D>(&companion_work, exec.settings, &tick, None));
                 let chosen = run_chosen::<D>(&problem, exec, keep_u, sink, &tick);
                 let companion = c.join().expect("companion run panicked");
                 Ok::<_, StudyError>((chosen?, Some(companion?)))
@@ -843,9 +852,7 @@ fn run_in<const D: usize>(
         attempts.push(Attempt {
             h: current.h,
             k: current.k,
-            refine: spec
-                .given_mesh()
-                .then(|| level.0.trailing_zeros() as usize),
+            refine: spec.given_mesh().then(|| level.0.trailing_zeros() as usize),
             steps: level.1,
             unknowns: planner.unknowns(level) as usize,
             predicted_error: current.predicted_error,
@@ -899,10 +906,7 @@ fn run_in<const D: usize>(
             seconds: r.seconds,
         })
         .collect();
-    let last_level = (
-        (1.0 / chosen.h).round() as usize,
-        chosen.steps,
-    );
+    let last_level = ((1.0 / chosen.h).round() as usize, chosen.steps);
     Ok(TargetResult {
         kind: "target",
         name: spec.name.clone(),
@@ -938,7 +942,10 @@ fn frontier(candidates: &[(Candidate, Option<Limit>)]) -> Vec<Candidate> {
     });
     let mut out: Vec<Candidate> = Vec::new();
     for c in ok {
-        if out.last().is_none_or(|l| c.predicted_error < l.predicted_error) {
+        if out
+            .last()
+            .is_none_or(|l| c.predicted_error < l.predicted_error)
+        {
             out.push(c);
         }
     }
@@ -1086,10 +1093,16 @@ impl TargetResult {
             self.cost_model.c,
             self.cost_model.alpha,
         );
-        for note in [&m.h.note, &m.k.note, &self.cost_model.note].into_iter().flatten() {
+        for note in [&m.h.note, &m.k.note, &self.cost_model.note]
+            .into_iter()
+            .flatten()
+        {
             s += &format!("  note: {note}\n");
         }
-        s += &format!("{:>7} {:>7} {:>7} {:>9} {:>6} {:>9}\n", "ladder", "h", "k", "unknowns", "steps", "seconds");
+        s += &format!(
+            "{:>7} {:>7} {:>7} {:>9} {:>6} {:>9}\n",
+            "ladder", "h", "k", "unknowns", "steps", "seconds"
+        );
         for p in &self.pilots {
             s += &format!(
                 "{:>7} {:>7} {:>7} {:>9} {:>6} {:>9.4}\n",
@@ -1101,7 +1114,10 @@ impl TargetResult {
                 p.seconds
             );
         }
-        s += &format!("study {:.3} s on {} thread(s)\n", self.seconds, self.threads);
+        s += &format!(
+            "study {:.3} s on {} thread(s)\n",
+            self.seconds, self.threads
+        );
         s
     }
 }
