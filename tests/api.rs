@@ -948,7 +948,11 @@ fn target_studies_over_http() {
     let e = &done["error"];
     assert_eq!(e["type"], "/problems/target-unreachable", "{e}");
     assert_eq!(e["errors"][0]["pointer"], "/study/target/error", "{e}");
-    assert!(e["detail"].as_str().unwrap().contains("budget"), "{e}");
+    let detail = e["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("cannot be reached") && detail.contains("the budget of 0.001 s"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -25,7 +25,7 @@ pub const COST_EXPONENT_RANGE: (f64, f64) = (1.0, 2.0);
 pub const ZERO_DIFFERENCE: f64 = 1e-9;
 /// At most this many of the finest differences of a ladder enter its order's fit: the
 /// coarsest levels are the farthest from the asymptotic regime.
-pub const FIT_POINTS: usize = 3;
+pub const FIT_POINTS: usize = 2;
 
 /// One part of the error model: e ≈ coefficient · x^order, x = h or k.
 #[derive(Debug, Clone, PartialEq, Serialize)]

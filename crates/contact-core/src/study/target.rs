@@ -46,8 +46,9 @@ pub const FIRST_PILOT_LEVELS: usize = 3;
 /// Levels of a pilot ladder at most.
 pub const MAX_PILOT_LEVELS: usize = 6;
 /// A pilot ladder is extended while its next level is predicted to cost at most this share
-/// of the chosen run: the pilots then add at most about 2 × 1/8 of it in all.
-pub const PILOT_SHARE: f64 = 1.0 / 16.0;
+/// of the chosen run: the pilots then add at most about 2 × 2 × 1/6 of it in all (each
+/// ladder a geometric series).
+pub const PILOT_SHARE: f64 = 1.0 / 6.0;
 /// The grid of candidates: n0·2^i and N0·2^j, i ≤ this, j ≤ 2 × this.
 const MAX_DOUBLINGS: u32 = 12;
 /// Coarsest resolutions tried for a rectangle or box (cells per unit length).
@@ -1028,7 +1029,10 @@ fn unreachable(
             frac(b.k),
             sig(b.predicted_seconds)
         ),
-        None => "; no run of the grid fits the limits".into(),
+        None => match spec.budget_s {
+            Some(b) => format!("; no run of the grid fits the limits and the budget of {b} s"),
+            None => "; no run of the grid fits the limits".into(),
+        },
     };
     StudyError::Unreachable {
         message: format!(
