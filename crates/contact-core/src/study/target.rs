@@ -1125,3 +1125,75 @@ impl TargetResult {
         s
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pointers(doc: Value) -> Vec<String> {
+        parse(&doc, "/study")
+            .unwrap_err()
+            .0
+            .into_iter()
+            .map(|e| e.pointer)
+            .collect()
+    }
+
+    #[test]
+    fn a_target_study_is_read_with_its_coarsest_level() {
+        let (spec, doc) = parse(
+            &json!({"scene": "paper-convergence", "target": {"error": 0.05}, "budget_s": 30}),
+            "",
+        )
+        .unwrap();
+        assert_eq!(
+            (spec.n0, spec.base.cells_per_unit, spec.base.steps),
+            (2, 2, PILOT_STEPS)
+        );
+        assert_eq!(spec.quantity, Quantity::W);
+        assert_eq!(doc["target"], json!({"error": 0.05, "quantity": "w"}));
+        assert!(doc["scene"].is_object(), "the preset is expanded");
+        let at = spec.scene_at(16, 32);
+        assert_eq!(
+            (at["mesh"]["h"].clone(), at["time"]["N"].clone()),
+            (json!("1/16"), json!(32))
+        );
+        let p = scene::validate(&at).unwrap();
+        assert_eq!((p.cells_per_unit, p.steps), (16, 32));
+        // A given mesh: refine levels.
+        let (plate, _) = parse(
+            &json!({"scene": "plate-with-hole", "target": {"error": 0.1, "quantity": "u"}}),
+            "",
+        )
+        .unwrap();
+        assert!(plate.given_mesh());
+        assert_eq!(plate.scene_at(4, 8)["mesh"]["refine"], json!(2));
+    }
+
+    #[test]
+    fn bad_targets_are_refused_at_their_pointer() {
+        let t = |target: Value| json!({"scene": "paper-convergence", "target": target});
+        assert_eq!(pointers(t(json!({"error": 0}))), ["/study/target/error"]);
+        assert_eq!(pointers(t(json!({"error": 1.5}))), ["/study/target/error"]);
+        assert_eq!(
+            pointers(t(json!({"error": 0.1, "quantity": "v"}))),
+            ["/study/target/quantity"]
+        );
+        assert_eq!(
+            pointers(t(json!({"error": 0.1, "x": 1}))),
+            ["/study/target/x"]
+        );
+        assert_eq!(pointers(t(json!(0.1))), ["/study/target"]);
+        let mut d = t(json!({"error": 0.1}));
+        d["budget_s"] = json!(-1);
+        assert_eq!(pointers(d.clone()), ["/study/budget_s"]);
+        d["budget_s"] = json!(1);
+        d["reference"] = json!({"h": "1/8", "k": "1/8"});
+        assert_eq!(pointers(d), ["/study/reference"]);
+        // ζ needs damage.
+        let mut scene = scene::presets::get("paper-convergence").unwrap();
+        scene.as_object_mut().unwrap().remove("damage");
+        let e = pointers(json!({"scene": scene, "target": {"error": 0.1, "quantity": "zeta"}}));
+        assert_eq!(e, ["/study/target/quantity"]);
+    }
+}
