@@ -774,10 +774,18 @@ fn run_in<const D: usize>(
         let choice = plan::cheapest(&feasible, spec.error);
         let mut extended = false;
         // Out of reach by this fit, the pilots are still refined towards the most accurate
-        // run within the limits: a pre-asymptotic fit may be what puts the target out of reach.
-        if let Some(c) = choice.or_else(|| plan::most_accurate(&feasible)) {
+        // run within the limits (a pre-asymptotic fit may be what puts the target out of
+        // reach), but only by levels costing at most 4 × the pilots so far: a refusal must
+        // stay cheap.
+        let spent: f64 = runs.values().map(|r| r.seconds).sum();
+        let allowed = match choice {
+            Some(c) => Some(PILOT_SHARE * c.predicted_seconds),
+            None => plan::most_accurate(&feasible)
+                .map(|c| (PILOT_SHARE * c.predicted_seconds).min(4.0 * spent)),
+        };
+        if let Some(allowed) = allowed {
             let affordable = |level: (usize, usize)| {
-                cost.predict(planner.unknowns(level), level.1) <= PILOT_SHARE * c.predicted_seconds
+                cost.predict(planner.unknowns(level), level.1) <= allowed
                     && planner.breaks(level).is_none()
             };
             let next_h = (h_ladder.last().unwrap() * 2, s_h);
