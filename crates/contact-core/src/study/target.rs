@@ -898,9 +898,8 @@ fn run_in<const D: usize>(
             predicted_error: model.predict(planner.h(next.0), planner.k(next.1)),
             predicted_seconds: next_seconds,
         };
+        // The first chosen run is the (2h, 2k) companion of the next.
         previous = Some((level, run));
-        let _ = &previous;
-        drop(summary);
     };
     let (_, summary) = chosen_run;
     let chosen = attempts.last().cloned().expect("one attempt");
