@@ -42,6 +42,15 @@ pub const REPORT_FILE: &str = "report.svg";
 const REPORTS_FILE: &str = "reports.json";
 /// Error-estimate rows so far (simulations with `error_estimate`), saved with the reports.
 const ESTIMATES_FILE: &str = "estimates.json";
+/// Target studies only: the scene document of the chosen run, whose stored steps the job's
+/// fields, VTU, PVD and archive serve.
+pub const CHOSEN_SCENE_FILE: &str = "chosen_scene.json";
+
+/// A stored study document is a target study (`{"study": {"target": ...}}`): it also has
+/// the chosen run's fields.
+pub fn is_target_study(doc: &serde_json::Value) -> bool {
+    doc.get("study").is_some_and(study::is_target)
+}
 
 /// A stored job document is a study when it has a top-level `study` object (the scene of a
 /// simulation cannot: `study` is not a scene field).
@@ -594,6 +603,9 @@ impl Runtime {
         worker: &str,
         cancel: &AtomicBool,
     ) -> Result<Outcome, Problem> {
+        if is_target_study(&job.scene) {
+            return self.execute_target(job, worker, cancel);
+        }
         let id = job.id;
         let (plan, _) = study::parse_with(&job.scene["study"], "/study", &*self.meshes)
             .map_err(|e| failure("stored study no longer validates", &e.to_string()))?;
@@ -653,6 +665,101 @@ impl Runtime {
                     .or_else(|| self.lost(id, worker))
                     .unwrap_or(Outcome::Interrupted)
             }),
+            Err(StudyError::Run(contact_core::run::RunError::Solve(e))) => Err(solve_problem(&e)),
+            Err(e) => Err(failure("study failed", &e.to_string())),
+        }
+    }
+
+    /// A target study: pilots, plan, the chosen run (its stored steps written like a
+    /// simulation's) and its check; restarted from scratch when resumed, like a study. An
+    /// unreachable target fails the job with a 422 problem at `/study/target/error`.
+    fn execute_target(
+        &self,
+        job: &JobRecord,
+        worker: &str,
+        cancel: &AtomicBool,
+    ) -> Result<Outcome, Problem> {
+        let id = job.id;
+        let (spec, _) = study::target::parse_with(&job.scene["study"], "/study", &*self.meshes)
+            .map_err(|e| failure("stored study no longer validates", &e.to_string()))?;
+        let last_beat = Mutex::new(Instant::now());
+        let stopped: Mutex<Option<Outcome>> = Mutex::new(None);
+        let progress = |done: usize, total: usize| {
+            if cancel.load(Ordering::SeqCst) || self.shutdown.load(Ordering::SeqCst) {
+                return ControlFlow::Break(());
+            }
+            self.steps_done.fetch_add(1, Ordering::Relaxed);
+            let p = Progress {
+                step: done,
+                steps: total,
+                last_residual: None,
+            };
+            self.running_progress(id, p);
+            let mut beat = last_beat.lock().unwrap();
+            if beat.elapsed() >= CHECKPOINT_EVERY {
+                *beat = Instant::now();
+                let _ = self.store.set_progress(id, p);
+                if let Some(stop) = self.lost(id, worker) {
+                    *stopped.lock().unwrap() = Some(stop);
+                    return ControlFlow::Break(());
+                }
+            }
+            ControlFlow::Continue(())
+        };
+        let exec = study::Execution {
+            threads: self.config.study_threads.max(1),
+            settings: SolverSettings {
+                memory_limit: self.config.max_job_memory,
+                ..SolverSettings::default()
+            },
+        };
+        let limits = study::target::Limits {
+            max_nodes: Some(self.config.max_nodes),
+            max_steps: Some(self.config.max_steps),
+        };
+        let mut sink = StepFiles {
+            results: &self.results,
+            id,
+        };
+        match study::target::run(&spec, exec, limits, &progress, &mut sink) {
+            Ok(result) => {
+                let io = |e: std::io::Error| write_failure(&e);
+                self.results
+                    .write_atomic(
+                        id,
+                        CHOSEN_SCENE_FILE,
+                        &serde_json::to_vec_pretty(&result.scene).expect("scene serialises"),
+                    )
+                    .map_err(io)?;
+                self.results
+                    .write_atomic(id, TABLE_FILE, result.text_table().as_bytes())
+                    .map_err(io)?;
+                let svg = contact_core::study::report_svg::target_report(&result);
+                self.results
+                    .write_atomic(id, REPORT_FILE, svg.as_bytes())
+                    .map_err(io)?;
+                let json = serde_json::to_vec_pretty(&result).expect("target result serialises");
+                self.results
+                    .write_atomic(id, SUMMARY_FILE, &json)
+                    .map_err(io)?;
+                Ok(Outcome::Succeeded)
+            }
+            Err(StudyError::Cancelled) => Ok(if cancel.load(Ordering::SeqCst) {
+                Outcome::Cancelled
+            } else {
+                let stopped = stopped.into_inner().unwrap();
+                stopped
+                    .or_else(|| self.lost(id, worker))
+                    .unwrap_or(Outcome::Interrupted)
+            }),
+            Err(e @ StudyError::Unreachable { .. }) => Err(Problem::field(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "target out of reach",
+                "/study/target/error",
+                e.to_string(),
+            )
+            .with_type("/problems/target-unreachable")),
+            Err(StudyError::Output(e)) => Err(write_failure(&e)),
             Err(StudyError::Run(contact_core::run::RunError::Solve(e))) => Err(solve_problem(&e)),
             Err(e) => Err(failure("study failed", &e.to_string())),
         }
@@ -749,6 +856,24 @@ impl Runtime {
         rows.retain(|r| r.n <= step);
         sim.restore(state);
         Ok(Some((reports, rows)))
+    }
+}
+
+/// The chosen run of a target study writes its stored steps as a simulation does.
+struct StepFiles<'a> {
+    results: &'a ResultFiles,
+    id: Uuid,
+}
+
+impl study::target::Sink for StepFiles<'_> {
+    fn restart(&mut self) -> std::io::Result<()> {
+        self.results
+            .remove_where(self.id, |name| parse_step_file(name).is_some())
+    }
+
+    fn step(&mut self, fields: &contact_core::solve::stepper::StepFields) -> std::io::Result<()> {
+        self.results
+            .write_atomic(self.id, &step_file(fields.n), &encode_step(fields))
     }
 }
 

@@ -882,6 +882,92 @@ fn running_studies_stop_for_cancel_and_shutdown() {
 
 /// Study jobs: submit, table as JSON and text, report SVG, no fields, the shared reference,
 /// refusal of non-nested levels; an error estimate on a simulation.
+/// A target study over HTTP: the choice and its check in the summary, the chosen run's fields,
+/// PVD and archive served like a simulation's, the report; a bad target refused at its
+/// pointer; a target out of reach of the budget fails the job with the reason.
+#[test]
+fn target_studies_over_http() {
+    let dir = temp_dir("target");
+    let server = Server::start(&dir, 2);
+    let a = server.addr;
+    let r = post_json(
+        a,
+        "/jobs",
+        &json!({"study": {"scene": "paper-convergence", "target": {"error": 0.2, "quantity": "w"}}}),
+    );
+    assert_eq!(r.status, 202, "{}", String::from_utf8_lossy(&r.body));
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let done = wait_status(a, &id, &["succeeded", "failed"], Duration::from_secs(120));
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert_eq!(
+        done["links"]["fields"],
+        format!("/jobs/{id}/fields?step=last")
+    );
+    let s = get(a, &format!("/jobs/{id}/summary")).json();
+    assert_eq!(s["kind"], "target");
+    let chosen = &s["chosen"];
+    assert!(chosen["estimated_error"].as_f64().unwrap() <= 0.2, "{s}");
+    assert!(chosen["predicted_error"].as_f64().unwrap() <= 0.2 / 1.25);
+    assert!(s["error_model"]["h"]["order"].is_number());
+    let steps = chosen["steps"].as_u64().unwrap();
+    assert_eq!(s["run"]["time"]["steps"], steps, "{}", s["run"]["time"]);
+    // The chosen run's last step, its mesh and VTK files.
+    let f = get(a, &format!("/jobs/{id}/fields?step=last&mesh=1"));
+    assert_eq!(f.status, 200, "{}", String::from_utf8_lossy(&f.body));
+    let f = f.json();
+    let h = chosen["h"].as_f64().unwrap();
+    let n = (1.0 / h).round() as usize;
+    assert_eq!(
+        f["mesh"]["nodes"].as_array().unwrap().len(),
+        (n + 1) * (n + 1)
+    );
+    assert_eq!(f["n"], steps);
+    assert_eq!(get(a, &format!("/jobs/{id}/result.pvd")).status, 200);
+    assert_eq!(get(a, &format!("/jobs/{id}/fields/last.vtu")).status, 200);
+    assert_eq!(get(a, &format!("/jobs/{id}/archive.tar")).status, 200);
+    let svg = String::from_utf8(get(a, &format!("/jobs/{id}/report.svg")).body).unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains("target"), "{svg}");
+    let text = String::from_utf8(get(a, &format!("/jobs/{id}/summary?format=text")).body).unwrap();
+    assert!(text.contains("chosen h ="), "{text}");
+
+    let p = assert_problem(
+        &post_json(
+            a,
+            "/jobs",
+            &json!({"study": {"scene": "paper-convergence", "target": {"error": 2}}}),
+        ),
+        422,
+    );
+    assert_eq!(p["errors"][0]["pointer"], "/study/target/error", "{p}");
+    let p = assert_problem(
+        &post_json(
+            a,
+            "/jobs",
+            &json!({"study": {"scene": "paper-convergence", "target": {"error": 0.1}, "h": "1/8"}}),
+        ),
+        422,
+    );
+    assert_eq!(p["errors"][0]["pointer"], "/study/h", "{p}");
+
+    let r = post_json(
+        a,
+        "/jobs",
+        &json!({"study": {"scene": "paper-convergence", "target": {"error": 0.05}, "budget_s": 0.001}}),
+    );
+    assert_eq!(r.status, 202);
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let done = wait_status(a, &id, &["succeeded", "failed"], Duration::from_secs(60));
+    assert_eq!(done["status"], "failed", "{done}");
+    let e = &done["error"];
+    assert_eq!(e["type"], "/problems/target-unreachable", "{e}");
+    assert_eq!(e["errors"][0]["pointer"], "/study/target/error", "{e}");
+    let detail = e["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("cannot be reached") && detail.contains("the budget of 0.001 s"),
+        "{e}"
+    );
+}
+
 #[test]
 fn study_jobs_and_error_estimates_over_http() {
     let dir = temp_dir("study");

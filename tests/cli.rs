@@ -140,6 +140,53 @@ fn guide_example_scene_validates() {
     assert_eq!((p.cells_per_unit, p.steps, p.boundary.len()), (32, 32, 4));
 }
 
+/// `contact-sim study FILE` with a target: the choice as JSON, the report files; a target
+/// out of reach of the budget is exit code 1 with the reason.
+#[test]
+fn a_target_study_file_prints_the_choice_or_the_reason() {
+    let dir = std::env::temp_dir().join(format!("contact-sim-cli-target-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("target.json");
+    std::fs::write(
+        &file,
+        r#"{"study": {"name": "t", "scene": "paper-convergence", "target": {"error": 0.2}}}"#,
+    )
+    .unwrap();
+    let reports = dir.join("reports");
+    let out = bin()
+        .args(["study", "--report-dir"])
+        .arg(&reports)
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["kind"], "target");
+    assert!(
+        v["chosen"]["estimated_error"].as_f64().unwrap() <= 0.2,
+        "{v}"
+    );
+    let svg = std::fs::read_to_string(reports.join("t.svg")).unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains("target"));
+    assert!(std::fs::read_to_string(reports.join("t.txt"))
+        .unwrap()
+        .contains("chosen h ="));
+    std::fs::write(
+        &file,
+        r#"{"study": {"scene": "paper-convergence", "target": {"error": 0.05}, "budget_s": 0.001}}"#,
+    )
+    .unwrap();
+    let out = bin().arg("study").arg(&file).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("cannot be reached"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn study_file_prints_the_table_as_json_or_text() {
     let dir = std::env::temp_dir().join(format!("contact-sim-cli-study-{}", std::process::id()));

@@ -5,6 +5,8 @@
 //   {kind: "study", vary: "h"|"k"|"hk", reference: {h, k, w_V, zeta_Z0, seconds},
 //    rows: [{h, k, err_w, err_zeta, order_w, order_zeta (null on the first row), unknowns,
 //            steps, seconds}], lsq_order_w, lsq_order_zeta}
+// or, for a target study, {kind: "target", target_error, quantity, chosen, attempts,
+//    error_model, pilots, safety_factor, seconds} (showTarget).
 
 import * as api from './api.js';
 import { el, fmt, fmtStep, fmtSeconds } from './util.js';
@@ -62,6 +64,10 @@ export class StudyView {
     }
     if (this.job !== job) return;
     const report = job.links?.report || `/jobs/${id}/report.svg`;
+    if (s.kind === 'target') {
+      this.showTarget(job, s, report);
+      return;
+    }
     const ref = s.reference || {};
     const vary = s.vary || '';
     const order = (x) => (x === null || x === undefined ? '–' : Number(x).toFixed(3));
@@ -107,6 +113,50 @@ export class StudyView {
       el('div', { class: 'report-wrap', id: 'report-wrap', tabindex: '0', role: 'region', 'aria-label': 'report (scrolls sideways on a narrow screen)' },
         el('p', { class: 'scroll-note' }, 'Scroll sideways for the whole report →'),
         img),
+    );
+    api.keyedImage(img, report);
+    this.root.dataset.state = 'ready';
+  }
+
+  /**
+   * A target study (summary kind "target"): the chosen (h, k), predicted and estimated error,
+   * predicted and measured time, the fitted models, every attempt, the work–precision report,
+   * and the chosen run's files (archive, PVD) served like a simulation's.
+   */
+  showTarget(job, s, report) {
+    const id = job.id;
+    const c = s.chosen || {};
+    const m = s.error_model || {};
+    const order = (x) => (x === null || x === undefined ? '–' : Number(x).toFixed(3));
+    const num = (x) => el('td', { class: 'num' }, x);
+    const rows = (s.attempts || []).map((a) => el('tr', {},
+      num(fmtStep(a.h)), num(fmtStep(a.k)), num(a.unknowns ?? '–'), num(a.steps ?? '–'),
+      num(fmt(a.predicted_error)), num(fmt(a.estimated_error)),
+      num(a.check_passed ? 'passed' : 'failed'),
+      num(fmtSeconds(a.predicted_seconds)), num(fmtSeconds(a.seconds))));
+    const img = el('img', { class: 'report', alt: 'work–precision: predicted frontier, pilot runs and the chosen run' });
+    this.root.replaceChildren(
+      el('div', { class: 'view-head' },
+        el('h2', {}, s.name || job.scene || 'target study', ' ', el('small', {}, id.slice(0, 8))),
+        el('nav', { class: 'downloads', 'aria-label': 'downloads' },
+          api.keyedLink(el('a', { href: `/jobs/${id}/summary`, download: `target-${id.slice(0, 8)}.json` }, 'summary JSON')),
+          api.keyedLink(el('a', { href: report, download: `report-${id.slice(0, 8)}.svg` }, 'report SVG')),
+          api.keyedLink(el('a', { href: `/jobs/${id}/archive.tar`, download: `contact-sim-${id}.tar` }, 'chosen run (VTU archive)')))),
+      el('p', { class: 'run-info', id: 'target-choice' },
+        `Target ${s.target_error} in ${s.quantity}: h = ${fmtStep(c.h)}, k = ${fmtStep(c.k)}`,
+        c.refine !== undefined ? ` (refine ${c.refine})` : '',
+        `, predicted error ${fmt(c.predicted_error)}, estimated ${fmt(c.estimated_error)} `,
+        `(check ${c.check_passed ? 'passed' : 'failed'}); predicted ${fmtSeconds(c.predicted_seconds)}, `,
+        `measured ${fmtSeconds(c.seconds)}; whole study ${fmtSeconds(s.seconds)}.`),
+      el('p', { class: 'run-info' },
+        `Error model ${fmt(m.h?.coefficient)}·h^${order(m.h?.order)} + ${fmt(m.k?.coefficient)}·k^${order(m.k?.order)} `,
+        `from ${(s.pilots || []).length} pilot runs; safety factor ${s.safety_factor}.`),
+      el('div', { class: 'table-wrap', tabindex: '0', role: 'region', 'aria-label': 'chosen runs (scrolls sideways)' },
+        el('table', { class: 'study', id: 'target-table' },
+          el('thead', {}, el('tr', {}, ['h', 'k', 'unknowns', 'steps', 'predicted error', 'estimated error', 'check', 'predicted time', 'time']
+            .map((h) => el('th', { scope: 'col' }, h)))),
+          el('tbody', {}, rows))),
+      img,
     );
     api.keyedImage(img, report);
     this.root.dataset.state = 'ready';

@@ -37,7 +37,22 @@ pub fn main(args: StudyArgs) -> ExitCode {
             "give study files and/or --preset NAME (paper-table-1, paper-table-2)",
         );
     }
-    let plans = match plans(&args.files, &args.preset) {
+    let docs = match documents(&args.files, &args.preset) {
+        Ok(d) => d,
+        Err(e) => return fail(2, &e),
+    };
+    let (targets, ladders): (Vec<_>, Vec<_>) =
+        docs.into_iter().partition(|(_, d)| study::is_target(d));
+    if !targets.is_empty() {
+        if !ladders.is_empty() {
+            return fail(
+                2,
+                "give target studies and ladder studies in separate invocations",
+            );
+        }
+        return main_targets(&args, &targets);
+    }
+    let plans = match plans(&ladders) {
         Ok(p) => p,
         Err(e) => return fail(2, &e),
     };
@@ -79,9 +94,76 @@ pub fn main(args: StudyArgs) -> ExitCode {
     ExitCode::SUCCESS
 }
 
-/// The studies of the files (a request body `{"study": {...}}` or the study object) and of
-/// the presets, in that order; an error names the file or preset.
-fn plans(files: &[PathBuf], presets: &[String]) -> Result<Vec<Plan>, String> {
+/// Target studies, one after the other: the result (JSON or text) of each, and with
+/// --report-dir its JSON, text and work–precision SVG. An unreachable target is exit code 1
+/// with the reason (the best error reachable and its cost).
+fn main_targets(args: &StudyArgs, docs: &[(String, Value)]) -> ExitCode {
+    let mut specs = Vec::new();
+    for (origin, doc) in docs {
+        match study::target::parse(doc, "") {
+            Ok((spec, _)) => specs.push(spec),
+            Err(e) => return fail(2, &format!("{origin}: {e}")),
+        }
+    }
+    let mut exec = study::Execution::default();
+    if let Some(t) = args.threads {
+        exec.threads = t.max(1);
+    }
+    let mut results = Vec::new();
+    for spec in &specs {
+        let bar = progress::bar(0, "steps");
+        let progress = |done: usize, total: usize| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+            ControlFlow::Continue(())
+        };
+        let r = study::target::run(
+            spec,
+            exec,
+            study::target::Limits::default(),
+            &progress,
+            &mut study::target::Discard,
+        );
+        bar.finish_and_clear();
+        match r {
+            Ok(r) => results.push(r),
+            Err(e) => return fail(1, &format!("{}: {e}", spec.name)),
+        }
+    }
+    if let Some(dir) = &args.report_dir {
+        let write = || -> std::io::Result<()> {
+            std::fs::create_dir_all(dir)?;
+            for r in &results {
+                let stem = file_stem(&r.name);
+                std::fs::write(dir.join(format!("{stem}.json")), pretty(r))?;
+                std::fs::write(dir.join(format!("{stem}.txt")), r.text_table())?;
+                let svg = study::report_svg::target_report(r);
+                std::fs::write(dir.join(format!("{stem}.svg")), svg)?;
+            }
+            Ok(())
+        };
+        if let Err(e) = write() {
+            return fail(
+                1,
+                &format!("cannot write the reports to {}: {e}", dir.display()),
+            );
+        }
+    }
+    match (args.format, results.as_slice()) {
+        (StudyFormat::Text, _) => {
+            for r in &results {
+                println!("{}", r.text_table());
+            }
+        }
+        (StudyFormat::Json, [one]) => println!("{}", pretty(one)),
+        (StudyFormat::Json, _) => println!("{}", pretty(&results)),
+    }
+    ExitCode::SUCCESS
+}
+
+/// The study documents of the files (a request body `{"study": {...}}` or the study
+/// object) and of the presets, in that order, each with its origin.
+fn documents(files: &[PathBuf], presets: &[String]) -> Result<Vec<(String, Value)>, String> {
     let mut docs: Vec<(String, Value)> = Vec::new();
     for f in files {
         let text =
@@ -96,6 +178,11 @@ fn plans(files: &[PathBuf], presets: &[String]) -> Result<Vec<Plan>, String> {
     for p in presets {
         docs.push((p.clone(), serde_json::json!({ "preset": p })));
     }
+    Ok(docs)
+}
+
+/// The ladder studies' plans; an error names the file or preset.
+fn plans(docs: &[(String, Value)]) -> Result<Vec<Plan>, String> {
     docs.iter()
         .map(|(origin, doc)| {
             study::parse(doc, "")
@@ -110,21 +197,24 @@ fn plans(files: &[PathBuf], presets: &[String]) -> Result<Vec<Plan>, String> {
 fn write_reports(dir: &Path, results: &[StudyResult]) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
     for r in results {
-        let stem: String = r
-            .name
-            .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || c == '-' {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .collect();
+        let stem = file_stem(&r.name);
         std::fs::write(dir.join(format!("{stem}.json")), pretty(r))?;
         std::fs::write(dir.join(format!("{stem}.txt")), r.text_table())?;
         let svg = study::report_svg::study_report(r);
         std::fs::write(dir.join(format!("{stem}.svg")), svg)?;
     }
     Ok(())
+}
+
+/// A study's name with anything but ASCII letters, digits and '-' replaced by '_'.
+fn file_stem(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
 }

@@ -44,6 +44,13 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
         links["summary"] = json!(format!("{base}/summary"));
         links["table"] = json!(format!("{base}/summary?format=text"));
         links["report"] = json!(format!("{base}/report.svg"));
+        if crate::jobs::is_target_study(&rec.scene) {
+            // The chosen run's results, served as a simulation's.
+            links["fields"] = json!(format!("{base}/fields?step=last"));
+            links["mesh"] = json!(format!("{base}/mesh"));
+            links["pvd"] = json!(format!("{base}/result.pvd"));
+            links["archive"] = json!(format!("{base}/archive.tar"));
+        }
     } else if rec.status == JobStatus::Succeeded {
         links["summary"] = json!(format!("{base}/summary"));
         links["fields"] = json!(format!("{base}/fields?step=last"));
@@ -347,6 +354,9 @@ fn validated(doc: Value, state: &AppState) -> Result<(Value, usize, u64), Proble
                     format!("unknown field {k:?} next to a study (a study request is {{\"study\": {{...}}}})"),
                 ));
             }
+            if study::is_target(study) {
+                return validated_target(study, state);
+            }
             let (plan, expanded) =
                 study::parse_with(study, "/study", &*state.rt.meshes).map_err(|e| {
                     crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))
@@ -356,6 +366,36 @@ fn validated(doc: Value, state: &AppState) -> Result<(Value, usize, u64), Proble
         }
         None => validated_scene(doc, None, state),
     }
+}
+
+/// A target study: validated as a document here; whether the target is within reach of the
+/// limits is known only once its pilot runs have measured the errors and times, so an
+/// unreachable target fails the job (422 problem at `/study/target/error` in its error)
+/// before the expensive run. Its progress scale starts at the first pilots' steps.
+fn validated_target(study: &Value, state: &AppState) -> Result<(Value, usize, u64), Problem> {
+    let (spec, expanded) =
+        study::target::parse_with(study, "/study", &*state.rt.meshes).map_err(|e| {
+            crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))
+        })?;
+    let cfg = &state.rt.config;
+    // The finest pilot of the h-ladder must fit the node limit, or nothing can be planned.
+    let first = study::target::FIRST_PILOT_LEVELS - 1;
+    let pilot = contact_core::study::with_resolution(
+        &spec.base,
+        (spec.n0 << first, study::target::PILOT_STEPS),
+    );
+    if pilot.n_nodes() > cfg.max_nodes {
+        return Err(Problem::invalid_field(
+            "/study/scene",
+            format!(
+                "even the pilot levels of this scene need {} nodes, more than this server's limit of {}",
+                pilot.n_nodes(),
+                cfg.max_nodes
+            ),
+        ));
+    }
+    let steps = study::target::PILOT_STEPS * ((1 << study::target::FIRST_PILOT_LEVELS) - 1) * 2;
+    Ok((json!({ "study": expanded }), steps, 0))
 }
 
 /// A scene document (`preset`: the key of the final time when it was expanded from a preset

@@ -9,7 +9,10 @@
 
 use super::query::Params;
 use super::{blocking, load_job, parse_id};
-use crate::jobs::{is_study, parse_step_file, step_file, REPORT_FILE, SUMMARY_FILE, TABLE_FILE};
+use crate::jobs::{
+    is_study, is_target_study, parse_step_file, step_file, CHOSEN_SCENE_FILE, REPORT_FILE,
+    SUMMARY_FILE, TABLE_FILE,
+};
 use crate::meshes::Meshes;
 use crate::problem::Problem;
 use crate::state::AppState;
@@ -49,9 +52,19 @@ async fn succeeded(state: &AppState, id: &str) -> Result<JobRecord, Problem> {
     Ok(rec)
 }
 
-/// A succeeded simulation (the per-step results of a study are its table, not fields).
+/// A succeeded simulation (the per-step results of a study are its table, not fields). A
+/// target study's are those of its chosen run: the record is returned with the chosen run's
+/// scene in place of the study, so that everything drawn from it (mesh, step 0, k) is that
+/// run's.
 async fn simulation(state: &AppState, id: &str) -> Result<JobRecord, Problem> {
-    let rec = load_job(state, parse_id(id)?).await?;
+    let mut rec = load_job(state, parse_id(id)?).await?;
+    if is_target_study(&rec.scene) {
+        require_succeeded(&rec)?;
+        let bytes = result_file(state, &rec, CHOSEN_SCENE_FILE).await?;
+        rec.scene = serde_json::from_slice(&bytes)
+            .map_err(|e| Problem::internal(format!("{CHOSEN_SCENE_FILE}: {e}")))?;
+        return Ok(rec);
+    }
     if is_study(&rec.scene) {
         return Err(Problem::not_found(format!(
             "job {} is a convergence study: it has no fields; see /jobs/{}/summary and /jobs/{}/report.svg",

@@ -289,6 +289,15 @@ def test_a_study_preset_is_submitted_by_name(client: Client) -> None:
         job.cancel()
 
 
+def test_a_target_study_gives_the_chosen_run(client: Client) -> None:
+    job = client.target("paper-convergence", 0.2, quantity="w").wait(timeout=120, progress=False)
+    s = job.summary()
+    assert s["kind"] == "target"
+    assert s["chosen"]["estimated_error"] <= 0.2
+    f = job.fields()
+    assert f.w is not None and len(f.w) > 0
+
+
 def test_study_table_as_dataframe(client: Client) -> None:
     study = {
         "study": {

@@ -226,6 +226,29 @@ class Client:
         headers = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
         return Job(self, self._json("POST", "/jobs", json=body, headers=headers))
 
+    def target(
+        self,
+        scene: Union[str, Mapping[str, Any]],
+        error: float,
+        quantity: str = "w",
+        budget_s: Optional[float] = None,
+        name: Optional[str] = None,
+    ) -> "Job":
+        """Submits a target study: the cheapest run of ``scene`` (a preset name or a scene
+        document) whose relative error at t = T in ``quantity`` ("w", "u" or "zeta") is below
+        ``error``, within ``budget_s`` seconds if given. The job's summary has the choice
+        (``chosen``), the fitted models and the pilots; its fields, VTU and archive are the
+        chosen run's. A target out of reach fails the job with the reason in its error."""
+        study: Dict[str, Any] = {
+            "scene": scene if isinstance(scene, str) else dict(scene),
+            "target": {"error": error, "quantity": quantity},
+        }
+        if budget_s is not None:
+            study["budget_s"] = budget_s
+        if name is not None:
+            study["name"] = name
+        return self.submit({"study": study})
+
     def _study_presets(self) -> List[str]:
         """Names of the server's study presets (asked once per client)."""
         if self._studies is None:

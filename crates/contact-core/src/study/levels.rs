@@ -21,6 +21,8 @@ pub struct Work {
     /// Runs with equal keys have the same mesh and physics and share one [`Prepared`]
     /// set-up (the factored velocity operator does not depend on k).
     pub share: Option<(String, usize)>,
+    /// Also keep the displacement u at the kept steps (target studies of u).
+    pub keep_u: bool,
 }
 
 impl Work {
@@ -35,6 +37,8 @@ pub struct Snapshot {
     pub step: usize,
     pub w: Vec<f64>,
     pub zeta: Vec<f64>,
+    /// Interleaved like w; empty unless the work asked for it ([`Work::keep_u`]).
+    pub u: Vec<f64>,
 }
 
 /// Mean and maximum iterations of a sub-problem solver over a run.
@@ -121,6 +125,11 @@ pub fn run_level<const D: usize>(
                 step: r.n,
                 w: sim.w.clone(),
                 zeta: sim.state.zeta.clone(),
+                u: if work.keep_u {
+                    sim.state.u.clone()
+                } else {
+                    Vec::new()
+                },
             });
         }
         if tick().is_break() {

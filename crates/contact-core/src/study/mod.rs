@@ -10,18 +10,23 @@
 //! - [`reference`] holds reference runs shared between studies of the same scene;
 //! - [`compare`] turns the runs into the error table ([`StudyResult`]);
 //! - [`report_svg`] draws a study's two plots (error against h or k, error against time);
-//! - [`presets`] are the paper's Tables 1–2.
+//! - [`presets`] are the paper's Tables 1–2;
+//! - [`target`] runs a study with a target error instead of a ladder: pilot levels, the
+//!   [`plan`] (error and cost models, the cheapest (h, k)), the chosen run and its check.
 
 pub mod compare;
 pub mod levels;
+pub mod plan;
 pub mod presets;
 pub mod reference;
 pub mod report_svg;
 pub mod spec;
+pub mod target;
 
 pub use compare::{StudyReference, StudyResult, StudyRow};
 pub use reference::ReferenceCache;
 pub use spec::{parse, parse_with, Plan, Vary};
+pub use target::{is_target, TargetResult, TargetSpec};
 
 use crate::problem::Problem;
 use crate::run::RunError;
@@ -53,6 +58,17 @@ pub enum StudyError {
     },
     #[error("cancelled")]
     Cancelled,
+    /// A target study's target is out of reach of the limits (said before the expensive run).
+    #[error("{message}")]
+    Unreachable {
+        message: String,
+        /// The smallest predicted error reachable within the limits and its predicted time.
+        best_error: Option<f64>,
+        best_seconds: Option<f64>,
+    },
+    /// Writing the chosen run's stored steps failed.
+    #[error("cannot write the chosen run's results: {0}")]
+    Output(#[source] std::io::Error),
 }
 
 /// How a study is executed (not what it computes).
@@ -193,6 +209,7 @@ fn run_many_in<const D: usize>(
                     keep,
                     is_reference: true,
                     share: Some((plan.reference_key.clone(), plan.reference.0)),
+                    keep_u: false,
                 });
             }
         }
@@ -213,6 +230,7 @@ fn run_many_in<const D: usize>(
                 keep,
                 is_reference: false,
                 share: Some((plan.reference_key.clone(), n)),
+                keep_u: false,
             });
         }
         level_jobs.push(idx);
@@ -297,9 +315,14 @@ fn check_nested(plan: &Plan) -> Result<(), StudyError> {
     Ok(())
 }
 
+/// [`with`] for callers outside the crate (a level's problem, e.g. to check limits).
+pub fn with_resolution(base: &Problem, level: (usize, usize)) -> Problem {
+    with(base, level)
+}
+
 /// The problem at one level: n cells per unit length on a rectangle; on a given mesh,
 /// n = 2^refine ([`spec::resolution`]).
-fn with(base: &Problem, (n, steps): (usize, usize)) -> Problem {
+pub(crate) fn with(base: &Problem, (n, steps): (usize, usize)) -> Problem {
     let body = base.body.as_ref().map(|b| {
         std::sync::Arc::new(crate::problem::Body {
             refine: n.trailing_zeros() as usize,
@@ -354,13 +377,13 @@ fn compared_steps(plan: &Plan) -> BTreeSet<usize> {
 }
 
 /// A finished run.
-enum Done<const D: usize> {
+pub(super) enum Done<const D: usize> {
     Level(LevelRun<D>),
     Reference(Reference<D>),
 }
 
 /// Runs the jobs on `exec.threads` threads, largest first, and returns them in input order.
-fn run_all<const D: usize>(
+pub(super) fn run_all<const D: usize>(
     jobs: Vec<Work>,
     exec: Execution,
     total: usize,

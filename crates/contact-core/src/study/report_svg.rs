@@ -2,7 +2,7 @@
 //! slope-1 and slope-2 guides, and the work–precision diagram (error against wall time).
 //! Plain SVG 1.1 text, no fonts or scripts, so it renders the same in browsers and viewers.
 
-use crate::study::{StudyResult, Vary};
+use crate::study::{StudyResult, TargetResult, Vary};
 use std::fmt::Write;
 
 const W: f64 = 980.0;
@@ -244,6 +244,143 @@ pub fn study_report(s: &StudyResult) -> String {
         ly - 3.5,
         ly + 4.0,
         order(s.lsq_order_zeta),
+    );
+    out
+}
+
+/// The work–precision plot of a target study: the predicted frontier of the (h, k) grid
+/// within the limits (time against predicted error), the pilot runs (measured time, the
+/// model's error at their (h, k)), the target and target/safety lines, and the chosen run
+/// twice: predicted (open) and measured time with its estimated error (filled).
+pub fn target_report(r: &TargetResult) -> String {
+    const COLOR_F: &str = "#888888";
+    const COLOR_P: &str = "#2ca02c";
+    let m = &r.error_model;
+    let pilots: Vec<(f64, f64)> = r
+        .pilots
+        .iter()
+        .map(|p| (p.seconds, m.predict(p.h, p.k)))
+        .collect();
+    let frontier: Vec<(f64, f64)> = r
+        .frontier
+        .iter()
+        .map(|c| (c.predicted_seconds, c.predicted_error))
+        .collect();
+    let chosen: Vec<(f64, f64, f64, f64)> = r
+        .attempts
+        .iter()
+        .map(|a| {
+            (
+                a.predicted_seconds,
+                a.predicted_error,
+                a.seconds,
+                a.estimated_error,
+            )
+        })
+        .collect();
+    let xs = pilots
+        .iter()
+        .chain(&frontier)
+        .map(|p| p.0)
+        .chain(chosen.iter().flat_map(|c| [c.0, c.2]))
+        .collect::<Vec<_>>();
+    let ys = pilots
+        .iter()
+        .chain(&frontier)
+        .map(|p| p.1)
+        .chain(chosen.iter().flat_map(|c| [c.1, c.3]))
+        .chain([r.target_error, r.target_error / r.safety_factor])
+        .collect::<Vec<_>>();
+    // The frontier reaches far beyond the choice: keep the axes to one decade past it.
+    let x_cap = xs
+        .iter()
+        .copied()
+        .filter(|x| *x > 0.0)
+        .fold(0.0f64, f64::max)
+        .min(10.0 * chosen.iter().map(|c| c.0.max(c.2)).fold(0.0, f64::max));
+    let panel = Panel {
+        left: LEFTS[0] + 120.0,
+        x: LogAxis::over(xs.iter().copied().filter(|x| *x <= x_cap)),
+        y: LogAxis::over(ys.iter().copied()),
+    };
+    let inside = |(x, y): &(f64, f64)| {
+        *x <= 10f64.powf(panel.x.hi) && *y >= 10f64.powf(panel.y.lo) && *y <= 10f64.powf(panel.y.hi)
+    };
+    let frac = fraction;
+    let c = &r.chosen;
+    let mut out = format!(
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" viewBox="0 0 {W} {H}" font-family="sans-serif">
+<title>{}</title>
+<rect width="{W}" height="{H}" fill="white"/>
+<text x="{}" y="24" text-anchor="middle" font-size="17">{}: target {} in {} → h = {}, k = {} (estimated {:.3e}, {:.2} s)</text>
+"##,
+        esc(&r.name),
+        W / 2.0,
+        esc(&r.name),
+        r.target_error,
+        r.quantity.name(),
+        frac(c.h),
+        frac(c.k),
+        c.estimated_error,
+        c.seconds,
+    );
+    panel.frame(
+        &mut out,
+        "work–precision (predicted frontier, pilots, chosen run)",
+        "wall time [s]",
+    );
+    for (level, dash, label) in [
+        (r.target_error, "8 4", "target"),
+        (r.target_error / r.safety_factor, "2 3", "target / safety"),
+    ] {
+        let y = panel.py(level);
+        let _ = writeln!(
+            out,
+            r##"<line x1="{}" y1="{y:.1}" x2="{}" y2="{y:.1}" stroke="{COLOR_Z}" stroke-dasharray="{dash}"/><text x="{}" y="{:.1}" font-size="11" fill="{COLOR_Z}">{label}</text>"##,
+            panel.left,
+            panel.left + PANEL_W,
+            panel.left + PANEL_W + 6.0,
+            y + 4.0
+        );
+    }
+    let frontier: Vec<(f64, f64)> = frontier.into_iter().filter(inside).collect();
+    panel.series(&mut out, &frontier, COLOR_F, false);
+    for p in pilots.iter().filter(|p| inside(p)) {
+        let _ = writeln!(
+            out,
+            r#"<rect x="{:.1}" y="{:.1}" width="7" height="7" fill="{COLOR_P}"/>"#,
+            panel.px(p.0) - 3.5,
+            panel.py(p.1) - 3.5
+        );
+    }
+    for &(tp, ep, tm, em) in &chosen {
+        let _ = writeln!(
+            out,
+            r#"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="{COLOR_W}" stroke-dasharray="3 3"/><circle cx="{:.1}" cy="{:.1}" r="7" fill="none" stroke="{COLOR_W}" stroke-width="2"/><circle cx="{:.1}" cy="{:.1}" r="7" fill="{COLOR_W}"/>"#,
+            panel.px(tp),
+            panel.py(ep),
+            panel.px(tm),
+            panel.py(em),
+            panel.px(tp),
+            panel.py(ep),
+            panel.px(tm),
+            panel.py(em),
+        );
+    }
+    let ly = H - 22.0;
+    let _ = write!(
+        out,
+        r##"<circle cx="90" cy="{ly}" r="4" fill="{COLOR_F}"/><text x="100" y="{:.0}" font-size="13">predicted frontier</text>
+<rect x="236.5" y="{:.1}" width="7" height="7" fill="{COLOR_P}"/><text x="250" y="{:.0}" font-size="13">pilot runs (model error)</text>
+<circle cx="450" cy="{ly}" r="6" fill="none" stroke="{COLOR_W}" stroke-width="2"/><text x="462" y="{:.0}" font-size="13">chosen: predicted</text>
+<circle cx="610" cy="{ly}" r="6" fill="{COLOR_W}"/><text x="622" y="{:.0}" font-size="13">chosen: measured time, (2h, 2k) error bar</text>
+</svg>
+"##,
+        ly + 4.0,
+        ly - 3.5,
+        ly + 4.0,
+        ly + 4.0,
+        ly + 4.0,
     );
     out
 }
