@@ -123,30 +123,7 @@ pub fn parse_with(
             ))
         }
     };
-    let scene_doc = match obj.get("scene") {
-        None => {
-            return Err(err(
-                "/scene",
-                "missing: the scene to study (an object or a preset name)".into(),
-            ))
-        }
-        Some(Value::String(s)) => scene::presets::get(s).ok_or_else(|| {
-            err(
-                "/scene",
-                format!(
-                    "unknown preset {s:?}; known: {}",
-                    scene::presets::names().join(", ")
-                ),
-            )
-        })?,
-        Some(v @ Value::Object(_)) => v.clone(),
-        Some(_) => {
-            return Err(err(
-                "/scene",
-                "scene must be a scene object or a preset name".into(),
-            ))
-        }
-    };
+    let scene_doc = scene_document(obj, at)?;
     let list = |key: &str| -> Result<(Vec<Value>, bool), ValidationErrors> {
         match obj.get(key) {
             None => Err(err(
@@ -354,6 +331,33 @@ pub fn parse_with(
         base,
     };
     Ok((plan, Value::Object(expanded)))
+}
+
+/// The scene a study (ladder or target) runs: its `scene` field, a scene object or a preset
+/// name expanded; errors point at `{at}/scene`.
+pub(super) fn scene_document(
+    obj: &serde_json::Map<String, Value>,
+    at: &str,
+) -> Result<Value, ValidationErrors> {
+    let err = |m: String| {
+        ValidationErrors(vec![FieldError {
+            pointer: format!("{at}/scene"),
+            message: m,
+        }])
+    };
+    match obj.get("scene") {
+        None => Err(err(
+            "missing: the scene to study (an object or a preset name)".into(),
+        )),
+        Some(Value::String(s)) => scene::presets::get(s).ok_or_else(|| {
+            err(format!(
+                "unknown preset {s:?}; known: {}",
+                scene::presets::names().join(", ")
+            ))
+        }),
+        Some(v @ Value::Object(_)) => Ok(v.clone()),
+        Some(_) => Err(err("scene must be a scene object or a preset name".into())),
+    }
 }
 
 #[cfg(test)]

@@ -220,30 +220,7 @@ pub fn parse_with(
             }
         },
     };
-    let scene_doc = match obj.get("scene") {
-        None => {
-            return Err(err(
-                "/scene",
-                "missing: the scene to study (an object or a preset name)".into(),
-            ))
-        }
-        Some(Value::String(s)) => scene::presets::get(s).ok_or_else(|| {
-            err(
-                "/scene",
-                format!(
-                    "unknown preset {s:?}; known: {}",
-                    scene::presets::names().join(", ")
-                ),
-            )
-        })?,
-        Some(v @ Value::Object(_)) => v.clone(),
-        Some(_) => {
-            return Err(err(
-                "/scene",
-                "scene must be a scene object or a preset name".into(),
-            ))
-        }
-    };
+    let scene_doc = super::spec::scene_document(obj, at)?;
     let at_scene = format!("{at}/scene");
     let relocate = |ValidationErrors(es): ValidationErrors| {
         ValidationErrors(
