@@ -1,12 +1,15 @@
 //! The multigrid path against the direct path: every per-step norm to 1e-9 relative, on the
 //! paper rectangles (smoothed aggregation when small, geometric levels from halving the
 //! grid), a polygon and an imported mesh as given (aggregation) and refined (geometric
-//! levels), the Kuhn box (both ways) and an imported tetrahedral mesh; damage on. Friction cases that slip on the multigrid path form the Schur
-//! complement by solves (until the full-space Newton method lands).
+//! levels), the Kuhn box (both ways) and an imported tetrahedral mesh; damage on. Scenes that
+//! slip take the semismooth Newton method on all DOFs on the multigrid path and the dense
+//! reduced problem on the direct one: partial and full slip in 2D and 3D, slip-weakening
+//! inside (2.31), a curved Γ3, an imported cylinder as given and refined.
 
 use contact_core::linalg::LinearPath;
 use contact_core::problem::Problem;
 use contact_core::scene::{self, presets};
+use contact_core::solve::invariants;
 use contact_core::solve::stepper::{Simulation, StepReport};
 use contact_core::solve::SolverSettings;
 use serde_json::{json, Value};
@@ -20,13 +23,21 @@ fn problem(preset: &str, mesh: Value, steps: usize, path: &str) -> Problem {
     scene::validate(&doc).unwrap_or_else(|e| panic!("{preset}: {e}"))
 }
 
-fn run<const D: usize>(p: Problem) -> (Vec<StepReport>, String) {
+fn run<const D: usize>(p: Problem) -> (Vec<StepReport>, String, &'static str) {
+    let (reports, sim) = simulate::<D>(p);
+    (reports, sim.linear_solver(), sim.slip_solver().describe())
+}
+
+/// Every step, with the invariants (friction law, w·n = 0 on Γ3, 0 ≤ ζ ≤ 1) checked.
+fn simulate<const D: usize>(p: Problem) -> (Vec<StepReport>, Simulation<D>) {
     let mut sim = Simulation::<D>::new(p, SolverSettings::default()).expect("set-up");
     let mut reports = Vec::new();
     while !sim.finished() {
-        reports.push(sim.step().expect("step"));
+        let r = sim.step().expect("step");
+        invariants::check_step(&sim, &r).unwrap_or_else(|e| panic!("{e}"));
+        reports.push(r);
     }
-    (reports, sim.linear_solver())
+    (reports, sim)
 }
 
 fn close(a: f64, b: f64, what: &str) {
@@ -38,8 +49,38 @@ fn close(a: f64, b: f64, what: &str) {
 }
 
 fn compare<const D: usize>(preset: &str, mesh: Value, steps: usize, expect: &str) {
-    let (direct, d_name) = run::<D>(problem(preset, mesh.clone(), steps, "direct"));
-    let (multi, m_name) = run::<D>(problem(preset, mesh, steps, "multigrid"));
+    compare_with::<D>(preset, mesh, steps, expect, &[]);
+}
+
+/// As [`compare`], with scene edits (JSON pointer, value); returns the steps that slipped.
+fn compare_with<const D: usize>(
+    preset: &str,
+    mesh: Value,
+    steps: usize,
+    expect: &str,
+    edits: &[(&str, Value)],
+) -> usize {
+    let edit = |mut p: Problem, path: &str| {
+        let mut doc = presets::get(preset).expect("preset");
+        doc["mesh"] = mesh.clone();
+        doc["time"] = json!({"T": doc["time"].get("T").or(doc["time"].get("t_end")).cloned().unwrap_or(json!(1)), "N": steps});
+        doc["solver"] = json!({"linear": path});
+        for (pointer, value) in edits {
+            *doc.pointer_mut(pointer).expect("pointer") = value.clone();
+        }
+        if !edits.is_empty() {
+            p = scene::validate(&doc).unwrap_or_else(|e| panic!("{preset}: {e}"));
+        }
+        p
+    };
+    let (direct, d_name, d_slip) = run::<D>(edit(
+        problem(preset, mesh.clone(), steps, "direct"),
+        "direct",
+    ));
+    let (multi, m_name, m_slip) = run::<D>(edit(
+        problem(preset, mesh.clone(), steps, "multigrid"),
+        "multigrid",
+    ));
     assert_eq!(d_name, "direct (Cholesky)");
     assert!(m_name.starts_with(expect), "{preset}: {m_name}");
     assert_eq!(direct.len(), multi.len());
@@ -56,6 +97,15 @@ fn compare<const D: usize>(preset: &str, mesh: Value, steps: usize, expect: &str
             "{at}: the multigrid path was taken"
         );
     }
+    let slipped = multi.iter().filter(|r| r.slip_nodes > 0).count();
+    if slipped > 0 {
+        assert!(d_slip.starts_with("dense Schur complement"), "{d_slip}");
+        assert_eq!(m_slip, "semismooth Newton on all DOFs (multigrid)");
+        let newton = multi.iter().filter(|r| r.slip_nodes > 0);
+        let most = newton.map(|r| r.velocity.iterations).max().unwrap_or(0);
+        eprintln!("{preset} {edits:?}: {slipped} slipping steps, at most {most} Newton iterations");
+    }
+    slipped
 }
 
 #[test]
@@ -137,4 +187,85 @@ fn the_scene_field_is_validated_and_hashed() {
     assert_eq!(p.linear, LinearPath::Multigrid);
     let plain = presets::get("paper-exp1").unwrap();
     assert_ne!(scene::content_hash(&doc), scene::content_hash(&plain));
+}
+
+/// A preset, its mesh, the expected hierarchy and scene edits.
+type Case = (&'static str, Value, &'static str, Vec<(&'static str, Value)>);
+
+/// Friction that slips, on the semismooth Newton path against the dense reduced problem.
+#[test]
+fn slipping_friction_agrees_on_the_newton_path() {
+    let tresca = |g: f64| ("/friction", json!({"law": "tresca", "g": g}));
+    // 2D: partial slip on a rectangle (aggregation, then a halved grid), full slip (g = 0).
+    let cases2: Vec<Case> = vec![
+        (
+            "paper-exp3",
+            json!({"h": "1/16"}),
+            "multigrid (smoothed aggregation",
+            vec![tresca(0.05)],
+        ),
+        (
+            "paper-convergence",
+            json!({"h": "1/32"}),
+            "multigrid (geometric",
+            vec![tresca(0.5)],
+        ),
+        (
+            "paper-convergence",
+            json!({"h": "1/16"}),
+            "multigrid (smoothed aggregation",
+            vec![tresca(0.0)],
+        ),
+        (
+            "plate-with-hole",
+            json!({"refine": 1}),
+            "multigrid (geometric",
+            vec![],
+        ),
+        (
+            "arch-on-support",
+            json!({"refine": 0}),
+            "multigrid (smoothed aggregation",
+            vec![],
+        ),
+        (
+            "paper-exp3",
+            json!({"h": "1/16"}),
+            "multigrid (smoothed aggregation",
+            vec![(
+                "/friction",
+                json!({"law": "slip_weakening", "mu0": 1.2, "mu1": 0.4, "alpha": 2}),
+            )],
+        ),
+    ];
+    for (preset, mesh, expect, edits) in cases2 {
+        let slipped = compare_with::<2>(preset, mesh, 4, expect, &edits);
+        assert!(slipped > 0, "{preset} {edits:?}: no step slipped");
+    }
+    // 3D: oblique partial slip on the box (aggregation and halved), the imported cylinder in
+    // full slip as given (aggregation) and refined (geometric).
+    let cases3: Vec<Case> = vec![
+        (
+            "box-exp3",
+            json!({"h": "1/6"}),
+            "multigrid (smoothed aggregation",
+            vec![tresca(2.0)],
+        ),
+        (
+            "box-exp3",
+            json!({"h": "1/8"}),
+            "multigrid (geometric",
+            vec![tresca(2.0)],
+        ),
+        (
+            "standing-cylinder",
+            json!({"refine": 0}),
+            "multigrid (smoothed aggregation",
+            vec![tresca(0.0)],
+        ),
+    ];
+    for (preset, mesh, expect, edits) in cases3 {
+        let slipped = compare_with::<3>(preset, mesh, 3, expect, &edits);
+        assert!(slipped > 0, "{preset} {edits:?}: no step slipped");
+    }
 }

@@ -40,6 +40,18 @@ pub fn velocity_solver<const D: usize>(
     if path != LinearPath::Multigrid {
         return LinearSolver::direct(&a);
     }
+    let (blocks, coarsening) = velocity_levels(mesh, dofs, lead);
+    LinearSolver::multigrid(Arc::new(a), blocks, coarsening)
+}
+
+/// The node blocks and the coarsening of a velocity-type operator on its first `lead` free
+/// DOFs: geometric levels where the mesh has them, else smoothed aggregation with the
+/// rigid-body modes.
+pub fn velocity_levels<const D: usize>(
+    mesh: &Mesh<D>,
+    dofs: &DofMap<D>,
+    lead: usize,
+) -> (Blocks, Coarsening) {
     let blocks = restrict(&node_blocks(mesh, dofs), lead);
     let coarsening = geometric_velocity(mesh, dofs, lead).unwrap_or_else(|| {
         let k = rigid_modes::count(D);
@@ -50,7 +62,7 @@ pub fn velocity_solver<const D: usize>(
             k,
         }
     });
-    LinearSolver::multigrid(Arc::new(a), blocks, coarsening)
+    (blocks, coarsening)
 }
 
 /// The geometric coarsening of a velocity-type operator on the first `lead` free DOFs, None

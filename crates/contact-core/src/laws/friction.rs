@@ -67,6 +67,47 @@ impl FrictionLaw {
         }
     }
 
+    /// j(r1) − j(r0) = ∫_{r0}^{r1} μ, given dr = r1 − r0 computed without cancellation. Near the
+    /// solution the steps' energy changes are far below the rounding of j itself, so the
+    /// difference is integrated, not subtracted.
+    pub fn potential_change(&self, r0: f64, r1: f64, dr: f64) -> f64 {
+        match self {
+            FrictionLaw::Tresca { g } => g * dr,
+            FrictionLaw::SlipWeakening { mu0, mu1, alpha } => {
+                if *alpha == 0.0 {
+                    mu0 * dr
+                } else {
+                    // ∫ e^(−α s) = e^(−α r0) (1 − e^(−α dr)) / α.
+                    mu1 * dr + (mu0 - mu1) * (-alpha * r0).exp() * -(-alpha * dr).exp_m1() / alpha
+                }
+            }
+            FrictionLaw::PiecewiseLinear { points } => {
+                // μ is linear between consecutive breakpoints (and constant outside them): the
+                // trapezoid rule on each piece is exact.
+                let (lo, hi, sign) = if r1 >= r0 {
+                    (r0, r1, 1.0)
+                } else {
+                    (r1, r0, -1.0)
+                };
+                let inside = points.iter().map(|p| p[0]).filter(|&t| t > lo && t < hi);
+                let mut total = 0.0;
+                let mut a = lo;
+                let mut pieces = 0;
+                for t in inside.chain(std::iter::once(hi)) {
+                    total += (t - a) * 0.5 * (self.mu(a) + self.mu(t));
+                    a = t;
+                    pieces += 1;
+                }
+                if pieces == 1 {
+                    // One piece: its length is dr itself, not the rounded hi − lo.
+                    dr * 0.5 * (self.mu(r0) + self.mu(r1))
+                } else {
+                    sign * total
+                }
+            }
+        }
+    }
+
     /// c2τ of (2.31): the relaxed-monotonicity constant of ∂j, i.e. max(0, −min_r μ'(r)).
     /// 0 for convex laws.
     pub fn relaxed_monotonicity(&self) -> f64 {

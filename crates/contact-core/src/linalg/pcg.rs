@@ -7,7 +7,7 @@
 //! true residual is recomputed and, if it misses the target, the iteration restarts from the
 //! current x (at most [`RESTARTS`] times).
 
-use super::Csr;
+use super::LinearOperator;
 
 /// Restarts from the true residual when the recursive one has drifted.
 const RESTARTS: usize = 2;
@@ -67,15 +67,15 @@ fn max_abs(a: &[f64]) -> f64 {
 }
 
 /// r ← b − A x.
-fn residual(a: &Csr, b: &[f64], x: &[f64], r: &mut [f64]) {
-    a.mul_vec(x, r);
+fn residual(a: &(impl LinearOperator + ?Sized), b: &[f64], x: &[f64], r: &mut [f64]) {
+    a.apply(x, r);
     r.iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
 }
 
 /// Solves A x = b from the initial guess in `x` (a warm start) until ‖b − A x‖∞ ≤ `atol`
 /// or `max_iterations` products with A have been made.
 pub fn solve(
-    a: &Csr,
+    a: &(impl LinearOperator + ?Sized),
     precond: &mut dyn Preconditioner,
     b: &[f64],
     x: &mut [f64],
@@ -84,7 +84,7 @@ pub fn solve(
     work: &mut PcgWork,
 ) -> PcgReport {
     let n = b.len();
-    assert_eq!(a.nrows, n);
+    assert_eq!(a.dim(), n);
     if work.r.len() != n {
         *work = PcgWork::new(n);
     }
@@ -101,7 +101,7 @@ pub fn solve(
         p.copy_from_slice(z);
         let mut rz = dot(r, z);
         while iterations < max_iterations {
-            a.mul_vec(p, q);
+            a.apply(p, q);
             iterations += 1;
             let pq = dot(p, q);
             if pq <= 0.0 || !pq.is_finite() {

@@ -92,7 +92,7 @@ impl LinearSolver {
             }
             LinearSolver::Multigrid(k) => {
                 let Krylov { a, vcycle, work } = &mut **k;
-                let rep = pcg::solve(a, vcycle, b, x, atol, MAX_KRYLOV_ITERATIONS, work);
+                let rep = pcg::solve(&**a, vcycle, b, x, atol, MAX_KRYLOV_ITERATIONS, work);
                 if rep.converged {
                     Ok(rep.iterations)
                 } else {

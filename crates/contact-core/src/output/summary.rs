@@ -3,10 +3,10 @@
 //! `steps[]` (the same per step plus `velocity` and `damage` solver reports), `timing`.
 
 use crate::estimate::ErrorEstimate;
-use crate::linalg::SchurPath;
 use crate::problem::{FrictionLaw, MeshPattern, Problem};
 use crate::solve::smallness::SmallnessReport;
 use crate::solve::stepper::{Simulation, StepReport};
+use crate::solve::velocity::ContactSolver;
 use crate::solve::SolverSettings;
 use serde::Serialize;
 
@@ -196,13 +196,10 @@ impl Summary {
                 contact_dofs: sim.dofs.n_contact(),
                 factor_n,
                 factor_nnz,
-                contact_solver: if contact {
-                    match sim.schur_path() {
-                        SchurPath::TrailingBlock => {
-                            "dense Schur complement (trailing block of the factor)"
-                        }
-                        SchurPath::BlockedSolves => "dense Schur complement (blocked solves)",
-                    }
+                contact_solver: if contact && stats.steps_with_slip == 0 {
+                    ContactSolver::StickOnly.describe()
+                } else if contact {
+                    sim.slip_solver().describe()
                 } else {
                     "none"
                 },

@@ -462,52 +462,11 @@ fn energy_change(p: &Reduced, x: &[f64], g: &[f64], d: &[f64], sd: &[f64]) -> f6
             } else {
                 0.0
             };
-            let change = potential_change(p.law, r0, r1, dr);
+            let change = p.law.potential_change(r0, r1, dr);
             p.weights[i] * change
         })
         .sum();
     quadratic + friction
-}
-
-/// j(r1) − j(r0) = ∫_{r0}^{r1} μ, given dr = r1 − r0 computed without cancellation. Near the
-/// solution the steps' energy changes are far below the rounding of j itself, so the
-/// difference is integrated, not subtracted.
-fn potential_change(law: &FrictionLaw, r0: f64, r1: f64, dr: f64) -> f64 {
-    match law {
-        FrictionLaw::Tresca { g } => g * dr,
-        FrictionLaw::SlipWeakening { mu0, mu1, alpha } => {
-            if *alpha == 0.0 {
-                mu0 * dr
-            } else {
-                // ∫ e^(−α s) = e^(−α r0) (1 − e^(−α dr)) / α.
-                mu1 * dr + (mu0 - mu1) * (-alpha * r0).exp() * -(-alpha * dr).exp_m1() / alpha
-            }
-        }
-        FrictionLaw::PiecewiseLinear { points } => {
-            // μ is linear between consecutive breakpoints (and constant outside them): the
-            // trapezoid rule on each piece is exact.
-            let (lo, hi, sign) = if r1 >= r0 {
-                (r0, r1, 1.0)
-            } else {
-                (r1, r0, -1.0)
-            };
-            let inside = points.iter().map(|p| p[0]).filter(|&t| t > lo && t < hi);
-            let mut total = 0.0;
-            let mut a = lo;
-            let mut pieces = 0;
-            for t in inside.chain(std::iter::once(hi)) {
-                total += (t - a) * 0.5 * (law.mu(a) + law.mu(t));
-                a = t;
-                pieces += 1;
-            }
-            if pieces == 1 {
-                // One piece: its length is dr itself, not the rounded hi − lo.
-                dr * 0.5 * (law.mu(r0) + law.mu(r1))
-            } else {
-                sign * total
-            }
-        }
-    }
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {

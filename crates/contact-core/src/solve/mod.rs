@@ -7,6 +7,7 @@ pub mod friction_isotropic;
 pub mod friction_reduced;
 pub mod invariants;
 pub mod reduced;
+pub mod semismooth_newton;
 pub mod smallness;
 pub mod stepper;
 pub mod velocity;

@@ -305,6 +305,10 @@ impl<const D: usize> Prepared<D> {
             SchurPath::default(),
             k_ii,
         );
+        if linear == LinearPath::Multigrid && dofs.n_contact() > 0 {
+            let (blocks, levels) = multilevel::velocity_levels(&mesh, &dofs, dofs.n_free());
+            velocity = velocity.with_full_space(blocks, levels);
+        }
         let smallness = smallness::check(problem, &mesh, &geo, &dofs, &mut velocity)?;
         let mass = assembly::mass(&mesh, &geo);
         Ok(Prepared {
@@ -704,6 +708,11 @@ impl<const D: usize> Simulation<D> {
     /// Dimension and factor size of the velocity system (interior DOFs).
     pub fn velocity_factor_size(&self) -> (usize, usize) {
         self.velocity.solver.factor_size()
+    }
+
+    /// How a slipping velocity step is (or was) solved.
+    pub fn slip_solver(&self) -> super::velocity::ContactSolver {
+        self.velocity.solver.slip_solver()
     }
 
     /// How the velocity step forms its Schur complement onto Γ3.

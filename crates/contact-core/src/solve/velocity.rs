@@ -15,17 +15,54 @@
 //! [`crate::linalg::schur`], or on the multigrid path column by column by solves), the
 //! reduced problem is solved, and one more solve recovers w_I.
 //!
+//! On the multigrid path with K's own hierarchy on all free DOFs ([`VelocityStep::with_full_space`])
+//! a slipping step never forms S: (3.13) is solved on all free DOFs by the truncated
+//! nonsmooth Newton multigrid method of [`super::semismooth_newton`], warm-started from the
+//! previous step's velocity.
+//!
 //! Each Γ3 node has d − 1 consecutive tangential DOFs: one in 2D (the reduced problem of
 //! [`super::friction_reduced`]), two in 3D (the isotropic, group-sparse one of
 //! [`super::friction_isotropic`], with the Euclidean norm of the node's 2-vector).
 
+use super::semismooth_newton::SemismoothNewton;
 use super::{friction_isotropic, friction_reduced};
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::fem::DofMap;
+use crate::linalg::multigrid::{Blocks, Coarsening, Hierarchy, Params};
 use crate::linalg::schur::{schur_by_solves, SCHUR_COLUMN_TOLERANCE};
 use crate::linalg::{schur_complement, Csr, LinearSolver, SchurPath};
 use crate::problem::FrictionLaw;
 use nalgebra::DMatrix;
+use std::sync::Arc;
+
+/// How a velocity step's friction problem is solved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ContactSolver {
+    /// Every step of a run stuck: the exact all-stick test held, or the problem's solution
+    /// had every Γ3 node at rest.
+    #[default]
+    StickOnly,
+    /// The dense reduced problem on S, formed as given.
+    DenseSchur(SchurPath),
+    /// Semismooth Newton on all free DOFs with multigrid (no S).
+    SemismoothNewton,
+}
+
+impl ContactSolver {
+    /// What the summary says (`mesh.contact_solver`).
+    pub fn describe(self) -> &'static str {
+        match self {
+            ContactSolver::StickOnly => "none needed (every step stuck)",
+            ContactSolver::DenseSchur(SchurPath::TrailingBlock) => {
+                "dense Schur complement (trailing block of the factor)"
+            }
+            ContactSolver::DenseSchur(SchurPath::BlockedSolves) => {
+                "dense Schur complement (blocked solves)"
+            }
+            ContactSolver::SemismoothNewton => "semismooth Newton on all DOFs (multigrid)",
+        }
+    }
+}
 
 /// Most rounds of iterative refinement of the interior velocity per step.
 const REFINEMENTS: usize = 3;
@@ -39,7 +76,7 @@ const KRYLOV_FRACTION: f64 = 0.01;
 #[derive(Clone)]
 pub struct VelocityStep {
     /// The operator on all free DOFs (for residuals), interior first, contact last.
-    k: Csr,
+    k: Arc<Csr>,
     n_i: usize,
     k_ii: LinearSolver,
     /// Contact rows, interior columns.
@@ -64,6 +101,13 @@ pub struct VelocityStep {
     r: Vec<f64>,
     /// Krylov iterations of the current step (multigrid path).
     krylov: usize,
+    /// K's node blocks and levels on all free DOFs (the multigrid path's slip solver, set
+    /// up on the first slipping step) ...
+    full_levels: Option<(Blocks, Coarsening)>,
+    /// ... and that solver.
+    newton: Option<Box<SemismoothNewton>>,
+    /// The last step's free-DOF velocity (the Newton warm start).
+    w_last: Vec<f64>,
 }
 
 impl VelocityStep {
@@ -81,7 +125,6 @@ impl VelocityStep {
         let k_ci = k.block(n_i..n, 0..n_i);
         let m = dofs.n_contact();
         VelocityStep {
-            k,
             n_i,
             k_ii,
             k_ci,
@@ -102,6 +145,26 @@ impl VelocityStep {
             y_prev: vec![0.0; n_i],
             r: vec![0.0; n],
             krylov: 0,
+            full_levels: None,
+            newton: None,
+            w_last: vec![0.0; n],
+            k: Arc::new(k),
+        }
+    }
+
+    /// Slipping steps solved on all free DOFs by semismooth Newton with multigrid on K's
+    /// `blocks` and `levels` (all free DOFs), instead of on the dense S.
+    pub fn with_full_space(mut self, blocks: Blocks, levels: Coarsening) -> Self {
+        self.full_levels = Some((blocks, levels));
+        self
+    }
+
+    /// How a slipping step is (or was) solved.
+    pub fn slip_solver(&self) -> ContactSolver {
+        if self.full_levels.is_some() || self.newton.is_some() {
+            ContactSolver::SemismoothNewton
+        } else {
+            ContactSolver::DenseSchur(self.schur_path)
         }
     }
 
@@ -151,7 +214,7 @@ impl VelocityStep {
 
     /// The free-DOF operator K and the number of interior DOFs (for benchmarks).
     pub fn operator(&self) -> (&Csr, usize) {
-        (&self.k, self.n_i)
+        (self.k.as_ref(), self.n_i)
     }
 
     /// One solve with K_II, in place (for benchmarks): a substitution pair on the direct
@@ -189,6 +252,49 @@ impl VelocityStep {
             residual: e.residual,
             tolerance: SCHUR_COLUMN_TOLERANCE,
         })
+    }
+
+    /// A slipping step on all free DOFs (multigrid path): semismooth Newton, warm-started
+    /// from the last step's velocity (after an all-stick step: this step's stick solution,
+    /// which is the last one's updated). Returns the Newton iterations.
+    fn solve_full(
+        &mut self,
+        f: &[f64],
+        w: &mut [f64],
+        settings: &SolverSettings,
+        step: usize,
+    ) -> Result<usize, SolveError> {
+        let n_i = self.n_i;
+        if let Some((blocks, levels)) = self.full_levels.take() {
+            let h = Hierarchy::new(self.k.clone(), blocks, levels, Params::default()).map_err(
+                |source| SolveError::Factor {
+                    what: "velocity (all free DOFs)",
+                    source,
+                },
+            )?;
+            self.newton = Some(Box::new(SemismoothNewton::new(
+                self.k.clone(),
+                Arc::new(h),
+                n_i,
+                self.block,
+                self.node_weights.clone(),
+                self.law.clone(),
+            )));
+        }
+        w.copy_from_slice(&self.w_last);
+        if self.x.iter().all(|&v| v == 0.0) {
+            w[..n_i].copy_from_slice(&self.y);
+        }
+        // Half the tolerance, as the dense path's reduced solve: the full check follows.
+        let inner = SolverSettings {
+            tolerance: 0.5 * settings.tolerance,
+            ..*settings
+        };
+        let newton = self.newton.as_mut().expect("built above");
+        let rep = newton.solve(f, w, &inner, KRYLOV_FRACTION * settings.tolerance, step)?;
+        self.krylov += rep.krylov_iterations;
+        self.x.copy_from_slice(&w[n_i..]);
+        Ok(rep.newton_iterations)
     }
 
     /// K_II y = b on the solver's path, from the guess in `y`, to KRYLOV_FRACTION of the
@@ -260,6 +366,8 @@ impl VelocityStep {
             if all_stick {
                 self.x.iter_mut().for_each(|v| *v = 0.0);
                 w[..n_i].copy_from_slice(&self.y);
+            } else if self.full_levels.is_some() || self.newton.is_some() {
+                iterations = self.solve_full(f, w, settings, step)?;
             } else {
                 let mut x = std::mem::take(&mut self.x);
                 let law = self.law.clone();
@@ -340,6 +448,7 @@ impl VelocityStep {
                 tolerance: settings.tolerance,
             });
         }
+        self.w_last.copy_from_slice(w);
         Ok(SolverReport {
             iterations,
             residual,

@@ -11,6 +11,7 @@
 
 pub mod aggregation;
 pub mod smoother;
+pub mod truncated;
 
 use super::cholesky::{Cholesky, FactorError};
 use super::galerkin::{galerkin, transpose};
@@ -157,8 +158,10 @@ struct Level {
 pub struct Hierarchy {
     levels: Vec<Level>,
     coarse_a: Csr,
+    coarse_blocks: Blocks,
     coarse: Cholesky,
     kind: &'static str,
+    params: Params,
 }
 
 impl Hierarchy {
@@ -223,9 +226,33 @@ impl Hierarchy {
         Ok(Hierarchy {
             levels,
             coarse_a,
+            coarse_blocks: blocks,
             coarse,
             kind,
+            params,
         })
+    }
+
+    /// The hierarchy of another operator `a` on level `level` of this one (same DOFs and
+    /// blocks), with this one's prolongators below it and fresh Galerkin operators,
+    /// smoothers and coarsest factor.
+    pub fn rebuilt_from(&self, level: usize, a: Arc<Csr>) -> Result<Hierarchy, FactorError> {
+        let blocks = |l: usize| match self.levels.get(l) {
+            Some(level) => level.smoother.jacobi.blocks().clone(),
+            None => self.coarse_blocks.clone(),
+        };
+        let coarsening = Coarsening::Geometric {
+            prolongators: self.levels[level..].iter().map(|l| l.p.clone()).collect(),
+            blocks: (level + 1..=self.levels.len()).map(blocks).collect(),
+        };
+        let mut h = Hierarchy::new(a, blocks(level), coarsening, self.params)?;
+        h.kind = self.kind;
+        Ok(h)
+    }
+
+    /// Level l's operator, smoother and prolongator to level l + 1 (l below the coarsest).
+    pub fn level(&self, l: usize) -> Option<(&Arc<Csr>, &Chebyshev, &Csr)> {
+        self.levels.get(l).map(|v| (&v.a, &v.smoother, &v.p))
     }
 
     /// Number of levels, the coarsest included.
@@ -250,6 +277,11 @@ impl Hierarchy {
             .map(|l| l.a.nrows)
             .chain(std::iter::once(self.coarse_a.nrows))
             .collect()
+    }
+
+    /// The coarsest operator.
+    pub fn coarsest(&self) -> &Csr {
+        &self.coarse_a
     }
 
     /// The finest operator.
@@ -318,7 +350,7 @@ impl VCycle {
             let w = &mut self.work[l];
             w.x.iter_mut().for_each(|v| *v = 0.0);
             let LevelWork { b, x, r, d, t } = w;
-            level.smoother.smooth(&level.a, b, x, r, d, t, true);
+            level.smoother.smooth(level.a.as_ref(), b, x, r, d, t, true);
             // t ← b − A x, restricted into the next level's right-hand side.
             level.a.mul_vec(x, t);
             t.iter_mut().zip(b.iter()).for_each(|(t, b)| *t = b - *t);
@@ -331,7 +363,9 @@ impl VCycle {
         level.p.mul_vec(&coarse[0].x, &mut w.t);
         w.x.iter_mut().zip(&w.t).for_each(|(x, t)| *x += t);
         let LevelWork { b, x, r, d, t } = w;
-        level.smoother.smooth(&level.a, b, x, r, d, t, false);
+        level
+            .smoother
+            .smooth(level.a.as_ref(), b, x, r, d, t, false);
     }
 }
 

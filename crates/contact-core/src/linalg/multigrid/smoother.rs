@@ -13,7 +13,7 @@
 #![allow(clippy::needless_range_loop)] // Index loops over nodes, blocks and components spell out the formulas.
 
 use super::Blocks;
-use crate::linalg::Csr;
+use crate::linalg::{Csr, LinearOperator};
 use nalgebra::{DMatrix, SymmetricEigen};
 
 /// Lanczos steps of the λ_max estimate.
@@ -41,38 +41,50 @@ impl BlockJacobi {
             offset.push(offset[b] + s * s);
         }
         let total = *offset.last().unwrap();
-        let (mut inv, mut diag) = (vec![0.0; total], vec![0.0; total]);
-        for b in 0..blocks.len() {
-            let dofs = blocks.dofs(b);
-            let s = dofs.len();
-            let m = DMatrix::from_fn(s, s, |i, j| a.get(dofs[i], dofs[j]));
-            // SPD A has SPD diagonal blocks; a singular one (a DOF without stiffness) falls
-            // back to the inverse of its positive diagonal entries.
-            let mi = m
-                .clone()
-                .cholesky()
-                .map(|c| c.inverse())
-                .unwrap_or_else(|| {
-                    DMatrix::from_fn(s, s, |i, j| {
-                        if i == j && m[(i, i)] > 0.0 {
-                            1.0 / m[(i, i)]
-                        } else {
-                            0.0
-                        }
-                    })
-                });
-            for i in 0..s {
-                for j in 0..s {
-                    inv[offset[b] + i * s + j] = mi[(i, j)];
-                    diag[offset[b] + i * s + j] = m[(i, j)];
-                }
-            }
-        }
-        BlockJacobi {
+        let (inv, diag) = (vec![0.0; total], vec![0.0; total]);
+        let mut jacobi = BlockJacobi {
             blocks: blocks.clone(),
             inv,
             diag,
             offset,
+        };
+        for b in 0..blocks.len() {
+            let dofs = blocks.dofs(b);
+            let m = DMatrix::from_fn(dofs.len(), dofs.len(), |i, j| a.get(dofs[i], dofs[j]));
+            jacobi.set_block(b, &m);
+        }
+        jacobi
+    }
+
+    /// The node blocks.
+    pub fn blocks(&self) -> &Blocks {
+        &self.blocks
+    }
+
+    /// Makes block b's matrix `m` (s × s, s its DOF count).
+    pub fn set_block(&mut self, b: usize, m: &DMatrix<f64>) {
+        let s = self.blocks.dofs(b).len();
+        // SPD A has SPD diagonal blocks; a singular one (a DOF without stiffness) falls
+        // back to the inverse of its positive diagonal entries.
+        let mi = m
+            .clone()
+            .cholesky()
+            .map(|c| c.inverse())
+            .unwrap_or_else(|| {
+                DMatrix::from_fn(s, s, |i, j| {
+                    if i == j && m[(i, i)] > 0.0 {
+                        1.0 / m[(i, i)]
+                    } else {
+                        0.0
+                    }
+                })
+            });
+        let o = self.offset[b];
+        for i in 0..s {
+            for j in 0..s {
+                self.inv[o + i * s + j] = mi[(i, j)];
+                self.diag[o + i * s + j] = m[(i, j)];
+            }
         }
     }
 
@@ -126,8 +138,8 @@ impl BlockJacobi {
 
 /// An estimate of λ_max(D⁻¹A) by Lanczos in the D inner product, from a fixed start vector
 /// (deterministic: the same matrix gives the same estimate).
-pub fn lambda_max(a: &Csr, d: &BlockJacobi) -> f64 {
-    let n = a.nrows;
+pub fn lambda_max(a: &impl LinearOperator, d: &BlockJacobi) -> f64 {
+    let n = a.dim();
     if n == 0 {
         return 1.0;
     }
@@ -149,7 +161,7 @@ pub fn lambda_max(a: &Csr, d: &BlockJacobi) -> f64 {
     let (mut alphas, mut betas) = (Vec::new(), Vec::new());
     let mut beta = 0.0;
     for _ in 0..LANCZOS_STEPS.min(n) {
-        a.mul_vec(&v, &mut av);
+        a.apply(&v, &mut av);
         d.solve(&av, &mut w);
         let alpha: f64 = av.iter().zip(&v).map(|(a, b)| a * b).sum();
         for i in 0..n {
@@ -200,6 +212,17 @@ impl Chebyshev {
         }
     }
 
+    /// The same polynomial over another block diagonal (of an operator whose λ_max(D⁻¹A) is
+    /// known not to exceed this one's).
+    pub fn with_jacobi(&self, jacobi: BlockJacobi) -> Chebyshev {
+        Chebyshev {
+            jacobi,
+            degree: self.degree,
+            lo: self.lo,
+            hi: self.hi,
+        }
+    }
+
     /// The upper end of the damped interval (1.1 λ_max estimate).
     pub fn lambda_hi(&self) -> f64 {
         self.hi
@@ -211,7 +234,7 @@ impl Chebyshev {
     #[allow(clippy::too_many_arguments)] // The vectors are the caller's scratch, as in faer.
     pub fn smooth(
         &self,
-        a: &Csr,
+        a: &impl LinearOperator,
         b: &[f64],
         x: &mut [f64],
         r: &mut [f64],
@@ -227,7 +250,7 @@ impl Chebyshev {
         if zero_start {
             t.copy_from_slice(b);
         } else {
-            a.mul_vec(x, t);
+            a.apply(x, t);
             t.iter_mut().zip(b).for_each(|(t, b)| *t = b - *t);
         }
         self.jacobi.solve(t, r);
@@ -237,7 +260,7 @@ impl Chebyshev {
             if k + 1 == self.degree {
                 break;
             }
-            a.mul_vec(d, t);
+            a.apply(d, t);
             self.jacobi.solve_sub(t, r);
             let rho_next = 1.0 / (2.0 * sigma - rho);
             let (c1, c2) = (rho_next * rho, 2.0 * rho_next / delta);

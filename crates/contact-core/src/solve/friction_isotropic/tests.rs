@@ -797,7 +797,7 @@ fn potential_change_is_the_difference_of_potentials() {
         for &r0 in &radii {
             for &r1 in &radii {
                 let expect = law.potential(r1) - law.potential(r0);
-                let got = potential_change(law, r0, r1, r1 - r0);
+                let got = law.potential_change(r0, r1, r1 - r0);
                 assert!(
                     (got - expect).abs() <= 1e-14,
                     "{law:?} {r0} → {r1}: {got} vs {expect}"
@@ -809,5 +809,5 @@ fn potential_change_is_the_difference_of_potentials() {
     let law = &laws[3];
     let (r0, dr) = (0.3, 1e-13);
     let exact = dr * law.mu(r0 + 0.5 * dr);
-    assert!((potential_change(law, r0, r0 + dr, dr) - exact).abs() <= 1e-12 * exact);
+    assert!((law.potential_change(r0, r0 + dr, dr) - exact).abs() <= 1e-12 * exact);
 }

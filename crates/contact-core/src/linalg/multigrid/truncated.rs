@@ -1,0 +1,327 @@
+//! Truncated multigrid (Kornhuber; Gräser & Kornhuber, "Multigrid methods for obstacle
+//! problems", J. Comput. Math. 27 (2009)) for an operator that differs from one with a
+//! [`Hierarchy`] on a few node blocks only: the generalized Jacobian of a semismooth Newton
+//! step of the velocity HVI,
+//!
+//!   M = (A + E)_{RR} ⊕ I_{FF},
+//!
+//! with F the fixed DOFs (sticking Γ3 nodes, held at zero), R the rest and E block diagonal on
+//! a few node blocks (the curvature of the friction potential at slipping Γ3 nodes). M is
+//! applied from A's storage ([`Jacobian`]), never copied.
+//!
+//! The preconditioner is a V-cycle for M⁺ (E replaced by its positive semidefinite part E⁺):
+//! - the finest level smooths M⁺ with A's Chebyshev polynomial over M⁺'s block diagonal. For
+//!   E⁺ ⪰ 0, λ_max(D_M⁻¹ M⁺) ≤ max(λ_max(D_A⁻¹ A), 1) (mediant inequality, block by block), so
+//!   A's interval still covers the spectrum and no new estimate is needed;
+//! - the prolongator is truncated, P̃ = P with the rows of F zeroed, so coarse corrections never
+//!   move a fixed DOF, and the first coarse operator is Galerkin for M⁺:
+//!   A₁' = P̃ᵀ M⁺ P̃ = A₁ − X − Xᵀ + P_Fᵀ A P_F + P̃ᵀ E⁺ P̃,   X = P_Fᵀ A P,
+//!   (P_F: the rows of F of P), an update of A₁ = Pᵀ A P that costs work on the rows of F and
+//!   of E only;
+//! - the levels below are rebuilt from A₁' with A's prolongators ([`Hierarchy::rebuilt_from`]).
+//!
+//! With every Γ3 node fixed this is multigrid for K_II with contact-free coarse spaces below
+//! the first level; with none fixed and E = 0 it is A's own V-cycle.
+
+use super::smoother::Chebyshev;
+use super::{Hierarchy, VCycle};
+use crate::linalg::cholesky::{Cholesky, FactorError};
+use crate::linalg::galerkin::{add, product, transpose};
+use crate::linalg::pcg::Preconditioner;
+use crate::linalg::{Csr, LinearOperator};
+use nalgebra::DMatrix;
+use std::sync::Arc;
+
+/// A symmetric s × s block (s ≤ 2) on the consecutive DOFs start..start + s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NodeBlock {
+    pub start: usize,
+    pub size: usize,
+    /// Row-major, the first size² entries used.
+    pub m: [f64; 4],
+}
+
+impl NodeBlock {
+    /// The positive semidefinite part (negative eigenvalues set to zero).
+    pub fn positive_part(&self) -> NodeBlock {
+        let mut out = *self;
+        match self.size {
+            1 => out.m[0] = self.m[0].max(0.0),
+            _ => {
+                let e = nalgebra::SymmetricEigen::new(nalgebra::Matrix2::new(
+                    self.m[0], self.m[1], self.m[2], self.m[3],
+                ));
+                let l = e.eigenvalues.map(|v| v.max(0.0));
+                let q = e.eigenvectors;
+                let p = q * nalgebra::Matrix2::from_diagonal(&l) * q.transpose();
+                out.m = [p[(0, 0)], p[(0, 1)], p[(1, 0)], p[(1, 1)]];
+            }
+        }
+        out
+    }
+
+    fn value(&self, i: usize, j: usize) -> f64 {
+        self.m[(i - self.start) * self.size + (j - self.start)]
+    }
+
+    fn contains(&self, i: usize) -> bool {
+        (self.start..self.start + self.size).contains(&i)
+    }
+}
+
+/// M = (A + E)_{RR} ⊕ I_{FF} applied from A's storage.
+pub struct Jacobian<'a> {
+    pub a: &'a Csr,
+    /// The fixed DOFs F, and a flag per DOF.
+    pub fixed: &'a [usize],
+    pub is_fixed: &'a [bool],
+    /// E's blocks (on DOFs of R).
+    pub blocks: &'a [NodeBlock],
+}
+
+impl LinearOperator for Jacobian<'_> {
+    fn dim(&self) -> usize {
+        self.a.nrows
+    }
+
+    fn apply(&self, x: &[f64], y: &mut [f64]) {
+        self.a.mul_vec(x, y);
+        // Remove A's columns of F (A is symmetric: its rows), then make the rows of F the
+        // identity's.
+        for &s in self.fixed {
+            if x[s] != 0.0 {
+                let row = self.a.indptr[s]..self.a.indptr[s + 1];
+                for (&j, v) in self.a.indices[row.clone()].iter().zip(&self.a.values[row]) {
+                    y[j as usize] -= v * x[s];
+                }
+            }
+        }
+        for &s in self.fixed {
+            y[s] = x[s];
+        }
+        for b in self.blocks {
+            for i in 0..b.size {
+                let mut v = 0.0;
+                for j in 0..b.size {
+                    v += b.m[i * b.size + j] * x[b.start + j];
+                }
+                y[b.start + i] += v;
+            }
+        }
+    }
+}
+
+/// The rows of `a` listed in `rows` (the others empty), same shape.
+fn rows_of(a: &Csr, rows: &[bool]) -> Csr {
+    let mut indptr = Vec::with_capacity(a.nrows + 1);
+    let (mut indices, mut values) = (Vec::new(), Vec::new());
+    indptr.push(0);
+    for (r, &keep) in rows.iter().enumerate() {
+        if keep {
+            let row = a.indptr[r]..a.indptr[r + 1];
+            indices.extend_from_slice(&a.indices[row.clone()]);
+            values.extend_from_slice(&a.values[row]);
+        }
+        indptr.push(indices.len());
+    }
+    Csr {
+        nrows: a.nrows,
+        ncols: a.ncols,
+        indptr,
+        indices,
+        values,
+    }
+}
+
+/// The block-diagonal n × n matrix of `blocks`.
+fn block_matrix(n: usize, blocks: &[NodeBlock]) -> Csr {
+    let t = blocks
+        .iter()
+        .flat_map(|b| {
+            (0..b.size * b.size).map(move |k| (b.start + k / b.size, b.start + k % b.size, b.m[k]))
+        })
+        .collect();
+    Csr::from_triplets(n, n, t)
+}
+
+/// The truncated V-cycle's finest level and the hierarchy below it.
+struct Levels {
+    smoother: Chebyshev,
+    p: Csr,
+    pt: Csr,
+    coarse: VCycle,
+    work: [Vec<f64>; 7],
+}
+
+enum Cycle {
+    /// A's hierarchy has levels: the truncated V-cycle.
+    Levels(Box<Levels>),
+    /// A is factored directly (a small problem): M⁺ is too.
+    Direct(Cholesky),
+}
+
+/// The truncated V-cycle for M⁺ (an SPD preconditioner for M).
+pub struct Truncated {
+    a: Arc<Csr>,
+    fixed: Vec<usize>,
+    is_fixed: Vec<bool>,
+    /// E⁺'s blocks.
+    positive: Vec<NodeBlock>,
+    cycle: Cycle,
+}
+
+impl Truncated {
+    /// The preconditioner for M with fixed DOFs `fixed` and blocks `blocks`, from A's
+    /// hierarchy `h`.
+    pub fn new(
+        h: &Hierarchy,
+        fixed: Vec<usize>,
+        blocks: &[NodeBlock],
+    ) -> Result<Truncated, FactorError> {
+        let a = Arc::new(h.operator().clone());
+        Self::with_operator(h, a, fixed, blocks)
+    }
+
+    /// As [`Truncated::new`], with A given (shared with the caller, which holds it anyway).
+    pub fn with_operator(
+        h: &Hierarchy,
+        a: Arc<Csr>,
+        fixed: Vec<usize>,
+        blocks: &[NodeBlock],
+    ) -> Result<Truncated, FactorError> {
+        let n = a.nrows;
+        let mut is_fixed = vec![false; n];
+        for &s in &fixed {
+            is_fixed[s] = true;
+        }
+        let positive: Vec<NodeBlock> = blocks.iter().map(NodeBlock::positive_part).collect();
+        let entry = |i: usize, j: usize| -> f64 {
+            if is_fixed[i] || is_fixed[j] {
+                return if i == j { 1.0 } else { 0.0 };
+            }
+            let e = positive
+                .iter()
+                .find(|b| b.contains(i) && b.contains(j))
+                .map_or(0.0, |b| b.value(i, j));
+            a.get(i, j) + e
+        };
+        let cycle = match h.level(0) {
+            None => {
+                let t = (0..n)
+                    .flat_map(|i| {
+                        let row = a.indptr[i]..a.indptr[i + 1];
+                        a.indices[row].iter().map(move |&j| (i, j as usize))
+                    })
+                    .map(|(i, j)| (i, j, entry(i, j)))
+                    .collect();
+                let m = Csr::from_triplets(n, n, t);
+                Cycle::Direct(Cholesky::new(m.lower_csc().as_ref())?)
+            }
+            Some((_, smoother, p)) => {
+                // The block diagonal of M⁺: A's, with the blocks touching F or E remade.
+                let mut jacobi = smoother.jacobi.clone();
+                let block_of = jacobi.blocks().block_of(n);
+                let mut touched: Vec<u32> = fixed
+                    .iter()
+                    .copied()
+                    .chain(positive.iter().map(|b| b.start))
+                    .map(|i| block_of[i])
+                    .collect();
+                touched.sort_unstable();
+                touched.dedup();
+                for b in touched {
+                    let dofs = jacobi.blocks().dofs(b as usize).to_vec();
+                    let m =
+                        DMatrix::from_fn(dofs.len(), dofs.len(), |i, j| entry(dofs[i], dofs[j]));
+                    jacobi.set_block(b as usize, &m);
+                }
+                let smoother = smoother.with_jacobi(jacobi);
+                // P̃ and A₁' = A₁ − X − Xᵀ + P_Fᵀ A P_F + P̃ᵀ E⁺ P̃.
+                let not_fixed: Vec<bool> = is_fixed.iter().map(|f| !f).collect();
+                let p_trunc = rows_of(p, &not_fixed);
+                let pt = transpose(&p_trunc);
+                let p_f = rows_of(p, &is_fixed);
+                let a_f = rows_of(&a, &is_fixed);
+                let p_ft = transpose(&p_f);
+                let x = product(&p_ft, &product(&a_f, p));
+                let y = product(&p_ft, &product(&a_f, &p_f));
+                let z = product(&pt, &product(&block_matrix(n, &positive), &p_trunc));
+                let delta = add(1.0, &add(1.0, &y, 1.0, &z), -1.0, &x);
+                let delta = add(1.0, &delta, -1.0, &transpose(&x));
+                let delta = add(0.5, &delta, 0.5, &transpose(&delta));
+                let a1 = match h.level(1) {
+                    Some((a1, _, _)) => a1.as_ref(),
+                    None => h.coarsest(),
+                };
+                let coarse = Arc::new(h.rebuilt_from(1, Arc::new(add(1.0, a1, 1.0, &delta)))?);
+                let nc = p.ncols;
+                Cycle::Levels(Box::new(Levels {
+                    smoother,
+                    p: p_trunc,
+                    pt,
+                    coarse: coarse.vcycle(),
+                    work: [
+                        vec![0.0; n],
+                        vec![0.0; n],
+                        vec![0.0; n],
+                        vec![0.0; n],
+                        vec![0.0; n],
+                        vec![0.0; nc],
+                        vec![0.0; nc],
+                    ],
+                }))
+            }
+        };
+        Ok(Truncated {
+            a,
+            fixed,
+            is_fixed,
+            positive,
+            cycle,
+        })
+    }
+}
+
+impl Preconditioner for Truncated {
+    fn apply(&mut self, r: &[f64], z: &mut [f64]) {
+        let op = Jacobian {
+            a: &self.a,
+            fixed: &self.fixed,
+            is_fixed: &self.is_fixed,
+            blocks: &self.positive,
+        };
+        match &mut self.cycle {
+            Cycle::Direct(c) => {
+                z.copy_from_slice(r);
+                c.solve_in_place(z);
+            }
+            Cycle::Levels(levels) => {
+                let Levels {
+                    smoother,
+                    p,
+                    pt,
+                    coarse,
+                    work,
+                } = &mut **levels;
+                let [b, x, rr, d, t, bc, xc] = work;
+                b.copy_from_slice(r);
+                x.iter_mut().for_each(|v| *v = 0.0);
+                smoother.smooth(&op, b, x, rr, d, t, true);
+                op.apply(x, t);
+                t.iter_mut().zip(b.iter()).for_each(|(t, b)| *t = b - *t);
+                pt.mul_vec(t, bc);
+                coarse.apply(bc, xc);
+                p.mul_vec(xc, t);
+                x.iter_mut().zip(t.iter()).for_each(|(x, t)| *x += t);
+                smoother.smooth(&op, b, x, rr, d, t, false);
+                z.copy_from_slice(x);
+            }
+        }
+        for &s in &self.fixed {
+            z[s] = r[s];
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

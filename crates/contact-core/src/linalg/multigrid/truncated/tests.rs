@@ -1,0 +1,181 @@
+use super::*;
+use crate::linalg::galerkin::galerkin;
+use crate::linalg::multigrid::{Blocks, Coarsening, Params};
+use crate::linalg::pcg::{self, PcgWork};
+
+/// The 5-point Laplacian on an m × m grid of interior points (Dirichlet all round), plus a
+/// small multiple of the identity so that a fixed-free DOF pattern stays SPD.
+fn laplacian(m: usize) -> Csr {
+    let id = |i: usize, j: usize| i * m + j;
+    let mut t = Vec::new();
+    for i in 0..m {
+        for j in 0..m {
+            t.push((id(i, j), id(i, j), 4.0));
+            if i > 0 {
+                t.push((id(i, j), id(i - 1, j), -1.0));
+            }
+            if i + 1 < m {
+                t.push((id(i, j), id(i + 1, j), -1.0));
+            }
+            if j > 0 {
+                t.push((id(i, j), id(i, j - 1), -1.0));
+            }
+            if j + 1 < m {
+                t.push((id(i, j), id(i, j + 1), -1.0));
+            }
+        }
+    }
+    Csr::from_triplets(m * m, m * m, t)
+}
+
+fn hierarchy(a: &Csr) -> Hierarchy {
+    Hierarchy::new(
+        Arc::new(a.clone()),
+        Blocks::scalar(a.nrows),
+        Coarsening::Aggregation {
+            nullspace: vec![1.0; a.nrows],
+            k: 1,
+        },
+        Params {
+            coarse_size: 40,
+            ..Params::default()
+        },
+    )
+    .unwrap()
+}
+
+/// Fixed DOFs on the first grid row (every other one) and 1 × 1 blocks, one of them
+/// negative, on the rest of that row: the shape of a Γ3 with stick and slip nodes.
+fn modification(m: usize) -> (Vec<usize>, Vec<NodeBlock>) {
+    let fixed: Vec<usize> = (0..m).step_by(2).collect();
+    let blocks = (1..m)
+        .step_by(2)
+        .map(|i| NodeBlock {
+            start: i,
+            size: 1,
+            m: [if i % 4 == 1 { 3.0 } else { -0.5 }, 0.0, 0.0, 0.0],
+        })
+        .collect();
+    (fixed, blocks)
+}
+
+/// M as an explicit matrix, from its definition.
+fn explicit(a: &Csr, fixed: &[usize], blocks: &[NodeBlock]) -> Csr {
+    let n = a.nrows;
+    let mut t = Vec::new();
+    for i in 0..n {
+        for k in a.indptr[i]..a.indptr[i + 1] {
+            let j = a.indices[k] as usize;
+            if !fixed.contains(&i) && !fixed.contains(&j) {
+                t.push((i, j, a.values[k]));
+            }
+        }
+    }
+    t.extend(fixed.iter().map(|&s| (s, s, 1.0)));
+    for b in blocks {
+        for k in 0..b.size * b.size {
+            t.push((b.start + k / b.size, b.start + k % b.size, b.m[k]));
+        }
+    }
+    Csr::from_triplets(n, n, t)
+}
+
+#[test]
+fn jacobian_is_the_masked_operator_plus_blocks() {
+    let m = 12;
+    let a = laplacian(m);
+    let (fixed, blocks) = modification(m);
+    let mut is_fixed = vec![false; a.nrows];
+    fixed.iter().for_each(|&s| is_fixed[s] = true);
+    let op = Jacobian {
+        a: &a,
+        fixed: &fixed,
+        is_fixed: &is_fixed,
+        blocks: &blocks,
+    };
+    let dense = explicit(&a, &fixed, &blocks);
+    let x: Vec<f64> = (0..a.nrows).map(|i| (i as f64 * 0.37).sin()).collect();
+    let (mut y, mut z) = (vec![0.0; a.nrows], vec![0.0; a.nrows]);
+    op.apply(&x, &mut y);
+    dense.mul_vec(&x, &mut z);
+    for (u, v) in y.iter().zip(&z) {
+        assert!((u - v).abs() < 1e-13, "{u} vs {v}");
+    }
+}
+
+#[test]
+fn first_coarse_operator_is_galerkin_for_the_truncated_prolongator() {
+    let m = 16;
+    let a = laplacian(m);
+    let h = hierarchy(&a);
+    assert!(h.n_levels() >= 3, "{:?}", h.sizes());
+    let (fixed, blocks) = modification(m);
+    let positive: Vec<NodeBlock> = blocks.iter().map(NodeBlock::positive_part).collect();
+    assert!(positive.iter().all(|b| b.m[0] >= 0.0));
+    let t = Truncated::new(&h, fixed.clone(), &blocks).unwrap();
+    let Cycle::Levels(levels) = &t.cycle else {
+        panic!("levels expected")
+    };
+    let Levels { p, pt, coarse, .. } = &**levels;
+    for &s in &fixed {
+        assert_eq!(p.indptr[s], p.indptr[s + 1], "row {s} of P̃ not truncated");
+    }
+    // A₁' from its definition, P̃ᵀ M⁺ P̃ with M⁺'s fixed rows zeroed.
+    let mut m_plus = explicit(&a, &fixed, &positive);
+    for &s in &fixed {
+        m_plus.values[m_plus.indptr[s]..m_plus.indptr[s + 1]].fill(0.0);
+    }
+    let expected = galerkin(&m_plus, p, pt);
+    let got = coarse.hierarchy().operator();
+    let nc = expected.nrows;
+    for i in 0..nc {
+        for j in 0..nc {
+            let (e, g) = (expected.get(i, j), got.get(i, j));
+            assert!(
+                (e - g).abs() < 1e-12 * (1.0 + e.abs()),
+                "({i},{j}): {e} vs {g}"
+            );
+        }
+    }
+}
+
+#[test]
+fn conjugate_gradients_on_the_jacobian_converge_like_on_the_operator() {
+    let m = 48;
+    let a = laplacian(m);
+    let h = hierarchy(&a);
+    let (fixed, blocks) = modification(m);
+    let mut t = Truncated::new(&h, fixed.clone(), &blocks).unwrap();
+    let mut b: Vec<f64> = (0..a.nrows)
+        .map(|i| ((i * 7919) % 13) as f64 - 6.0)
+        .collect();
+    fixed.iter().for_each(|&s| b[s] = 0.0);
+    let mut x = vec![0.0; a.nrows];
+    let rep = {
+        let blocks = blocks.clone();
+        let op = explicit(&a, &fixed, &blocks);
+        pcg::solve(&op, &mut t, &b, &mut x, 1e-10, 200, &mut PcgWork::default())
+    };
+    // The same solve on A with A's own V-cycle, as the yardstick.
+    let mut plain = Arc::new(h).vcycle();
+    let mut y = vec![0.0; a.nrows];
+    let base = pcg::solve(
+        &a,
+        &mut plain,
+        &b,
+        &mut y,
+        1e-10,
+        200,
+        &mut PcgWork::default(),
+    );
+    assert!(rep.converged && base.converged, "{rep:?} {base:?}");
+    assert!(
+        rep.iterations <= base.iterations + 5,
+        "truncated {} vs plain {}",
+        rep.iterations,
+        base.iterations
+    );
+    for &s in &fixed {
+        assert_eq!(x[s], 0.0);
+    }
+}

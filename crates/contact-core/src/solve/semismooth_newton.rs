@@ -1,0 +1,470 @@
+//! The velocity HVI (3.13) on all free DOFs, without the Schur complement: a truncated
+//! nonsmooth Newton multigrid method (Gräser & Kornhuber, "Truncated nonsmooth Newton
+//! multigrid methods for convex minimization problems", 2009), for the multigrid path.
+//!
+//!   minimise E(w) = ½ wᵀ K w − fᵀ w + Σ_i ω_i j(|x_i|),   x_i = node i's tangential DOFs,
+//!
+//! over the free DOFs (interior first, then the d − 1 tangential DOFs of each Γ3 node). Each
+//! iteration:
+//! 1. **Nonlinear Gauss–Seidel over the Γ3 nodes.** Node by node, x_i ← argmin of E over x_i
+//!    with the rest fixed: prox_{ω_i j / K_ii}(x_i − g_i / K_ii) in 2D (exact), a few
+//!    proximal-gradient steps with step 1/λ_max(K_ii) in 3D. Each decreases E, which is what
+//!    makes the method globally convergent; it also sets stick nodes exactly to zero and
+//!    lets stuck nodes start slipping.
+//! 2. **Partition.** Stick: x_i = 0; slip: the rest.
+//! 3. **Newton step** on the smooth problem that remains (stick DOFs held at zero): with
+//!    ρ = |x_i|, ẑ = x_i/ρ at a slip node, the gradient r = K w − f + ω_i μ(ρ) ẑ and the
+//!    Hessian M = K + E on the other DOFs, E_i = ω_i [μ′(ρ) ẑẑᵀ + μ(ρ)/ρ (I − ẑẑᵀ)] (2D:
+//!    ω_i μ′(ρ)), solved by conjugate gradients preconditioned with the truncated V-cycle of
+//!    K's hierarchy ([`crate::linalg::multigrid::truncated`]: truncated prolongator, E⁺ in
+//!    the smoother and the first coarse operator). The inexact-Newton tolerance is
+//!    min(0.1, KKT residual)·‖r‖∞, never below the velocity step's Krylov floor. With a
+//!    slip-weakening law (μ′ < 0) M may be indefinite away from the solution: CG stops at
+//!    the first direction of non-positive curvature and the step is its last iterate (a
+//!    descent direction of the quadratic model), or −B r if that is the first direction.
+//! 4. **Line search** on E along the step: α = 1, ½, … until E decreases, the change formed
+//!    from the step (α dᵀg + ½ α² dᵀK d + Σ ω ∫ μ), not from E itself, so that it can be
+//!    judged near the solution.
+//!
+//! The preconditioner is rebuilt only when the stick set changes or a block of E⁺ moves by
+//! more than a quarter of its node's stiffness; CG is run on the exact M either way.
+//! Convergence is declared on the KKT residual of the full problem (as the direct path's),
+//! from a freshly computed K w − f.
+
+use super::{friction_isotropic, friction_reduced};
+use super::{SolveError, SolverSettings};
+use crate::linalg::multigrid::truncated::{Jacobian, NodeBlock, Truncated};
+use crate::linalg::multigrid::Hierarchy;
+use crate::linalg::pcg::{self, PcgWork, Preconditioner};
+use crate::linalg::solver::MAX_KRYLOV_ITERATIONS;
+use crate::linalg::Csr;
+use crate::problem::FrictionLaw;
+use std::sync::Arc;
+
+/// Proximal-gradient sweeps of one 3D node in the nonlinear Gauss–Seidel step.
+const LOCAL_SWEEPS: usize = 3;
+/// Most halvings of the line search.
+const HALVINGS: usize = 40;
+/// A block of E⁺ that moved by more than this fraction of its node's stiffness triggers a
+/// new preconditioner.
+const REBUILD_FRACTION: f64 = 0.25;
+
+/// How a solve went.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewtonReport {
+    pub newton_iterations: usize,
+    pub krylov_iterations: usize,
+    /// Relative KKT residual of the full problem.
+    pub residual: f64,
+    pub slip_nodes: usize,
+    /// Preconditioners built during the solve.
+    pub preconditioners: usize,
+}
+
+/// The preconditioner and the stick set and blocks it was made for.
+struct Cached {
+    stick: Vec<bool>,
+    blocks: Vec<NodeBlock>,
+    /// The fixed DOFs (the stick nodes'), as a list and a flag per DOF.
+    fixed: Vec<usize>,
+    is_fixed: Vec<bool>,
+    truncated: Truncated,
+}
+
+/// The solver of (3.13) on all free DOFs for one operator K (fixed for a run).
+pub struct SemismoothNewton {
+    k: Arc<Csr>,
+    hierarchy: Arc<Hierarchy>,
+    n_i: usize,
+    /// Tangential DOFs per Γ3 node: d − 1.
+    block: usize,
+    /// ω_i per Γ3 node.
+    weights: Vec<f64>,
+    law: FrictionLaw,
+    /// K's diagonal block of each Γ3 node (row-major, block² entries used).
+    node_k: Vec<[f64; 4]>,
+    cached: Option<Cached>,
+    work: PcgWork,
+}
+
+/// A clone shares K and its hierarchy and builds its own preconditioner when first used.
+impl Clone for SemismoothNewton {
+    fn clone(&self) -> Self {
+        SemismoothNewton {
+            k: self.k.clone(),
+            hierarchy: self.hierarchy.clone(),
+            n_i: self.n_i,
+            block: self.block,
+            weights: self.weights.clone(),
+            law: self.law.clone(),
+            node_k: self.node_k.clone(),
+            cached: None,
+            work: PcgWork::default(),
+        }
+    }
+}
+
+impl SemismoothNewton {
+    /// `k` on all free DOFs (the first `n_i` interior, then `block` DOFs per Γ3 node),
+    /// `hierarchy` the multigrid hierarchy of `k`.
+    pub fn new(
+        k: Arc<Csr>,
+        hierarchy: Arc<Hierarchy>,
+        n_i: usize,
+        block: usize,
+        weights: Vec<f64>,
+        law: FrictionLaw,
+    ) -> Self {
+        let node_k = (0..weights.len())
+            .map(|i| {
+                let c = n_i + block * i;
+                let mut m = [0.0; 4];
+                for r in 0..block {
+                    for s in 0..block {
+                        m[r * block + s] = k.get(c + r, c + s);
+                    }
+                }
+                m
+            })
+            .collect();
+        SemismoothNewton {
+            k,
+            hierarchy,
+            n_i,
+            block,
+            weights,
+            law,
+            node_k,
+            cached: None,
+            work: PcgWork::default(),
+        }
+    }
+
+    fn node(&self, v: &[f64], i: usize) -> [f64; 2] {
+        let c = self.n_i + self.block * i;
+        if self.block == 1 {
+            [v[c], 0.0]
+        } else {
+            [v[c], v[c + 1]]
+        }
+    }
+
+    /// max of the interior residual and the Γ3 stick/slip violations, unscaled.
+    fn kkt(&self, g: &[f64], w: &[f64]) -> f64 {
+        let n_i = self.n_i;
+        let interior = g[..n_i].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let contact = match self.block {
+            1 => friction_reduced::kkt_violation(&g[n_i..], &w[n_i..], &self.weights, &self.law),
+            _ => friction_isotropic::kkt_violation(&g[n_i..], &w[n_i..], &self.weights, &self.law),
+        };
+        if contact.is_nan() {
+            f64::NAN
+        } else {
+            interior.max(contact)
+        }
+    }
+
+    /// g += K[:, c..c+block] δ (K symmetric: its rows).
+    fn update_gradient(&self, g: &mut [f64], c: usize, delta: [f64; 2]) {
+        for (r, &d) in delta.iter().enumerate().take(self.block) {
+            if d == 0.0 {
+                continue;
+            }
+            let row = self.k.indptr[c + r]..self.k.indptr[c + r + 1];
+            for (&j, v) in self.k.indices[row.clone()].iter().zip(&self.k.values[row]) {
+                g[j as usize] += v * d;
+            }
+        }
+    }
+
+    /// Step 1: nonlinear Gauss–Seidel over the Γ3 nodes (w and g = K w − f updated).
+    fn smooth_contact(&self, w: &mut [f64], g: &mut [f64]) {
+        for i in 0..self.weights.len() {
+            let c = self.n_i + self.block * i;
+            let om = self.weights[i];
+            let kb = self.node_k[i];
+            let x = self.node(w, i);
+            let y = if self.block == 1 {
+                [
+                    friction_reduced::prox(&self.law, om / kb[0], x[0] - g[c] / kb[0]),
+                    0.0,
+                ]
+            } else {
+                // λ_max of the 2 × 2 block.
+                let (a, b, d) = (kb[0], 0.5 * (kb[1] + kb[2]), kb[3]);
+                let lam = 0.5 * (a + d) + (0.25 * (a - d) * (a - d) + b * b).sqrt();
+                let step = 1.0 / lam;
+                let mut y = x;
+                let mut gy = [g[c], g[c + 1]];
+                for _ in 0..LOCAL_SWEEPS {
+                    let z = [y[0] - step * gy[0], y[1] - step * gy[1]];
+                    let next = friction_isotropic::prox(&self.law, step * om, z);
+                    let dv = [next[0] - y[0], next[1] - y[1]];
+                    if dv == [0.0, 0.0] {
+                        break;
+                    }
+                    gy[0] += a * dv[0] + kb[1] * dv[1];
+                    gy[1] += kb[2] * dv[0] + d * dv[1];
+                    y = next;
+                }
+                y
+            };
+            let delta = [y[0] - x[0], y[1] - x[1]];
+            if delta != [0.0, 0.0] {
+                w[c] = y[0];
+                if self.block == 2 {
+                    w[c + 1] = y[1];
+                }
+                self.update_gradient(g, c, delta);
+            }
+        }
+    }
+
+    /// Step 2–3's data: the stick flags, the Newton gradient r (zero on stick DOFs) and the
+    /// blocks E at the slip nodes.
+    fn linearise(&self, w: &[f64], g: &[f64], r: &mut [f64]) -> (Vec<bool>, Vec<NodeBlock>) {
+        r.copy_from_slice(g);
+        let mut stick = vec![false; self.weights.len()];
+        let mut blocks = Vec::new();
+        for (i, &om) in self.weights.iter().enumerate() {
+            let c = self.n_i + self.block * i;
+            let x = self.node(w, i);
+            let rho = (x[0] * x[0] + x[1] * x[1]).sqrt();
+            if rho == 0.0 {
+                stick[i] = true;
+                r[c..c + self.block].iter_mut().for_each(|v| *v = 0.0);
+                continue;
+            }
+            let (mu, dmu) = (self.law.mu(rho), self.law.dmu(rho));
+            let z = [x[0] / rho, x[1] / rho];
+            let mut m = [0.0; 4];
+            if self.block == 1 {
+                r[c] += om * mu * z[0];
+                m[0] = om * dmu;
+            } else {
+                r[c] += om * mu * z[0];
+                r[c + 1] += om * mu * z[1];
+                let t = mu / rho;
+                for a in 0..2 {
+                    for b in 0..2 {
+                        let zz = z[a] * z[b];
+                        let id = if a == b { 1.0 } else { 0.0 };
+                        m[2 * a + b] = om * (dmu * zz + t * (id - zz));
+                    }
+                }
+            }
+            blocks.push(NodeBlock {
+                start: c,
+                size: self.block,
+                m,
+            });
+        }
+        (stick, blocks)
+    }
+
+    /// The preconditioner for this stick set and these blocks: the cached one if it still
+    /// fits, else a new one. Returns whether one was built.
+    fn prepare(&mut self, stick: Vec<bool>, blocks: &[NodeBlock]) -> Result<bool, SolveError> {
+        let positive: Vec<NodeBlock> = blocks.iter().map(NodeBlock::positive_part).collect();
+        if let Some(c) = &self.cached {
+            if c.stick == stick && c.blocks.len() == positive.len() {
+                let close = c.blocks.iter().zip(&positive).all(|(old, new)| {
+                    let i = (new.start - self.n_i) / self.block;
+                    let stiffness = self.node_k[i].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    let moved = old
+                        .m
+                        .iter()
+                        .zip(&new.m)
+                        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+                    let size = old.m.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    old.start == new.start && moved <= REBUILD_FRACTION * (stiffness + size)
+                });
+                if close {
+                    return Ok(false);
+                }
+            }
+        }
+        let fixed: Vec<usize> = stick
+            .iter()
+            .enumerate()
+            .filter(|(_, &s)| s)
+            .flat_map(|(i, _)| {
+                let c = self.n_i + self.block * i;
+                c..c + self.block
+            })
+            .collect();
+        let mut is_fixed = vec![false; self.k.nrows];
+        fixed.iter().for_each(|&s| is_fixed[s] = true);
+        let truncated =
+            Truncated::with_operator(&self.hierarchy, self.k.clone(), fixed.clone(), blocks)
+                .map_err(|source| SolveError::Factor {
+                    what: "truncated multigrid coarse",
+                    source,
+                })?;
+        self.cached = Some(Cached {
+            stick,
+            blocks: positive,
+            fixed,
+            is_fixed,
+            truncated,
+        });
+        Ok(true)
+    }
+
+    /// E(w + α d) − E(w) from g = K w − f and K d.
+    fn energy_change(&self, w: &[f64], d: &[f64], dg: f64, dkd: f64, alpha: f64) -> f64 {
+        let friction: f64 = (0..self.weights.len())
+            .filter(|&i| self.weights[i] != 0.0)
+            .map(|i| {
+                let x = self.node(w, i);
+                let di = self.node(d, i);
+                if di == [0.0, 0.0] {
+                    return 0.0;
+                }
+                let di = [alpha * di[0], alpha * di[1]];
+                let y = [x[0] + di[0], x[1] + di[1]];
+                let (r0, r1) = (x[0].hypot(x[1]), y[0].hypot(y[1]));
+                // |y| − |x| = (y − x)·(y + x) / (|y| + |x|), without cancellation.
+                let dr = if r0 + r1 > 0.0 {
+                    (di[0] * (x[0] + y[0]) + di[1] * (x[1] + y[1])) / (r0 + r1)
+                } else {
+                    0.0
+                };
+                self.weights[i] * self.law.potential_change(r0, r1, dr)
+            })
+            .sum();
+        alpha * dg + 0.5 * alpha * alpha * dkd + friction
+    }
+
+    /// Solves (3.13) for the free-DOF load `f` from the warm start in `w` (overwritten with
+    /// the solution), to the relative KKT residual `settings.tolerance` (relative to ‖f‖∞).
+    /// `krylov_floor` is the smallest CG residual asked for, relative to ‖f‖∞.
+    pub fn solve(
+        &mut self,
+        f: &[f64],
+        w: &mut [f64],
+        settings: &SolverSettings,
+        krylov_floor: f64,
+        step: usize,
+    ) -> Result<NewtonReport, SolveError> {
+        let n = self.k.nrows;
+        let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
+        let (mut g, mut r, mut d, mut kd) =
+            (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        let fresh_gradient = |k: &Csr, w: &[f64], g: &mut [f64]| {
+            k.mul_vec(w, g);
+            g.iter_mut().zip(f).for_each(|(g, f)| *g -= f);
+        };
+        fresh_gradient(&self.k, w, &mut g);
+        let mut report = NewtonReport {
+            newton_iterations: 0,
+            krylov_iterations: 0,
+            residual: f64::INFINITY,
+            slip_nodes: 0,
+            preconditioners: 0,
+        };
+        let mut fresh = true;
+        let mut rejected = 0;
+        for it in 0..=settings.max_iterations {
+            let mut residual = self.kkt(&g, w) / scale;
+            if residual <= settings.tolerance && !fresh {
+                // g is updated by products with steps; judge convergence on K w − f itself.
+                fresh_gradient(&self.k, w, &mut g);
+                residual = self.kkt(&g, w) / scale;
+            }
+            report.residual = residual;
+            report.newton_iterations = it;
+            if residual <= settings.tolerance {
+                report.slip_nodes = (0..self.weights.len())
+                    .filter(|&i| self.node(w, i) != [0.0, 0.0])
+                    .count();
+                return Ok(report);
+            }
+            if it == settings.max_iterations || !residual.is_finite() {
+                return Err(SolveError::NotConverged {
+                    what: "velocity step (semismooth Newton, multigrid)",
+                    step,
+                    iterations: it,
+                    residual,
+                    tolerance: settings.tolerance,
+                });
+            }
+            fresh = false;
+            self.smooth_contact(w, &mut g);
+            let (stick, blocks) = self.linearise(w, &g, &mut r);
+            if self.prepare(stick, &blocks)? {
+                report.preconditioners += 1;
+            }
+            let r_norm = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            if r_norm == 0.0 {
+                continue;
+            }
+            let eta = residual.min(0.1);
+            let atol = (eta * r_norm).max(krylov_floor * scale);
+            r.iter_mut().for_each(|v| *v = -*v);
+            d.iter_mut().for_each(|v| *v = 0.0);
+            let Cached {
+                fixed,
+                is_fixed,
+                truncated,
+                ..
+            } = self.cached.as_mut().expect("prepared");
+            let jacobian = Jacobian {
+                a: &self.k,
+                fixed,
+                is_fixed,
+                blocks: &blocks,
+            };
+            let rep = pcg::solve(
+                &jacobian,
+                truncated,
+                &r,
+                &mut d,
+                atol,
+                MAX_KRYLOV_ITERATIONS,
+                &mut self.work,
+            );
+            report.krylov_iterations += rep.iterations;
+            if rep.negative_curvature && d.iter().all(|&v| v == 0.0) {
+                truncated.apply(&r, &mut d);
+            }
+            // Line search on E along d (r now holds −∇, d_stick = 0).
+            self.k.mul_vec(&d, &mut kd);
+            let dg: f64 = d.iter().zip(&g).map(|(d, g)| d * g).sum();
+            let dkd: f64 = d.iter().zip(&kd).map(|(d, k)| d * k).sum();
+            let mut alpha = 1.0;
+            let mut accepted = false;
+            for _ in 0..HALVINGS {
+                if self.energy_change(w, &d, dg, dkd, alpha) < 0.0 {
+                    accepted = true;
+                    break;
+                }
+                alpha *= 0.5;
+            }
+            if accepted {
+                w.iter_mut().zip(&d).for_each(|(w, d)| *w += alpha * d);
+                g.iter_mut().zip(&kd).for_each(|(g, k)| *g += alpha * k);
+                rejected = 0;
+            } else {
+                // No decrease along the Newton step: at working precision (the tolerance is
+                // below the rounding of E's changes), or a step that only the smoother can
+                // improve on. Twice in a row is a stall.
+                rejected += 1;
+                if rejected == 2 {
+                    fresh_gradient(&self.k, w, &mut g);
+                    return Err(SolveError::NotConverged {
+                        what: "velocity step (semismooth Newton, multigrid): no descent",
+                        step,
+                        iterations: it + 1,
+                        residual: self.kkt(&g, w) / scale,
+                        tolerance: settings.tolerance,
+                    });
+                }
+            }
+        }
+        unreachable!()
+    }
+}
+
+#[cfg(test)]
+mod tests;
