@@ -190,7 +190,7 @@ fn an_unreachable_target_is_refused_with_the_reason() {
     };
     eprintln!("{message}");
     assert!(
-        message.contains("more nodes than this server's limit"),
+        message.contains("nodes, more than the node limit of 1100"),
         "{message}"
     );
     assert!(message.contains("the best reachable"), "{message}");
