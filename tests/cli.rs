@@ -216,6 +216,18 @@ fn a_target_out_of_reach_of_the_limits_is_refused_before_the_expensive_run() {
             .parse()
             .unwrap_or_else(|_| panic!("{label:?} in {text}"))
     };
+    // `contact-sim study FLAGS… FILE`: its exit code and stderr.
+    let study = |flags: &[&str]| {
+        let out = bin().arg("study").args(flags).arg(&file).output().unwrap();
+        assert!(
+            out.status.code() == Some(0) || out.stdout.is_empty(),
+            "a refused study prints no result"
+        );
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+        )
+    };
     for (flag, value, limit) in [
         (
             "--max-nodes",
@@ -229,16 +241,10 @@ fn a_target_out_of_reach_of_the_limits_is_refused_before_the_expensive_run() {
         ),
     ] {
         let started = std::time::Instant::now();
-        let out = bin()
-            .args(["study", flag, value])
-            .arg(&file)
-            .output()
-            .unwrap();
+        let (code, err) = study(&[flag, value]);
         let took = started.elapsed().as_secs_f64();
-        let err = String::from_utf8_lossy(&out.stderr).to_string();
         eprintln!("{flag} {value}: {took:.2} s: {err}");
-        assert_eq!(out.status.code(), Some(1), "{flag}: {err}");
-        assert!(out.stdout.is_empty(), "{flag}: no result is printed");
+        assert_eq!(code, Some(1), "{flag}: {err}");
         assert!(
             err.contains("tight: the target error 0.005 in w cannot be reached within the limits"),
             "{err}"
@@ -255,13 +261,8 @@ fn a_target_out_of_reach_of_the_limits_is_refused_before_the_expensive_run() {
         );
     }
     // Pilot levels beyond the node limit (h = 1/8: 81 nodes): nothing to plan with.
-    let out = bin()
-        .args(["study", "--max-nodes", "50"])
-        .arg(&file)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let (code, err) = study(&["--max-nodes", "50"]);
+    assert_eq!(code, Some(2), "{err}");
     assert!(
         err.contains("even the pilot levels need 81 nodes, more than the limit of 50"),
         "{err}"
@@ -273,24 +274,14 @@ fn a_target_out_of_reach_of_the_limits_is_refused_before_the_expensive_run() {
             "reference": {"h": "1/16", "k": "1/4"}}}"#,
     )
     .unwrap();
-    let out = bin()
-        .args(["study", "--max-nodes", "288"])
-        .arg(&file)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let (code, err) = study(&["--max-nodes", "288"]);
+    assert_eq!(code, Some(2), "{err}");
     assert!(
         err.contains("ladder: the reference mesh has 289 nodes, more than the limit of 288"),
         "{err}"
     );
-    let out = bin()
-        .args(["study", "--max-job-memory", "10K"])
-        .arg(&file)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let (code, err) = study(&["--max-job-memory", "10K"]);
+    assert_eq!(code, Some(2), "{err}");
     assert!(
         err.contains("ladder: the reference run: this run needs about")
             && err.contains(
@@ -299,16 +290,8 @@ fn a_target_out_of_reach_of_the_limits_is_refused_before_the_expensive_run() {
         "{err}"
     );
     // Within the limits the same study runs.
-    let out = bin()
-        .args(["study", "--max-nodes", "289", "--max-job-memory", "1G"])
-        .arg(&file)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let (code, err) = study(&["--max-nodes", "289", "--max-job-memory", "1G"]);
+    assert_eq!(code, Some(0), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -642,6 +642,20 @@ async function testLiveJob() {
   await page.close();
 }
 
+/** The job resource of `id` once it has ended (polled; at most 60 s). */
+async function finished(id, what) {
+  const t0 = Date.now();
+  for (;;) {
+    const job = await (await context.request.get(`${base}/jobs/${id}`)).json();
+    if (['succeeded', 'failed', 'cancelled'].includes(job.status)) {
+      check(true, `${what} finishes within 60 s`);
+      return job;
+    }
+    check(Date.now() - t0 < 60_000, `${what} finishes within 60 s`);
+    await new Promise((r) => setTimeout(r, 100));
+  }
+}
+
 /**
  * A real convergence study submitted to the server (coarse, a second or two): the view shows
  * the server's table (h as 1/n, "–" for the first row's orders, the least-squares orders) and
@@ -655,14 +669,7 @@ async function testStudyView() {
   });
   check(submit.status() === 202 || submit.status() === 200, `study accepted (${submit.status()})`);
   const id = (await submit.json()).id;
-  const t0 = Date.now();
-  let job;
-  for (;;) {
-    job = await (await request.get(`${base}/jobs/${id}`)).json();
-    if (['succeeded', 'failed', 'cancelled'].includes(job.status)) break;
-    check(Date.now() - t0 < 60_000, 'the study finishes within 60 s');
-    await new Promise((r) => setTimeout(r, 100));
-  }
+  const job = await finished(id, 'the study');
   check(job.status === 'succeeded' && job.kind === 'study', `study ${job.status}`);
   const summary = await (await request.get(`${base}/jobs/${id}/summary`)).json();
   // A simulation submitted elsewhere (not from this browser): its entry is labelled from the
@@ -1901,14 +1908,7 @@ async function testTargetView() {
   });
   check(submit.status() === 202, `target study accepted (${submit.status()})`);
   const id = (await submit.json()).id;
-  const t0 = Date.now();
-  let job;
-  for (;;) {
-    job = await (await request.get(`${base}/jobs/${id}`)).json();
-    if (['succeeded', 'failed', 'cancelled'].includes(job.status)) break;
-    check(Date.now() - t0 < 60_000, 'the target study finishes within 60 s');
-    await new Promise((r) => setTimeout(r, 100));
-  }
+  const job = await finished(id, 'the target study');
   check(job.status === 'succeeded' && job.kind === 'study', `target study ${job.status}`);
   const s = await (await request.get(`${base}/jobs/${id}/summary`)).json();
   check(s.kind === 'target' && s.chosen.estimated_error <= 0.2, `summary of kind target, estimated ${s.chosen.estimated_error}`);
