@@ -606,9 +606,81 @@ impl Runtime {
         if is_target_study(&job.scene) {
             return self.execute_target(job, worker, cancel);
         }
-        let id = job.id;
         let (plan, _) = study::parse_with(&job.scene["study"], "/study", &*self.meshes)
             .map_err(|e| failure("stored study no longer validates", &e.to_string()))?;
+        let exec = study::Execution {
+            threads: self.config.study_threads.max(1),
+            ..Default::default()
+        };
+        self.run_study_job(job.id, worker, cancel, |progress| {
+            let result = study::run(&plan, &self.references, exec, progress)?;
+            let json = serde_json::to_vec_pretty(&result).expect("study result serialises");
+            Ok(vec![
+                (TABLE_FILE, result.text_table().into_bytes()),
+                (
+                    REPORT_FILE,
+                    study::report_svg::study_report(&result).into_bytes(),
+                ),
+                (SUMMARY_FILE, json),
+            ])
+        })
+    }
+
+    /// A target study: pilots, plan, the chosen run (its stored steps written like a
+    /// simulation's) and its check; restarted from scratch when resumed, like a study. An
+    /// unreachable target fails the job with a 422 problem at `/study/target/error`.
+    fn execute_target(
+        &self,
+        job: &JobRecord,
+        worker: &str,
+        cancel: &AtomicBool,
+    ) -> Result<Outcome, Problem> {
+        let id = job.id;
+        let (spec, _) = study::target::parse_with(&job.scene["study"], "/study", &*self.meshes)
+            .map_err(|e| failure("stored study no longer validates", &e.to_string()))?;
+        let exec = study::Execution {
+            threads: self.config.study_threads.max(1),
+            settings: SolverSettings {
+                memory_limit: self.config.max_job_memory,
+                ..SolverSettings::default()
+            },
+        };
+        let limits = study::target::Limits {
+            max_nodes: Some(self.config.max_nodes),
+            max_steps: Some(self.config.max_steps),
+        };
+        let mut sink = StepFiles {
+            results: &self.results,
+            id,
+        };
+        self.run_study_job(id, worker, cancel, |progress| {
+            let result = study::target::run(&spec, exec, limits, progress, &mut sink)?;
+            let scene = serde_json::to_vec_pretty(&result.scene).expect("scene serialises");
+            let json = serde_json::to_vec_pretty(&result).expect("target result serialises");
+            Ok(vec![
+                (CHOSEN_SCENE_FILE, scene),
+                (TABLE_FILE, result.text_table().into_bytes()),
+                (
+                    REPORT_FILE,
+                    study::report_svg::target_report(&result).into_bytes(),
+                ),
+                (SUMMARY_FILE, json),
+            ])
+        })
+    }
+
+    /// What every study job shares: `run` computes with a progress hook that counts steps,
+    /// renews the lease about once a second and stops on cancel, shutdown or a lost lease;
+    /// the files it returns are written in order (the summary last: its presence means the
+    /// result is complete). A stopped study is cancelled, interrupted or taken over; an
+    /// unreachable target is a 422 problem at `/study/target/error`.
+    fn run_study_job(
+        &self,
+        id: Uuid,
+        worker: &str,
+        cancel: &AtomicBool,
+        run: impl FnOnce(&StudyProgress) -> Result<Vec<(&'static str, Vec<u8>)>, StudyError>,
+    ) -> Result<Outcome, Problem> {
         let last_beat = Mutex::new(Instant::now());
         // Why a heartbeat stopped the study (cancelled, or taken over by another worker).
         let stopped: Mutex<Option<Outcome>> = Mutex::new(None);
@@ -634,25 +706,13 @@ impl Runtime {
             }
             ControlFlow::Continue(())
         };
-        let exec = study::Execution {
-            threads: self.config.study_threads.max(1),
-            ..Default::default()
-        };
-        match study::run(&plan, &self.references, exec, &progress) {
-            Ok(result) => {
-                let io = |e: std::io::Error| write_failure(&e);
-                let json = serde_json::to_vec_pretty(&result).expect("study result serialises");
-                self.results
-                    .write_atomic(id, TABLE_FILE, result.text_table().as_bytes())
-                    .map_err(io)?;
-                let svg = contact_core::study::report_svg::study_report(&result);
-                self.results
-                    .write_atomic(id, REPORT_FILE, svg.as_bytes())
-                    .map_err(io)?;
-                // The summary last: its presence means the result is complete.
-                self.results
-                    .write_atomic(id, SUMMARY_FILE, &json)
-                    .map_err(io)?;
+        match run(&progress) {
+            Ok(files) => {
+                for (name, bytes) in files {
+                    self.results
+                        .write_atomic(id, name, &bytes)
+                        .map_err(|e| write_failure(&e))?;
+                }
                 Ok(Outcome::Succeeded)
             }
             Err(StudyError::Cancelled) => Ok(if cancel.load(Ordering::SeqCst) {
@@ -660,93 +720,6 @@ impl Runtime {
             } else {
                 // A heartbeat's verdict, or else shutting down: a cancel requested through
                 // another node meanwhile still counts.
-                let stopped = stopped.into_inner().unwrap();
-                stopped
-                    .or_else(|| self.lost(id, worker))
-                    .unwrap_or(Outcome::Interrupted)
-            }),
-            Err(StudyError::Run(contact_core::run::RunError::Solve(e))) => Err(solve_problem(&e)),
-            Err(e) => Err(failure("study failed", &e.to_string())),
-        }
-    }
-
-    /// A target study: pilots, plan, the chosen run (its stored steps written like a
-    /// simulation's) and its check; restarted from scratch when resumed, like a study. An
-    /// unreachable target fails the job with a 422 problem at `/study/target/error`.
-    fn execute_target(
-        &self,
-        job: &JobRecord,
-        worker: &str,
-        cancel: &AtomicBool,
-    ) -> Result<Outcome, Problem> {
-        let id = job.id;
-        let (spec, _) = study::target::parse_with(&job.scene["study"], "/study", &*self.meshes)
-            .map_err(|e| failure("stored study no longer validates", &e.to_string()))?;
-        let last_beat = Mutex::new(Instant::now());
-        let stopped: Mutex<Option<Outcome>> = Mutex::new(None);
-        let progress = |done: usize, total: usize| {
-            if cancel.load(Ordering::SeqCst) || self.shutdown.load(Ordering::SeqCst) {
-                return ControlFlow::Break(());
-            }
-            self.steps_done.fetch_add(1, Ordering::Relaxed);
-            let p = Progress {
-                step: done,
-                steps: total,
-                last_residual: None,
-            };
-            self.running_progress(id, p);
-            let mut beat = last_beat.lock().unwrap();
-            if beat.elapsed() >= CHECKPOINT_EVERY {
-                *beat = Instant::now();
-                let _ = self.store.set_progress(id, p);
-                if let Some(stop) = self.lost(id, worker) {
-                    *stopped.lock().unwrap() = Some(stop);
-                    return ControlFlow::Break(());
-                }
-            }
-            ControlFlow::Continue(())
-        };
-        let exec = study::Execution {
-            threads: self.config.study_threads.max(1),
-            settings: SolverSettings {
-                memory_limit: self.config.max_job_memory,
-                ..SolverSettings::default()
-            },
-        };
-        let limits = study::target::Limits {
-            max_nodes: Some(self.config.max_nodes),
-            max_steps: Some(self.config.max_steps),
-        };
-        let mut sink = StepFiles {
-            results: &self.results,
-            id,
-        };
-        match study::target::run(&spec, exec, limits, &progress, &mut sink) {
-            Ok(result) => {
-                let io = |e: std::io::Error| write_failure(&e);
-                self.results
-                    .write_atomic(
-                        id,
-                        CHOSEN_SCENE_FILE,
-                        &serde_json::to_vec_pretty(&result.scene).expect("scene serialises"),
-                    )
-                    .map_err(io)?;
-                self.results
-                    .write_atomic(id, TABLE_FILE, result.text_table().as_bytes())
-                    .map_err(io)?;
-                let svg = contact_core::study::report_svg::target_report(&result);
-                self.results
-                    .write_atomic(id, REPORT_FILE, svg.as_bytes())
-                    .map_err(io)?;
-                let json = serde_json::to_vec_pretty(&result).expect("target result serialises");
-                self.results
-                    .write_atomic(id, SUMMARY_FILE, &json)
-                    .map_err(io)?;
-                Ok(Outcome::Succeeded)
-            }
-            Err(StudyError::Cancelled) => Ok(if cancel.load(Ordering::SeqCst) {
-                Outcome::Cancelled
-            } else {
                 let stopped = stopped.into_inner().unwrap();
                 stopped
                     .or_else(|| self.lost(id, worker))
@@ -876,6 +849,10 @@ impl study::target::Sink for StepFiles<'_> {
             .write_atomic(self.id, &step_file(fields.n), &encode_step(fields))
     }
 }
+
+/// The progress hook of a study job: (steps done, steps in all) after every step of every
+/// run; `Break` stops the study.
+type StudyProgress<'a> = dyn Fn(usize, usize) -> ControlFlow<()> + Sync + 'a;
 
 /// Per-step reports and error-estimate rows restored from a checkpoint.
 type Resumed = (Vec<StepReport>, Vec<EstimateRow>);

@@ -187,6 +187,114 @@ fn a_target_study_file_prints_the_choice_or_the_reason() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `contact-sim study --max-nodes N --max-job-memory B`: a target out of reach of the limits
+/// is refused after the cheap pilot runs and before the expensive run (exit code 1, naming
+/// the limit, the run it would need with its predicted time, and the best error reachable
+/// with its cost): the command takes far less than that run's predicted time. Pilots beyond
+/// the node limit, or a ladder study's reference, are exit code 2 before any run.
+#[test]
+fn a_target_out_of_reach_of_the_limits_is_refused_before_the_expensive_run() {
+    let dir = std::env::temp_dir().join(format!("contact-sim-cli-limits-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("target.json");
+    std::fs::write(
+        &file,
+        r#"{"study": {"name": "tight", "scene": "paper-convergence", "target": {"error": 0.005}}}"#,
+    )
+    .unwrap();
+    // The number after `label` in `text`.
+    let figure = |text: &str, label: &str| -> f64 {
+        let at = text
+            .find(label)
+            .unwrap_or_else(|| panic!("no {label:?} in {text}"))
+            + label.len();
+        let num: String = text[at..]
+            .chars()
+            .take_while(|c| c.is_ascii_digit() || *c == '.' || *c == 'e' || *c == '-')
+            .collect();
+        num.trim_end_matches('.')
+            .parse()
+            .unwrap_or_else(|_| panic!("{label:?} in {text}"))
+    };
+    // `contact-sim study FLAGS… FILE`: its exit code and stderr.
+    let study = |flags: &[&str]| {
+        let out = bin().arg("study").args(flags).arg(&file).output().unwrap();
+        assert!(
+            out.status.code() == Some(0) || out.stdout.is_empty(),
+            "a refused study prints no result"
+        );
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+        )
+    };
+    for (flag, value, limit) in [
+        (
+            "--max-nodes",
+            "1100",
+            "nodes, more than the node limit of 1100",
+        ),
+        (
+            "--max-job-memory",
+            "24M",
+            "of memory (predicted), more than the per-job memory limit of 24 MiB",
+        ),
+    ] {
+        let started = std::time::Instant::now();
+        let (code, err) = study(&[flag, value]);
+        let took = started.elapsed().as_secs_f64();
+        eprintln!("{flag} {value}: {took:.2} s: {err}");
+        assert_eq!(code, Some(1), "{flag}: {err}");
+        assert!(
+            err.contains("tight: the target error 0.005 in w cannot be reached within the limits"),
+            "{err}"
+        );
+        assert!(err.contains(limit), "{flag}: {err}");
+        let best = figure(&err, "the best reachable is a predicted error of ");
+        assert!(best > 0.005 && best < 1.0, "{err}");
+        assert!(figure(&err, " in about ") > 0.0, "{err}");
+        // The run the target needs, with its predicted time: the refusal came well before it.
+        let needed = figure(&err, ", about ");
+        assert!(
+            took < needed / 4.0 && took < 120.0,
+            "{flag}: refused after {took:.1} s, the needed run alone is predicted at {needed} s: {err}"
+        );
+    }
+    // Pilot levels beyond the node limit (h = 1/8: 81 nodes): nothing to plan with.
+    let (code, err) = study(&["--max-nodes", "50"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("even the pilot levels need 81 nodes, more than the limit of 50"),
+        "{err}"
+    );
+    // A ladder study whose reference (h = 1/16: 289 nodes) is beyond the limits.
+    std::fs::write(
+        &file,
+        r#"{"study": {"name": "ladder", "scene": "paper-convergence", "h": ["1/2", "1/4"], "k": "1/4",
+            "reference": {"h": "1/16", "k": "1/4"}}}"#,
+    )
+    .unwrap();
+    let (code, err) = study(&["--max-nodes", "288"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("ladder: the reference mesh has 289 nodes, more than the limit of 288"),
+        "{err}"
+    );
+    let (code, err) = study(&["--max-job-memory", "10K"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("ladder: the reference run: this run needs about")
+            && err.contains(
+                "of memory (predicted, on the multigrid path), more than this node's per-job limit"
+            ),
+        "{err}"
+    );
+    // Within the limits the same study runs.
+    let (code, err) = study(&["--max-nodes", "289", "--max-job-memory", "1G"]);
+    assert_eq!(code, Some(0), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn study_file_prints_the_table_as_json_or_text() {
     let dir = std::env::temp_dir().join(format!("contact-sim-cli-study-{}", std::process::id()));

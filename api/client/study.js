@@ -148,7 +148,7 @@ export class StudyView {
         `, predicted error ${fmt(c.predicted_error)}, estimated ${fmt(c.estimated_error)} `,
         `(check ${c.check_passed ? 'passed' : 'failed'}); predicted ${fmtSeconds(c.predicted_seconds)}, `,
         `measured ${fmtSeconds(c.seconds)}; whole study ${fmtSeconds(s.seconds)}.`),
-      el('p', { class: 'run-info' },
+      el('p', { class: 'run-info', id: 'target-fit' },
         `Error model ${fmt(m.h?.coefficient)}·h^${order(m.h?.order)} + ${fmt(m.k?.coefficient)}·k^${order(m.k?.order)} `,
         `from ${(s.pilots || []).length} pilot runs; safety factor ${s.safety_factor}.`),
       el('div', { class: 'table-wrap', tabindex: '0', role: 'region', 'aria-label': 'chosen runs (scrolls sideways)' },

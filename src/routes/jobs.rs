@@ -379,17 +379,12 @@ fn validated_target(study: &Value, state: &AppState) -> Result<(Value, usize, u6
         })?;
     let cfg = &state.rt.config;
     // The finest pilot of the h-ladder must fit the node limit, or nothing can be planned.
-    let first = study::target::FIRST_PILOT_LEVELS - 1;
-    let pilot = contact_core::study::with_resolution(
-        &spec.base,
-        (spec.n0 << first, study::target::PILOT_STEPS),
-    );
-    if pilot.n_nodes() > cfg.max_nodes {
+    let pilot_nodes = spec.pilot_nodes();
+    if pilot_nodes > cfg.max_nodes {
         return Err(Problem::invalid_field(
             "/study/scene",
             format!(
-                "even the pilot levels of this scene need {} nodes, more than this server's limit of {}",
-                pilot.n_nodes(),
+                "even the pilot levels of this scene need {pilot_nodes} nodes, more than this server's limit of {}",
                 cfg.max_nodes
             ),
         ));

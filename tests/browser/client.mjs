@@ -39,6 +39,8 @@
 // 8. API keys (issue 15) against a server that asks for one (page.route answers 401 with
 //    `WWW-Authenticate: Bearer` until the header is there): the key is asked once, kept in
 //    sessionStorage, and sent on every request, the event stream included; never in a URL.
+// 10. A real target study: the view states the chosen h and k, the predicted and estimated
+//    error and the fit as the summary has them; the work–precision report draws the chosen run.
 // Throughout: axe-core checks WCAG 2.2 A/AA (contrast, target sizes, names) on each state of
 // the page, and no request of the anonymous page carries an Authorization header.
 
@@ -640,6 +642,20 @@ async function testLiveJob() {
   await page.close();
 }
 
+/** The job resource of `id` once it has ended (polled; at most 60 s). */
+async function finished(id, what) {
+  const t0 = Date.now();
+  for (;;) {
+    const job = await (await context.request.get(`${base}/jobs/${id}`)).json();
+    if (['succeeded', 'failed', 'cancelled'].includes(job.status)) {
+      check(true, `${what} finishes within 60 s`);
+      return job;
+    }
+    check(Date.now() - t0 < 60_000, `${what} finishes within 60 s`);
+    await new Promise((r) => setTimeout(r, 100));
+  }
+}
+
 /**
  * A real convergence study submitted to the server (coarse, a second or two): the view shows
  * the server's table (h as 1/n, "–" for the first row's orders, the least-squares orders) and
@@ -653,14 +669,7 @@ async function testStudyView() {
   });
   check(submit.status() === 202 || submit.status() === 200, `study accepted (${submit.status()})`);
   const id = (await submit.json()).id;
-  const t0 = Date.now();
-  let job;
-  for (;;) {
-    job = await (await request.get(`${base}/jobs/${id}`)).json();
-    if (['succeeded', 'failed', 'cancelled'].includes(job.status)) break;
-    check(Date.now() - t0 < 60_000, 'the study finishes within 60 s');
-    await new Promise((r) => setTimeout(r, 100));
-  }
+  const job = await finished(id, 'the study');
   check(job.status === 'succeeded' && job.kind === 'study', `study ${job.status}`);
   const summary = await (await request.get(`${base}/jobs/${id}/summary`)).json();
   // A simulation submitted elsewhere (not from this browser): its entry is labelled from the
@@ -1885,9 +1894,84 @@ async function testNewcomer() {
   await form.close();
 }
 
+/**
+ * A real target study (paper-convergence, w within 0.2: pilots and a chosen run of well under
+ * a second): the view states the chosen h and k, the predicted and estimated error and the
+ * fitted error model as the summary has them, and embeds the work–precision report, whose
+ * chosen run is drawn where its measured time and estimated error put it.
+ */
+async function testTargetView() {
+  console.log('test 10: target study view (a real target study job)');
+  const request = context.request;
+  const submit = await request.post(`${base}/jobs`, {
+    data: { study: { name: 'target view', scene: 'paper-convergence', target: { error: 0.2, quantity: 'w' } } },
+  });
+  check(submit.status() === 202, `target study accepted (${submit.status()})`);
+  const id = (await submit.json()).id;
+  const job = await finished(id, 'the target study');
+  check(job.status === 'succeeded' && job.kind === 'study', `target study ${job.status}`);
+  const s = await (await request.get(`${base}/jobs/${id}/summary`)).json();
+  check(s.kind === 'target' && s.chosen.estimated_error <= 0.2, `summary of kind target, estimated ${s.chosen.estimated_error}`);
+  const page = await openPage(async () => {}, `#job=${id}`);
+  await page.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 10_000 });
+  check((await page.textContent('#viewer h2')).startsWith('target view'), 'the view is titled with the study\'s name');
+
+  // The numbers after `label` in `text` (as the page writes them: 0.1234, 1.234e-5).
+  const numberAfter = (text, label) => {
+    const m = text.slice(text.indexOf(label) + label.length).match(/^-?[0-9.]+(e[-+]?[0-9]+)?/);
+    return text.includes(label) && m ? Number(m[0]) : NaN;
+  };
+  const near = (shown, value) => Math.abs(shown - value) <= 1e-3 * Math.abs(value);
+  const choice = await page.textContent('#target-choice');
+  const c = s.chosen;
+  const hk = `h = 1/${Math.round(1 / c.h)}, k = 1/${Math.round(1 / c.k)}`;
+  check(choice.includes(`Target 0.2 in w: ${hk}`), `the chosen ${hk} is shown: "${choice}"`);
+  const predicted = numberAfter(choice, 'predicted error ');
+  const estimated = numberAfter(choice, 'estimated ');
+  check(near(predicted, c.predicted_error) && near(estimated, c.estimated_error),
+    `predicted error ${predicted} and estimated ${estimated} as in the summary (${c.predicted_error}, ${c.estimated_error})`);
+  check(choice.includes('check passed'), 'the check by the (2h, 2k) error bar is said to pass');
+  const fit = await page.textContent('#target-fit');
+  const m = s.error_model;
+  const a = numberAfter(fit, 'Error model ');
+  const p = numberAfter(fit, '·h^');
+  const b = numberAfter(fit, ' + ');
+  const q = numberAfter(fit, '·k^');
+  check(near(a, m.h.coefficient) && Math.abs(p - m.h.order) < 1e-3 && near(b, m.k.coefficient) && Math.abs(q - m.k.order) < 1e-3,
+    `the fit ${a}·h^${p} + ${b}·k^${q} is the summary's (${m.h.coefficient}, ${m.h.order}, ${m.k.coefficient}, ${m.k.order})`);
+  check(fit.includes(`from ${s.pilots.length} pilot runs`) && s.pilots.length >= 5, `the fit names its ${s.pilots.length} pilot runs`);
+  const rows = await page.$$eval('#target-table tbody tr', (trs) => trs.map((tr) => [...tr.cells].map((x) => x.textContent)));
+  const last = rows[rows.length - 1];
+  check(rows.length === s.attempts.length && last[0] === `1/${Math.round(1 / c.h)}` && last[1] === `1/${Math.round(1 / c.k)}` && last[6] === 'passed',
+    `a table row per attempt, the last the chosen run: ${JSON.stringify(last)}`);
+
+  // The work–precision report: embedded and loaded, its chosen run named and drawn.
+  await page.waitForFunction(() => document.querySelector('#viewer img.report')?.naturalWidth > 0, null, { timeout: 10_000 });
+  const img = await page.$eval('#viewer img.report', (i) => ({ src: i.getAttribute('src'), w: i.naturalWidth, h: i.naturalHeight }));
+  check(img.src === `/jobs/${id}/report.svg`, `report SVG embedded (${img.w} × ${img.h} px)`);
+  const svg = await (await request.get(`${base}${img.src}`)).text();
+  const group = svg.match(/<g id="chosen-run"><title>([^<]*)<\/title>.*?<circle class="measured" cx="([0-9.]+)" cy="([0-9.]+)"/);
+  check(group && group[1].startsWith(hk), `the report names the chosen run: ${group && group[1]}`);
+  // Where the image puts that point: the measured run's colour, drawn from the <img> itself.
+  const [cx, cy] = [Number(group[2]), Number(group[3])];
+  const pixel = await page.$eval('#viewer img.report', (i, [x, y]) => {
+    const canvas = document.createElement('canvas');
+    canvas.width = i.naturalWidth;
+    canvas.height = i.naturalHeight;
+    const ctx = canvas.getContext('2d');
+    ctx.drawImage(i, 0, 0);
+    return [...ctx.getImageData(Math.round(x), Math.round(y), 1, 1).data];
+  }, [cx, cy]);
+  check(pixel[0] === 0x1f && pixel[1] === 0x77 && pixel[2] === 0xb4 && cx > 0 && cx < img.w && cy > 0 && cy < img.h,
+    `the chosen run is drawn at (${cx}, ${cy}) of the report: pixel ${pixel}`);
+  await page.screenshot({ path: path.join(outDir, 'client-target.png'), fullPage: true });
+  await axeCheck(page, 'on the target study view');
+  await page.close();
+}
+
 // CLIENT_TESTS=5,7 runs only those sections (while working on one); all by default.
 const only = process.env.CLIENT_TESTS ? new Set(process.env.CLIENT_TESTS.split(',').map(Number)) : null;
-const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys, testNewcomer];
+const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys, testNewcomer, testTargetView];
 
 let failed = false;
 try {

@@ -68,6 +68,33 @@ fn paper_targets_are_met_without_waste() {
     }
 }
 
+/// The target 0.05 above chooses h = 1/128, the reference's own h, so its "true error" there
+/// (0.0028) is the k-part alone. Against a reference finer in h (h = 1/256 at the chosen k)
+/// the chosen run's h-part is 0.020 (h = 1/64: 0.041; with the observed order ≈ 1 about 0.04
+/// and 0.08 from the limit), so the choice is within the target and far from wasteful, and
+/// no coarser h would do. Ignored: the h = 1/256 reference alone takes about 16 s.
+#[test]
+#[ignore = "a reference at h = 1/256 (about 16 s); run with --ignored"]
+fn the_finest_paper_choice_is_measured_against_a_finer_reference() {
+    let e = 0.05;
+    let r = go(paper(e), Limits::default()).unwrap();
+    let (n, steps) = level(&r);
+    let base = problem("paper-convergence", 2 * n, steps, &[]);
+    let truth = study::run_ladder(&base, &[(n / 2, steps), (n, steps)], (2 * n, steps)).unwrap();
+    for (row, m) in truth.rows.iter().zip([n / 2, n]) {
+        eprintln!(
+            "h = 1/{m}, k = 1/{steps}: error {:.4} against h = 1/{}",
+            row.err_w,
+            2 * n
+        );
+    }
+    let h_part = truth.rows[1].err_w;
+    assert!(
+        h_part < e && h_part > e / 20.0,
+        "h = 1/{n}, k = 1/{steps}: h-part {h_part}"
+    );
+}
+
 /// On a grid of cheap runs (h, k ∈ {1/4, …, 1/32}, true errors against h = k = 1/128), brute
 /// force finds the cheapest pair meeting the target; the planner, limited to the same grid,
 /// chooses a pair that meets it and costs at most 2 × as much. Cost = unknowns × steps
@@ -190,7 +217,7 @@ fn an_unreachable_target_is_refused_with_the_reason() {
     };
     eprintln!("{message}");
     assert!(
-        message.contains("more nodes than this server's limit"),
+        message.contains("nodes, more than the node limit of 1100"),
         "{message}"
     );
     assert!(message.contains("the best reachable"), "{message}");

@@ -353,10 +353,23 @@ pub fn target_report(r: &TargetResult) -> String {
             panel.py(p.1) - 3.5
         );
     }
-    for &(tp, ep, tm, em) in &chosen {
+    // Each run at a chosen (h, k), named; the last (the one whose fields are served) is
+    // `chosen-run`.
+    for (i, (&(tp, ep, tm, em), a)) in chosen.iter().zip(&r.attempts).enumerate() {
+        let id = if i + 1 == chosen.len() {
+            "chosen-run"
+        } else {
+            "first-choice"
+        };
         let _ = writeln!(
             out,
-            r#"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="{COLOR_W}" stroke-dasharray="3 3"/><circle cx="{:.1}" cy="{:.1}" r="7" fill="none" stroke="{COLOR_W}" stroke-width="2"/><circle cx="{:.1}" cy="{:.1}" r="7" fill="{COLOR_W}"/>"#,
+            r#"<g id="{id}"><title>h = {}, k = {}: predicted error {:.3e} in {:.3} s, estimated {:.3e} in {:.3} s</title><line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="{COLOR_W}" stroke-dasharray="3 3"/><circle cx="{:.1}" cy="{:.1}" r="7" fill="none" stroke="{COLOR_W}" stroke-width="2"/><circle class="measured" cx="{:.1}" cy="{:.1}" r="7" fill="{COLOR_W}"/></g>"#,
+            frac(a.h),
+            frac(a.k),
+            ep,
+            tp,
+            em,
+            tm,
             panel.px(tp),
             panel.py(ep),
             panel.px(tm),

@@ -71,12 +71,7 @@ pub fn parse_with(
     at: &str,
     files: &dyn scene::MeshFiles,
 ) -> Result<(Plan, Value), ValidationErrors> {
-    let err = |p: &str, m: String| {
-        ValidationErrors(vec![FieldError {
-            pointer: format!("{at}{p}"),
-            message: m,
-        }])
-    };
+    let err = |p: &str, m: String| field_error(at, p, m);
     let Some(obj) = doc.as_object() else {
         return Err(err(
             "",
@@ -113,16 +108,7 @@ pub fn parse_with(
         })?;
         return parse_with(&expanded, at, files);
     }
-    let name = match obj.get("name") {
-        None => None,
-        Some(Value::String(s)) if !s.is_empty() && s.len() <= 200 => Some(s.clone()),
-        Some(_) => {
-            return Err(err(
-                "/name",
-                "name must be a string of 1 to 200 characters".into(),
-            ))
-        }
-    };
+    let name = study_name(obj, at)?;
     let scene_doc = scene_document(obj, at)?;
     let list = |key: &str| -> Result<(Vec<Value>, bool), ValidationErrors> {
         match obj.get(key) {
@@ -333,18 +319,37 @@ pub fn parse_with(
     Ok((plan, Value::Object(expanded)))
 }
 
+/// One error at `{at}{p}`.
+pub(super) fn field_error(at: &str, p: &str, message: String) -> ValidationErrors {
+    ValidationErrors(vec![FieldError {
+        pointer: format!("{at}{p}"),
+        message,
+    }])
+}
+
+/// A study's optional `name`: a string of 1 to 200 characters.
+pub(super) fn study_name(
+    obj: &serde_json::Map<String, Value>,
+    at: &str,
+) -> Result<Option<String>, ValidationErrors> {
+    match obj.get("name") {
+        None => Ok(None),
+        Some(Value::String(s)) if !s.is_empty() && s.len() <= 200 => Ok(Some(s.clone())),
+        Some(_) => Err(field_error(
+            at,
+            "/name",
+            "name must be a string of 1 to 200 characters".into(),
+        )),
+    }
+}
+
 /// The scene a study (ladder or target) runs: its `scene` field, a scene object or a preset
 /// name expanded; errors point at `{at}/scene`.
 pub(super) fn scene_document(
     obj: &serde_json::Map<String, Value>,
     at: &str,
 ) -> Result<Value, ValidationErrors> {
-    let err = |m: String| {
-        ValidationErrors(vec![FieldError {
-            pointer: format!("{at}/scene"),
-            message: m,
-        }])
-    };
+    let err = |m: String| field_error(at, "/scene", m);
     match obj.get("scene") {
         None => Err(err(
             "missing: the scene to study (an object or a preset name)".into(),

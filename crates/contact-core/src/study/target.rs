@@ -102,6 +102,16 @@ impl TargetSpec {
         self.base.body.is_some()
     }
 
+    /// Nodes of the finest first pilot level (n0·2^(FIRST_PILOT_LEVELS − 1), at N0 steps):
+    /// below it a node limit leaves nothing to plan with.
+    pub fn pilot_nodes(&self) -> usize {
+        with(
+            &self.base,
+            (self.n0 << (FIRST_PILOT_LEVELS - 1), PILOT_STEPS),
+        )
+        .n_nodes()
+    }
+
     /// The scene document of the run at resolution n (1/h, or 2^refine) and N steps.
     pub fn scene_at(&self, n: usize, steps: usize) -> Value {
         let mut d = self.scene.clone();
@@ -139,12 +149,7 @@ pub fn parse_with(
     at: &str,
     files: &dyn scene::MeshFiles,
 ) -> Result<(TargetSpec, Value), ValidationErrors> {
-    let err = |p: &str, m: String| {
-        ValidationErrors(vec![FieldError {
-            pointer: format!("{at}{p}"),
-            message: m,
-        }])
-    };
+    let err = |p: &str, m: String| super::spec::field_error(at, p, m);
     let Some(obj) = doc.as_object() else {
         return Err(err("", "a study must be an object".into()));
     };
@@ -161,16 +166,7 @@ pub fn parse_with(
             return Err(err(&format!("/{k}"), why));
         }
     }
-    let name = match obj.get("name") {
-        None => None,
-        Some(Value::String(s)) if !s.is_empty() && s.len() <= 200 => Some(s.clone()),
-        Some(_) => {
-            return Err(err(
-                "/name",
-                "name must be a string of 1 to 200 characters".into(),
-            ))
-        }
-    };
+    let name = super::spec::study_name(obj, at)?;
     let Some(target) = obj.get("target").and_then(Value::as_object) else {
         return Err(err(
             "/target",
@@ -415,9 +411,15 @@ pub fn run(
     progress: &(dyn Fn(usize, usize) -> ControlFlow<()> + Sync),
     sink: &mut dyn Sink,
 ) -> Result<TargetResult, StudyError> {
+    let planner = Planner {
+        spec,
+        exec,
+        limits,
+        started: Instant::now(),
+    };
     match spec.base.dim() {
-        2 => run_in::<2>(spec, exec, limits, progress, sink),
-        _ => run_in::<3>(spec, exec, limits, progress, sink),
+        2 => run_in::<2>(&planner, progress, sink),
+        _ => run_in::<3>(&planner, progress, sink),
     }
 }
 
@@ -649,19 +651,13 @@ fn run_chosen<const D: usize>(
     Ok((run, summary))
 }
 
+/// [`run`] in dimension D.
 fn run_in<const D: usize>(
-    spec: &TargetSpec,
-    exec: Execution,
-    limits: Limits,
+    planner: &Planner,
     progress: &(dyn Fn(usize, usize) -> ControlFlow<()> + Sync),
     sink: &mut dyn Sink,
 ) -> Result<TargetResult, StudyError> {
-    let planner = Planner {
-        spec,
-        exec,
-        limits,
-        started: Instant::now(),
-    };
+    let (spec, exec) = (planner.spec, planner.exec);
     let keep_u = spec.quantity == Quantity::U;
     let (n0, s0) = (spec.n0, PILOT_STEPS);
     // The ladders cross at their third levels: each is run where the other parameter is
@@ -782,7 +778,7 @@ fn run_in<const D: usize>(
     };
     let frontier = frontier(&candidates);
     let Some(first) = choice else {
-        return Err(unreachable(&planner, &model, &cost, &candidates));
+        return Err(unreachable(planner, &model, &cost, &candidates));
     };
 
     // The chosen run, checked by its (2h, 2k) companion; once more at (h/2, k/2) if the
@@ -980,21 +976,47 @@ fn unreachable(
         (n, limit)
     }) {
         Some((n, l)) => {
+            let limits = planner.limits;
             let what = match l {
-                Limit::Nodes => "more nodes than this server's limit".to_string(),
-                Limit::Steps => "more time steps than this server's limit".to_string(),
-                Limit::Memory => "more memory than the per-job limit".to_string(),
-                Limit::Budget => format!(
-                    "about {} s, beyond the budget of {} s",
-                    sig(n.predicted_seconds),
-                    spec.budget_s.unwrap_or(0.0)
+                Limit::Nodes => format!(
+                    "{} nodes, more than the node limit of {}",
+                    planner.problem((n.n, n.steps)).n_nodes(),
+                    limits.max_nodes.unwrap_or(0)
                 ),
+                Limit::Steps => format!(
+                    "{} time steps, more than the step limit of {}",
+                    n.steps,
+                    limits.max_steps.unwrap_or(0)
+                ),
+                Limit::Memory => {
+                    use crate::memory::{choose, human, MemoryError};
+                    let p = planner.problem((n.n, n.steps));
+                    match choose(&p, planner.exec.settings.memory_limit) {
+                        Err(
+                            MemoryError::TooLarge {
+                                predicted, allowed, ..
+                            }
+                            | MemoryError::DirectTooLarge {
+                                predicted, allowed, ..
+                            },
+                        ) => format!(
+                            "about {} of memory (predicted), more than the per-job memory limit of {}",
+                            human(predicted),
+                            human(allowed)
+                        ),
+                        Ok(_) => "more memory than the per-job limit".into(),
+                    }
+                }
+                Limit::Budget => {
+                    format!("beyond the budget of {} s", spec.budget_s.unwrap_or(0.0))
+                }
             };
             format!(
-                "it needs h = {}, k = {} (predicted error {}), which takes {what}",
+                "it needs h = {}, k = {} (predicted error {}, about {} s): {what}",
                 frac(n.h),
                 frac(n.k),
-                sig(n.predicted_error)
+                sig(n.predicted_error),
+                sig(n.predicted_seconds)
             )
         }
         None => format!(
