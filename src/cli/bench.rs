@@ -19,6 +19,11 @@ pub struct BenchArgs {
     /// Linear solver path of every level, overriding the scene's `solver.linear`.
     #[arg(long = "linear-solver", value_parser = ["auto", "direct", "multigrid"])]
     pub linear_solver: Option<String>,
+    /// Replace the scene's friction law by Tresca with each of these bounds g in turn (e.g.
+    /// `2,20`: slipping and sticking runs of the same scene side by side, with their time
+    /// ratio).
+    #[arg(long = "friction-g", value_delimiter = ',')]
+    pub friction_g: Vec<f64>,
     /// Instead: Tables 1 and 2 together (one shared reference) against the reference
     /// run alone.
     #[arg(long)]
@@ -55,7 +60,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         .linear_solver
         .as_deref()
         .and_then(contact_core::linalg::LinearPath::parse);
-    match bench::run(&args.preset, &args.levels, repeat, linear) {
+    match bench::run(&args.preset, &args.levels, repeat, linear, &args.friction_g) {
         Ok(report) => {
             eprintln!("{}", report.table());
             println!("{}", pretty(&report));

@@ -31,6 +31,15 @@ pub struct BenchLevel {
     pub step_over_matvec: f64,
     /// "direct (Cholesky)", "multigrid (geometric, 4 levels)", ...
     pub linear_solver: String,
+    /// The Tresca bound g the scene's friction was replaced with (None: the scene's law).
+    pub friction_g: Option<f64>,
+    /// Steps in which some Γ3 node slipped, the most slipping nodes of a step and the most
+    /// iterations of one step's friction solver (Newton iterations on the multigrid path).
+    pub steps_with_slip: usize,
+    pub max_slip_nodes: usize,
+    pub velocity_max_iterations: usize,
+    /// Total time against the first friction bound's run at the same level (1 for it).
+    pub time_over_first_g: f64,
     /// Most Krylov iterations of one step's velocity and damage solves (0 on the direct path).
     pub velocity_max_krylov_iterations: usize,
     pub damage_max_krylov_iterations: usize,
@@ -52,22 +61,27 @@ pub struct BenchReport {
 impl BenchReport {
     /// A plain-text table for humans.
     pub fn table(&self) -> String {
-        let mut s = String::from("  1/h   nodes  unknowns steps  setup_s  solve_s  total_s  step_ms  subst_ms  step/subst  matvec_ms  step/matvec  its_v  its_d  pred_MiB  peak_MiB  solver\n");
+        let mut s = String::from("  1/h       g   nodes  unknowns steps  setup_s  solve_s  total_s  vs_g0  step_ms  subst_ms  step/subst  matvec_ms  step/matvec  slip_steps  slip_max  newton  its_v  its_d  pred_MiB  peak_MiB  solver\n");
         for l in &self.levels {
             s += &format!(
-                "{:5} {:7} {:9} {:5} {:8.4} {:8.4} {:8.4} {:8.3} {:9.3} {:11.2} {:10.3} {:12.1} {:6} {:6} {:9.0} {:9}  {}\n",
+                "{:5} {:>7} {:7} {:9} {:5} {:8.4} {:8.4} {:8.4} {:6.2} {:8.3} {:9.3} {:11.2} {:10.3} {:12.1} {:11} {:9} {:7} {:6} {:6} {:9.0} {:9}  {}\n",
                 l.level,
+                l.friction_g.map_or("-".into(), |g| format!("{g}")),
                 l.nodes,
                 l.unknowns,
                 l.steps,
                 l.setup_s,
                 l.solve_s,
                 l.total_s,
+                l.time_over_first_g,
                 1e3 * l.per_step_s,
                 1e3 * l.substitution_s,
                 l.step_over_substitution,
                 1e3 * l.matvec_s,
                 l.step_over_matvec,
+                l.steps_with_slip,
+                l.max_slip_nodes,
+                l.velocity_max_iterations,
                 l.velocity_max_krylov_iterations,
                 l.damage_max_krylov_iterations,
                 l.predicted_mib,
@@ -83,23 +97,36 @@ impl BenchReport {
 pub const DEFAULT_PRESET: &str = "paper-convergence";
 
 /// Runs `preset` (2D or 3D) at each level, each `repeat` times (fastest end-to-end run
-/// reported), on the path `linear` (None: the scene's own `solver.linear`).
+/// reported), on the path `linear` (None: the scene's own `solver.linear`), once per Tresca
+/// bound in `friction_g` (empty: the scene's own friction law).
 pub fn run(
     preset: &str,
     levels: &[usize],
     repeat: usize,
     linear: Option<LinearPath>,
+    friction_g: &[f64],
 ) -> Result<BenchReport, Box<dyn std::error::Error>> {
     let mut out = Vec::new();
+    let bounds: Vec<Option<f64>> = if friction_g.is_empty() {
+        vec![None]
+    } else {
+        friction_g.iter().map(|&g| Some(g)).collect()
+    };
     for &level in levels {
-        let mut best: Option<BenchLevel> = None;
-        for _ in 0..repeat {
-            let r = one(preset, level, linear)?;
-            if best.as_ref().is_none_or(|b| r.total_s < b.total_s) {
-                best = Some(r);
+        let mut first = None;
+        for &g in &bounds {
+            let mut best: Option<BenchLevel> = None;
+            for _ in 0..repeat {
+                let r = one(preset, level, linear, g)?;
+                if best.as_ref().is_none_or(|b| r.total_s < b.total_s) {
+                    best = Some(r);
+                }
             }
+            let mut best = best.expect("repeat ≥ 1");
+            let t0 = *first.get_or_insert(best.total_s);
+            best.time_over_first_g = best.total_s / t0;
+            out.push(best);
         }
-        out.push(best.expect("repeat ≥ 1"));
     }
     Ok(BenchReport {
         preset: preset.to_string(),
@@ -112,12 +139,16 @@ fn one(
     preset: &str,
     level: usize,
     linear: Option<LinearPath>,
+    friction_g: Option<f64>,
 ) -> Result<BenchLevel, Box<dyn std::error::Error>> {
     reset_peak_rss();
     let start = Instant::now();
     let mut problem = leveled(preset, level)?;
     if let Some(path) = linear {
         problem.linear = path;
+    }
+    if let Some(g) = friction_g {
+        problem.friction = crate::problem::FrictionLaw::Tresca { g };
     }
     match problem.dim() {
         2 => measure::<2>(problem, level, start),
@@ -154,8 +185,12 @@ fn measure<const D: usize>(
     let t0 = Instant::now();
     let mut last = None;
     let (mut its_v, mut its_d) = (0, 0);
+    let (mut slip_steps, mut slip_max, mut newton) = (0, 0, 0);
     while !sim.finished() {
         let record = sim.step()?;
+        slip_steps += usize::from(record.slip_nodes > 0);
+        slip_max = slip_max.max(record.slip_nodes);
+        newton = newton.max(record.velocity.iterations);
         its_v = its_v.max(record.velocity.krylov_iterations);
         its_d = its_d.max(record.damage.map_or(0, |d| d.krylov_iterations));
         last = Some(record);
@@ -184,6 +219,14 @@ fn measure<const D: usize>(
         matvec_s,
         step_over_matvec: solve_s / steps as f64 / matvec_s,
         linear_solver: sim.linear_solver(),
+        friction_g: match &sim.problem.friction {
+            crate::problem::FrictionLaw::Tresca { g } => Some(*g),
+            _ => None,
+        },
+        steps_with_slip: slip_steps,
+        max_slip_nodes: slip_max,
+        velocity_max_iterations: newton,
+        time_over_first_g: 1.0,
         velocity_max_krylov_iterations: its_v,
         damage_max_krylov_iterations: its_d,
         w_v: last.w_v,
@@ -308,7 +351,8 @@ pub fn tables(repeat: usize, threads: usize) -> Result<TablesBench, Box<dyn std:
     };
     let (mut tables_s, mut reference_alone_s) = (f64::INFINITY, f64::INFINITY);
     for _ in 0..repeat {
-        reference_alone_s = reference_alone_s.min(one("paper-convergence", 128, None)?.total_s);
+        reference_alone_s =
+            reference_alone_s.min(one("paper-convergence", 128, None, None)?.total_s);
         let start = Instant::now();
         let cache = study::ReferenceCache::new(1);
         study::run_many(&plans, &cache, exec, &|_, _| {

@@ -15,9 +15,12 @@
 //!   (refined bodies, generated meshes with even cell counts) at 1/8–1/32, smoothed
 //!   aggregation at 1/16 and 1/32 (odd cell counts).
 //!
-//! A slipping step on either path also holds the dense Schur complement onto Γ3 (m² values,
-//! m the tangential contact DOFs), which is not counted: it depends on the Γ3 part of the
-//! boundary, known only once the mesh is tagged.
+//! With a Γ3, the multigrid path also builds K's hierarchy on all free DOFs for the
+//! semismooth Newton method of a slipping step (sharing K itself) with its truncated
+//! preconditioner; it is counted whether or not the run slips. A slipping step on the direct
+//! path holds the dense Schur complement onto Γ3 (m² values, m the tangential contact DOFs),
+//! which is not counted: it depends on the Γ3 part of the boundary, known only once the mesh
+//! is tagged.
 
 use crate::linalg::LinearPath;
 use crate::problem::Problem;
@@ -41,6 +44,8 @@ struct Counts {
     /// The multigrid path coarsens geometrically ([`crate::fem::multilevel`]): a refined
     /// body, or a generated rectangle or box with even cell counts.
     geometric: bool,
+    /// The boundary has a Γ3 part.
+    contact: bool,
 }
 
 fn counts(p: &Problem) -> Counts {
@@ -69,6 +74,10 @@ fn counts(p: &Problem) -> Counts {
         cells,
         stencil: if d == 2 { 7.0 } else { 15.0 },
         damage: p.damage.is_some(),
+        contact: p
+            .boundary
+            .iter()
+            .any(|b| matches!(b.kind, crate::problem::BoundaryKind::Contact)),
         geometric: match (&p.body, p.depth_cells()) {
             (Some(b), _) => b.refine > 0,
             (None, Some(nz)) => {
@@ -96,6 +105,16 @@ fn factor_entries(d: f64, n: f64) -> f64 {
 /// peaks of box-exp3 at 1/16, 1/24, 1/32 and 1/48 (`contact-sim bench --linear-solver
 /// multigrid`: 84, 280, 606 and 1,958 MiB; predicted 80, 262, 607 and 2,014 MiB).
 const GEOMETRIC_HIERARCHY: f64 = 1.0;
+
+/// With a Γ3 the multigrid path's hierarchy is K's on all free DOFs (K shared, K_II never
+/// copied), plus the slipping steps' truncated preconditioner and Newton vectors, as a
+/// multiple of K's bytes beside the terms above: box-exp3 at 1/32 peaked at 538 MiB with
+/// g = 20 (all stick) and 555 MiB with g = 2 (every step slips), predicted 568 MiB.
+const FULL_SPACE_GEOMETRIC: f64 = 0.25;
+
+/// The same with smoothed aggregation: the second set-up's transients beside the first
+/// hierarchy's kept levels.
+const FULL_SPACE_AGGREGATION: f64 = 2.0;
 
 /// The resident size of the process before a run (code, allocator, runtime), counted on the
 /// multigrid path whose small runs it dominates.
@@ -145,7 +164,12 @@ pub fn predict(p: &Problem) -> Prediction {
     } else {
         0.0
     };
-    let multigrid = PROCESS + base + hierarchy_k + hierarchy_h;
+    let full_space = match (c.contact, c.geometric) {
+        (false, _) => 0.0,
+        (true, true) => FULL_SPACE_GEOMETRIC * csr(nnz_k, n),
+        (true, false) => FULL_SPACE_AGGREGATION * csr(nnz_k, n),
+    };
+    let multigrid = PROCESS + base + hierarchy_k + hierarchy_h + full_space;
     // The multigrid path assembles K into its pattern: only the scalar matrices' triplets
     // (M and L, (D+1)² per cell) are ever held.
     let scalar_assembly = 24.0 * c.cells * (c.d + 1.0).powi(2);

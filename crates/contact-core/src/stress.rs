@@ -637,7 +637,15 @@ pub fn run_with(quick: bool, mut starting: impl FnMut(usize, usize, &Case)) -> S
 /// Runs one case at the resolution of the full table or the quick subset (`None` if the case
 /// is not in the quick subset).
 pub fn run_case(case: &Case, quick: bool) -> Option<CaseReport> {
-    let doc = case.scene(quick)?;
+    run_case_on(case, quick, None)
+}
+
+/// [`run_case`] on the linear path given (`"direct"`, `"multigrid"`; None: the scene's).
+pub fn run_case_on(case: &Case, quick: bool, linear: Option<&str>) -> Option<CaseReport> {
+    let mut doc = case.scene(quick)?;
+    if let Some(path) = linear {
+        doc["solver"] = json!({"linear": path});
+    }
     let mut report = CaseReport {
         name: case.name,
         about: case.about,

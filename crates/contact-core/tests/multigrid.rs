@@ -190,7 +190,12 @@ fn the_scene_field_is_validated_and_hashed() {
 }
 
 /// A preset, its mesh, the expected hierarchy and scene edits.
-type Case = (&'static str, Value, &'static str, Vec<(&'static str, Value)>);
+type Case = (
+    &'static str,
+    Value,
+    &'static str,
+    Vec<(&'static str, Value)>,
+);
 
 /// Friction that slips, on the semismooth Newton path against the dense reduced problem.
 #[test]

@@ -65,3 +65,33 @@ fn slender_cantilever_reaches_the_tolerance() {
     assert_eq!(r.outcome, Outcome::Completed, "{:?}", r.reason);
     assert!(r.velocity_residual_max.unwrap() <= 1e-10);
 }
+
+/// The friction cases of the quick subset on the multigrid path (slip by the semismooth
+/// Newton method on all DOFs): the same outcome as on the direct path, residuals at
+/// tolerance, the invariants after every step, and the same slip fraction.
+#[test]
+fn friction_cases_behave_the_same_on_the_multigrid_path() {
+    let friction = ["tresca", "slipweak", "pwlinear"];
+    let mut ran = 0;
+    for case in stress::cases() {
+        if !friction.iter().any(|f| case.name.starts_with(f)) {
+            continue;
+        }
+        let Some(direct) = stress::run_case_on(&case, true, Some("direct")) else {
+            continue;
+        };
+        let multi = stress::run_case_on(&case, true, Some("multigrid")).expect("quick case");
+        assert!(multi.as_expected, "{}: {:?}", case.name, multi.reason);
+        assert_eq!(multi.outcome, direct.outcome, "{}", case.name);
+        if multi.outcome == Outcome::Completed {
+            assert!(
+                multi.velocity_residual_max.unwrap() <= 1e-10,
+                "{}",
+                case.name
+            );
+            assert_eq!(multi.slip_fraction, direct.slip_fraction, "{}", case.name);
+        }
+        ran += 1;
+    }
+    assert!(ran >= 8, "only {ran} friction cases");
+}

@@ -47,7 +47,7 @@ const LOCAL_SWEEPS: usize = 3;
 const HALVINGS: usize = 40;
 /// A block of E⁺ that moved by more than this fraction of its node's stiffness triggers a
 /// new preconditioner.
-const REBUILD_FRACTION: f64 = 0.25;
+const REBUILD_FRACTION: f64 = 1.0;
 
 /// How a solve went.
 #[derive(Debug, Clone, Copy, PartialEq)]

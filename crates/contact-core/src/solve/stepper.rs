@@ -18,10 +18,12 @@ use crate::fem::{assembly, loads, norms, DofMap, Geometry};
 use crate::laws::constitutive::{elastic_stress, viscous_stress, von_mises};
 use crate::laws::damage_source::phi;
 use crate::laws::Tensor;
-use crate::linalg::{Csr, LinearPath, SchurPath};
+use crate::linalg::multigrid::{Hierarchy, Params};
+use crate::linalg::{Csr, LinearPath, LinearSolver, SchurPath};
 use crate::memory;
 use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::{Problem, SmallnessPolicy};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Below this many nodes the two sub-problems run one after the other (thread hand-off
@@ -293,11 +295,28 @@ impl<const D: usize> Prepared<D> {
             _ => assembly::viscous_stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi),
         };
         let n_i = dofs.n_interior;
-        let k_ii = multilevel::velocity_solver(&mesh, &dofs, k.block(0..n_i, 0..n_i), n_i, linear)
-            .map_err(|source| SolveError::Factor {
-                what: "velocity",
-                source,
-            })?;
+        let k = Arc::new(k);
+        let factor_error = |source| SolveError::Factor {
+            what: "velocity",
+            source,
+        };
+        // With a Γ3 the multigrid path builds one hierarchy, of K on all free DOFs: the slip
+        // solver's, through which K_II is solved too (never copied).
+        let full_space = linear == LinearPath::Multigrid && dofs.n_contact() > 0;
+        let (k_ii, hierarchy) = if full_space {
+            let (blocks, levels) = multilevel::velocity_levels(&mesh, &dofs, dofs.n_free());
+            let h = Hierarchy::new(k.clone(), blocks, levels, Params::default())
+                .map(Arc::new)
+                .map_err(factor_error)?;
+            let k_ii =
+                LinearSolver::leading_block(h.clone(), k.clone(), n_i).map_err(factor_error)?;
+            (k_ii, Some(h))
+        } else {
+            let k_ii =
+                multilevel::velocity_solver(&mesh, &dofs, k.block(0..n_i, 0..n_i), n_i, linear)
+                    .map_err(factor_error)?;
+            (k_ii, None)
+        };
         let mut velocity = VelocityStep::with_solver(
             k,
             &dofs,
@@ -305,9 +324,8 @@ impl<const D: usize> Prepared<D> {
             SchurPath::default(),
             k_ii,
         );
-        if linear == LinearPath::Multigrid && dofs.n_contact() > 0 {
-            let (blocks, levels) = multilevel::velocity_levels(&mesh, &dofs, dofs.n_free());
-            velocity = velocity.with_full_space(blocks, levels);
+        if let Some(h) = hierarchy {
+            velocity = velocity.with_hierarchy(h);
         }
         let smallness = smallness::check(problem, &mesh, &geo, &dofs, &mut velocity)?;
         let mass = assembly::mass(&mesh, &geo);

@@ -15,8 +15,9 @@
 //! [`crate::linalg::schur`], or on the multigrid path column by column by solves), the
 //! reduced problem is solved, and one more solve recovers w_I.
 //!
-//! On the multigrid path with K's own hierarchy on all free DOFs ([`VelocityStep::with_full_space`])
-//! a slipping step never forms S: (3.13) is solved on all free DOFs by the truncated
+//! On the multigrid path with K's own hierarchy on all free DOFs ([`VelocityStep::with_hierarchy`];
+//! K_II is then solved through it as well, [`LinearSolver::LeadingBlock`]) a slipping step
+//! never forms S: (3.13) is solved on all free DOFs by the truncated
 //! nonsmooth Newton multigrid method of [`super::semismooth_newton`], warm-started from the
 //! previous step's velocity.
 //!
@@ -28,7 +29,7 @@ use super::semismooth_newton::SemismoothNewton;
 use super::{friction_isotropic, friction_reduced};
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::fem::DofMap;
-use crate::linalg::multigrid::{Blocks, Coarsening, Hierarchy, Params};
+use crate::linalg::multigrid::Hierarchy;
 use crate::linalg::schur::{schur_by_solves, SCHUR_COLUMN_TOLERANCE};
 use crate::linalg::{schur_complement, Csr, LinearSolver, SchurPath};
 use crate::problem::FrictionLaw;
@@ -101,10 +102,7 @@ pub struct VelocityStep {
     r: Vec<f64>,
     /// Krylov iterations of the current step (multigrid path).
     krylov: usize,
-    /// K's node blocks and levels on all free DOFs (the multigrid path's slip solver, set
-    /// up on the first slipping step) ...
-    full_levels: Option<(Blocks, Coarsening)>,
-    /// ... and that solver.
+    /// The multigrid path's solver of slipping steps on all free DOFs.
     newton: Option<Box<SemismoothNewton>>,
     /// The last step's free-DOF velocity (the Newton warm start).
     w_last: Vec<f64>,
@@ -113,7 +111,7 @@ pub struct VelocityStep {
 impl VelocityStep {
     /// The step with a given solver of K_II (the leading n_interior block of `k`).
     pub fn with_solver<const D: usize>(
-        k: Csr,
+        k: Arc<Csr>,
         dofs: &DofMap<D>,
         law: FrictionLaw,
         path: SchurPath,
@@ -145,23 +143,29 @@ impl VelocityStep {
             y_prev: vec![0.0; n_i],
             r: vec![0.0; n],
             krylov: 0,
-            full_levels: None,
             newton: None,
             w_last: vec![0.0; n],
-            k: Arc::new(k),
+            k,
         }
     }
 
-    /// Slipping steps solved on all free DOFs by semismooth Newton with multigrid on K's
-    /// `blocks` and `levels` (all free DOFs), instead of on the dense S.
-    pub fn with_full_space(mut self, blocks: Blocks, levels: Coarsening) -> Self {
-        self.full_levels = Some((blocks, levels));
+    /// Slipping steps solved on all free DOFs by semismooth Newton with the multigrid
+    /// `hierarchy` of K (all free DOFs), instead of on the dense S.
+    pub fn with_hierarchy(mut self, hierarchy: Arc<Hierarchy>) -> Self {
+        self.newton = Some(Box::new(SemismoothNewton::new(
+            self.k.clone(),
+            hierarchy,
+            self.n_i,
+            self.block,
+            self.node_weights.clone(),
+            self.law.clone(),
+        )));
         self
     }
 
     /// How a slipping step is (or was) solved.
     pub fn slip_solver(&self) -> ContactSolver {
-        if self.full_levels.is_some() || self.newton.is_some() {
+        if self.newton.is_some() {
             ContactSolver::SemismoothNewton
         } else {
             ContactSolver::DenseSchur(self.schur_path)
@@ -254,10 +258,9 @@ impl VelocityStep {
         })
     }
 
-    /// A slipping step on all free DOFs (multigrid path): semismooth Newton, warm-started
-    /// from the last step's velocity (after an all-stick step: this step's stick solution,
-    /// which is the last one's updated). Returns the Newton iterations.
-    fn solve_full(
+    /// The stick test with y = K_II⁻¹ f_I, then (if some node slips) the reduced problem or
+    /// the full-space method. Returns the friction solver's iterations.
+    fn solve_stick_or_reduced(
         &mut self,
         f: &[f64],
         w: &mut [f64],
@@ -265,80 +268,10 @@ impl VelocityStep {
         step: usize,
     ) -> Result<usize, SolveError> {
         let n_i = self.n_i;
-        if let Some((blocks, levels)) = self.full_levels.take() {
-            let h = Hierarchy::new(self.k.clone(), blocks, levels, Params::default()).map_err(
-                |source| SolveError::Factor {
-                    what: "velocity (all free DOFs)",
-                    source,
-                },
-            )?;
-            self.newton = Some(Box::new(SemismoothNewton::new(
-                self.k.clone(),
-                Arc::new(h),
-                n_i,
-                self.block,
-                self.node_weights.clone(),
-                self.law.clone(),
-            )));
-        }
-        w.copy_from_slice(&self.w_last);
-        if self.x.iter().all(|&v| v == 0.0) {
-            w[..n_i].copy_from_slice(&self.y);
-        }
-        // Half the tolerance, as the dense path's reduced solve: the full check follows.
-        let inner = SolverSettings {
-            tolerance: 0.5 * settings.tolerance,
-            ..*settings
-        };
-        let newton = self.newton.as_mut().expect("built above");
-        let rep = newton.solve(f, w, &inner, KRYLOV_FRACTION * settings.tolerance, step)?;
-        self.krylov += rep.krylov_iterations;
-        self.x.copy_from_slice(&w[n_i..]);
-        Ok(rep.newton_iterations)
-    }
-
-    /// K_II y = b on the solver's path, from the guess in `y`, to KRYLOV_FRACTION of the
-    /// tolerance relative to `scale`.
-    fn solve_interior(
-        &mut self,
-        b: &[f64],
-        y: &mut [f64],
-        scale: f64,
-        settings: &SolverSettings,
-        step: usize,
-    ) -> Result<(), SolveError> {
-        let atol = KRYLOV_FRACTION * settings.tolerance * scale;
-        match self.k_ii.solve(b, y, atol) {
-            Ok(it) => {
-                self.krylov += it;
-                Ok(())
-            }
-            Err(e) => Err(SolveError::NotConverged {
-                what: "velocity step (multigrid conjugate gradients)",
-                step,
-                iterations: e.iterations,
-                residual: e.residual / scale,
-                tolerance: KRYLOV_FRACTION * settings.tolerance,
-            }),
-        }
-    }
-
-    /// Solves (3.13) for the free-DOF load `f`, writing the free-DOF velocity into `w`.
-    /// The reported residual is the relative KKT residual of the FULL problem, computed from
-    /// K w − f (not from the reduced quantities).
-    pub fn solve(
-        &mut self,
-        f: &[f64],
-        w: &mut [f64],
-        settings: &SolverSettings,
-        step: usize,
-    ) -> Result<SolverReport, SolveError> {
-        let n_i = self.n_i;
         let m = self.n_contact();
         let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
-        self.krylov = 0;
         let mut y = std::mem::take(&mut self.y);
-        if matches!(self.k_ii, LinearSolver::Multigrid(_)) {
+        if self.k_ii.is_iterative() {
             // Warm start: y_n ≈ 2 y_{n−1} − y_{n−2}; y_prev ← y_{n−1}.
             for (y, p) in y.iter_mut().zip(self.y_prev.iter_mut()) {
                 let last = *y;
@@ -366,7 +299,7 @@ impl VelocityStep {
             if all_stick {
                 self.x.iter_mut().for_each(|v| *v = 0.0);
                 w[..n_i].copy_from_slice(&self.y);
-            } else if self.full_levels.is_some() || self.newton.is_some() {
+            } else if self.newton.is_some() {
                 iterations = self.solve_full(f, w, settings, step)?;
             } else {
                 let mut x = std::mem::take(&mut self.x);
@@ -432,6 +365,85 @@ impl VelocityStep {
         } else {
             w.copy_from_slice(&self.y);
         }
+        Ok(iterations)
+    }
+
+    /// A slipping step on all free DOFs (multigrid path): semismooth Newton, warm-started
+    /// from the last step's velocity (after an all-stick step: this step's stick solution,
+    /// which is the last one's updated). Returns the Newton iterations.
+    fn solve_full(
+        &mut self,
+        f: &[f64],
+        w: &mut [f64],
+        settings: &SolverSettings,
+        step: usize,
+    ) -> Result<usize, SolveError> {
+        let n_i = self.n_i;
+        w.copy_from_slice(&self.w_last);
+        if self.x.iter().all(|&v| v == 0.0) {
+            w[..n_i].copy_from_slice(&self.y);
+        }
+        // Half the tolerance, as the dense path's reduced solve: the full check follows.
+        let inner = SolverSettings {
+            tolerance: 0.5 * settings.tolerance,
+            ..*settings
+        };
+        let newton = self.newton.as_mut().expect("the multigrid path's");
+        let rep = newton.solve(f, w, &inner, KRYLOV_FRACTION * settings.tolerance, step)?;
+        self.krylov += rep.krylov_iterations;
+        self.x.copy_from_slice(&w[n_i..]);
+        Ok(rep.newton_iterations)
+    }
+
+    /// K_II y = b on the solver's path, from the guess in `y`, to KRYLOV_FRACTION of the
+    /// tolerance relative to `scale`.
+    fn solve_interior(
+        &mut self,
+        b: &[f64],
+        y: &mut [f64],
+        scale: f64,
+        settings: &SolverSettings,
+        step: usize,
+    ) -> Result<(), SolveError> {
+        let atol = KRYLOV_FRACTION * settings.tolerance * scale;
+        match self.k_ii.solve(b, y, atol) {
+            Ok(it) => {
+                self.krylov += it;
+                Ok(())
+            }
+            Err(e) => Err(SolveError::NotConverged {
+                what: "velocity step (multigrid conjugate gradients)",
+                step,
+                iterations: e.iterations,
+                residual: e.residual / scale,
+                tolerance: KRYLOV_FRACTION * settings.tolerance,
+            }),
+        }
+    }
+
+    /// Solves (3.13) for the free-DOF load `f`, writing the free-DOF velocity into `w`.
+    /// The reported residual is the relative KKT residual of the FULL problem, computed from
+    /// K w − f (not from the reduced quantities).
+    pub fn solve(
+        &mut self,
+        f: &[f64],
+        w: &mut [f64],
+        settings: &SolverSettings,
+        step: usize,
+    ) -> Result<SolverReport, SolveError> {
+        let n_i = self.n_i;
+        let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
+        self.krylov = 0;
+        let iterations = if self.newton.is_some() && self.x.iter().any(|&v| v != 0.0) {
+            // The last step slipped: this one goes to the full-space method at once (which
+            // also finds an all-stick solution), without the stick test's solve.
+            let iterations = self.solve_full(f, w, settings, step)?;
+            self.y.copy_from_slice(&w[..n_i]);
+            self.y_prev.copy_from_slice(&w[..n_i]);
+            iterations
+        } else {
+            self.solve_stick_or_reduced(f, w, settings, step)?
+        };
         let mut residual = self.full_residual(f, w) / scale;
         if residual > settings.tolerance && residual.is_finite() {
             residual = self.refine(f, w, scale, settings.tolerance);

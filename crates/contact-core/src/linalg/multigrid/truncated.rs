@@ -145,6 +145,7 @@ fn block_matrix(n: usize, blocks: &[NodeBlock]) -> Csr {
 }
 
 /// The truncated V-cycle's finest level and the hierarchy below it.
+#[derive(Clone)]
 struct Levels {
     smoother: Chebyshev,
     p: Csr,
@@ -153,6 +154,7 @@ struct Levels {
     work: [Vec<f64>; 7],
 }
 
+#[derive(Clone)]
 enum Cycle {
     /// A's hierarchy has levels: the truncated V-cycle.
     Levels(Box<Levels>),
@@ -161,6 +163,7 @@ enum Cycle {
 }
 
 /// The truncated V-cycle for M⁺ (an SPD preconditioner for M).
+#[derive(Clone)]
 pub struct Truncated {
     a: Arc<Csr>,
     fixed: Vec<usize>,

@@ -261,3 +261,30 @@ fn three_dimensional_isotropic_friction() {
     };
     assert!(c.check(&f, &weights, law, &zero).slip_nodes > 0);
 }
+
+/// The multigrid path's smallness figure (Lanczos on W^{½} S⁻¹ W^{½}, no S formed) is the
+/// dense path's λ_min(W^{-½} S W^{-½}), in 2D and 3D.
+#[test]
+fn lanczos_smallness_matches_the_dense_eigenvalue() {
+    use crate::linalg::LinearSolver;
+    use crate::solve::smallness::min_eig_by_lanczos;
+    for c in [
+        case::<2>("paper-convergence", json!({"h": "1/16"})),
+        case::<3>("box-exp3", json!({"h": "1/6"})),
+    ] {
+        let per_dof: Vec<f64> = c
+            .weights
+            .iter()
+            .flat_map(|w| std::iter::repeat_n(*w, c.block))
+            .collect();
+        let d: Vec<f64> = per_dof.iter().map(|w| 1.0 / w.sqrt()).collect();
+        let dense = min_eig_scaled(&c.s, &d);
+        let w_sqrt: Vec<f64> = per_dof.iter().map(|w| w.sqrt()).collect();
+        let mut solver = LinearSolver::with_hierarchy(c.hierarchy.clone(), c.k.clone());
+        let lanczos = min_eig_by_lanczos(&mut solver, c.n_i, &w_sqrt).unwrap();
+        assert!(
+            (lanczos - dense).abs() <= 1e-8 * dense,
+            "Lanczos {lanczos} vs dense {dense}"
+        );
+    }
+}
