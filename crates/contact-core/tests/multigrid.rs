@@ -268,6 +268,12 @@ fn slipping_friction_agrees_on_the_newton_path() {
             "multigrid (smoothed aggregation",
             vec![tresca(0.0)],
         ),
+        (
+            "standing-cylinder",
+            json!({"refine": 1}),
+            "multigrid (geometric",
+            vec![tresca(0.0)],
+        ),
     ];
     for (preset, mesh, expect, edits) in cases3 {
         let slipped = compare_with::<3>(preset, mesh, 3, expect, &edits);
