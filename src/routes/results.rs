@@ -17,7 +17,8 @@ use crate::meshes::Meshes;
 use crate::problem::Problem;
 use crate::state::AppState;
 use crate::store::{JobRecord, JobStatus};
-use crate::stream::{blocking_body, blocking_body_or_length};
+use crate::stream::{blocking_body, blocking_body_or_length, rendered_len};
+use std::io::Write as _;
 use axum::extract::{Path, State};
 use axum::http::{header, HeaderValue, Method};
 use axum::response::{IntoResponse, Response};
@@ -516,9 +517,11 @@ pub async fn pvd(
 
 /// One uncompressed tar (POSIX ustar) whose members all sit in one folder named after the
 /// job: `<id>/scene.json`, `<id>/summary.json`, `<id>/result.pvd` and
-/// `<id>/fields/step_NNNNNN.vtu` for step 0 (the initial state) and every stored step. Each
-/// member is rendered just before it is written, so the archive is streamed, never held
-/// whole.
+/// `<id>/fields/step_NNNNNN.vtu` for step 0 (the initial state) and every stored step. The
+/// archive is streamed, never held whole, and so is each VTU member: a tar header states its
+/// member's length, so a VTU is rendered twice, once into a byte counter for the header and
+/// once into the body (a 1/64 box's VTU is some hundreds of MB; held in memory it would come
+/// on top of the job's own peak).
 pub async fn archive(
     State(state): State<AppState>,
     Path(id): Path<String>,
@@ -565,9 +568,29 @@ pub async fn archive(
         member("result.pvd", &pvd)?;
         for n in steps {
             let f = load_step(&st, &rec, n).map_err(io)?;
-            let mut buf = Vec::new();
-            write_mesh_vtu(&mut buf, &mesh, &f)?;
-            member(&name(n), &buf)?;
+            let size = rendered_len(|w| write_mesh_vtu(w, &mesh, &f))?;
+            let mut h = tar::Header::new_ustar();
+            h.set_entry_type(tar::EntryType::Regular);
+            h.set_mode(0o644);
+            h.set_uid(0);
+            h.set_gid(0);
+            h.set_size(size);
+            h.set_mtime(mtime);
+            h.set_path(format!("{id}/{}", name(n)))?;
+            h.set_cksum();
+            // The header, the body as it is rendered and the padding to the next 512-byte
+            // block: what `append_data` writes, without holding the body.
+            let out = tar.get_mut();
+            out.write_all(h.as_bytes())?;
+            let mut body = Counted(out, 0);
+            write_mesh_vtu(&mut body, &mesh, &f)?;
+            if body.1 != size {
+                return Err(std::io::Error::other(format!(
+                    "step {n}: the VTU rendered {} bytes, then {size}",
+                    body.1
+                )));
+            }
+            out.write_all(&[0; 512][..(512 - (size % 512) as usize) % 512])?;
         }
         tar.finish()
     });
@@ -580,4 +603,19 @@ pub async fn archive(
         HeaderValue::from_str(&disp).expect("ASCII"),
     );
     Ok(resp)
+}
+
+/// A writer that counts what passes through it.
+struct Counted<W>(W, u64);
+
+impl<W: std::io::Write> std::io::Write for Counted<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.0.write(buf)?;
+        self.1 += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.0.flush()
+    }
 }
