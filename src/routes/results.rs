@@ -582,7 +582,7 @@ pub async fn archive(
             // block: what `append_data` writes, without holding the body.
             let out = tar.get_mut();
             out.write_all(h.as_bytes())?;
-            let mut body = Counted(out, 0);
+            let mut body = Counted(&mut *out, 0);
             write_mesh_vtu(&mut body, &mesh, &f)?;
             if body.1 != size {
                 return Err(std::io::Error::other(format!(

@@ -430,11 +430,12 @@ def test_3d_surface_fields_are_the_full_fields_on_the_boundary(client: Client) -
     assert np.array_equal(c.slip_velocity, fc.slip_velocity)
     # Without the mesh, the fields are on the surface all the same.
     u_only = job.fields(names=["u"], mesh=False, surface=True)
-    assert u_only.u is not None and np.array_equal(u_only.u, s.u)
+    assert u_only.u is not None and s.u is not None and np.array_equal(u_only.u, s.u)
     # A 2D job's fields are whole with or without surface.
     plane = client.submit("paper-exp2", overrides={"h": "1/4", "k": "1/4"}).wait(progress=False)
     a, b = plane.fields(surface=True), plane.fields()
     assert not a.surface and a.triangles is not None and b.triangles is not None
+    assert a.u is not None and b.u is not None
     assert np.array_equal(a.triangles, b.triangles) and np.array_equal(a.u, b.u)
 
 
