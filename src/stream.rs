@@ -83,9 +83,9 @@ pub async fn blocking_body_or_length(
         return Ok(blocking_body(content_type, render));
     }
     let bytes = tokio::task::spawn_blocking(move || rendered_len(render))
-    .await
-    .map_err(|e| Problem::internal(format!("rendering task failed: {e}")))?
-    .map_err(|e| Problem::internal(e.to_string()))?;
+        .await
+        .map_err(|e| Problem::internal(format!("rendering task failed: {e}")))?
+        .map_err(|e| Problem::internal(e.to_string()))?;
     let mut resp = Response::new(Body::empty());
     let h = resp.headers_mut();
     h.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));

@@ -13,10 +13,7 @@ use common::http::{assert_problem, get, post_json, wait_status};
 use common::server::Server;
 
 fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!(
-        "contact-sim-surface-{tag}-{}",
-        std::process::id()
-    ));
+    let d = std::env::temp_dir().join(format!("contact-sim-surface-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     d
 }
@@ -132,7 +129,12 @@ fn a_3d_jobs_surface_has_the_lattice_counts_and_the_full_fields_values() {
         .as_array()
         .unwrap()
         .iter()
-        .map(|f| (key(&usizes(&f[0])), (f[1].clone(), f[2].as_u64().unwrap() as usize)))
+        .map(|f| {
+            (
+                key(&usizes(&f[0])),
+                (f[1].clone(), f[2].as_u64().unwrap() as usize),
+            )
+        })
         .collect();
     for (t, tri) in tris.iter().enumerate() {
         let original: Vec<usize> = tri.iter().map(|&k| ids[k]).collect();
@@ -168,13 +170,23 @@ fn a_3d_jobs_surface_has_the_lattice_counts_and_the_full_fields_values() {
         assert_eq!(s["slip_velocity"], f["slip_velocity"]);
         assert_eq!(s["traction"], f["traction"]);
     }
-    assert_eq!((surf["n"].clone(), surf["t"].clone()), (full["n"].clone(), full["t"].clone()));
+    assert_eq!(
+        (surf["n"].clone(), surf["t"].clone()),
+        (full["n"].clone(), full["t"].clone())
+    );
 
     // Without the mesh, with a field list and another step: the same restriction.
-    let r = get(a, &format!("/jobs/{id}/fields?surface=true&fields=zeta,von_mises&step=1"));
+    let r = get(
+        a,
+        &format!("/jobs/{id}/fields?surface=true&fields=zeta,von_mises&step=1"),
+    );
     assert_eq!(r.status, 200, "{}", r.text());
     let s1 = r.json();
-    let f1 = get(a, &format!("/jobs/{id}/fields?fields=zeta,von_mises&step=1")).json();
+    let f1 = get(
+        a,
+        &format!("/jobs/{id}/fields?fields=zeta,von_mises&step=1"),
+    )
+    .json();
     assert!(s1.get("mesh").is_none() && s1.get("u").is_none());
     assert_eq!(s1["n"], 1);
     for (i, &n) in ids.iter().enumerate() {
@@ -184,7 +196,11 @@ fn a_3d_jobs_surface_has_the_lattice_counts_and_the_full_fields_values() {
         assert_eq!(s1["von_mises"][t], f1["von_mises"][e]);
     }
     // surface=0 is the whole field.
-    let s0 = get(a, &format!("/jobs/{id}/fields?surface=0&fields=zeta&step=1")).json();
+    let s0 = get(
+        a,
+        &format!("/jobs/{id}/fields?surface=0&fields=zeta&step=1"),
+    )
+    .json();
     assert_eq!(s0["zeta"].as_array().unwrap().len(), all_nodes);
 
     // /mesh?surface=1 is the fields' surface mesh; /mesh alone the whole mesh.
@@ -195,7 +211,9 @@ fn a_3d_jobs_surface_has_the_lattice_counts_and_the_full_fields_values() {
 
     // The surface is what a client draws of a solid: far smaller than the whole.
     let whole = get(a, &format!("/jobs/{id}/fields?mesh=1")).body.len();
-    let part = get(a, &format!("/jobs/{id}/fields?mesh=1&surface=1")).body.len();
+    let part = get(a, &format!("/jobs/{id}/fields?mesh=1&surface=1"))
+        .body
+        .len();
     assert!(part < whole / 2, "{part} of {whole} bytes");
 
     // A bad flag is a 400 naming the parameter.

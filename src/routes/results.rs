@@ -18,7 +18,6 @@ use crate::problem::Problem;
 use crate::state::AppState;
 use crate::store::{JobRecord, JobStatus};
 use crate::stream::{blocking_body, blocking_body_or_length, rendered_len};
-use std::io::Write as _;
 use axum::extract::{Path, State};
 use axum::http::{header, HeaderValue, Method};
 use axum::response::{IntoResponse, Response};
@@ -28,6 +27,7 @@ use contact_core::output::stored::decode_step;
 use contact_core::output::surface::Surface;
 use contact_core::output::vtk::{write_mesh_vtu, write_pvd};
 use contact_core::solve::stepper::{initial_fields_of, StepFields};
+use std::io::Write as _;
 use uuid::Uuid;
 
 const FIELD_NAMES: [&str; 6] = ["u", "w", "zeta", "sigma", "von_mises", "contact"];

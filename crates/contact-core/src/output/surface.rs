@@ -55,7 +55,8 @@ impl Surface {
     /// of unmatched faces, not every face: expected O(cells) time, and memory O(surface)
     /// besides the output for cells ordered as generators and mesh files order them.
     pub fn of_solid(m: &Mesh<3>) -> Surface {
-        let mut open: HashMap<[usize; 3], (usize, u8)> = HashMap::new();
+        let mut open: HashMap<[usize; 3], (usize, u8), foldhash::fast::RandomState> =
+            HashMap::default();
         for (e, c) in m.cells().enumerate() {
             for skip in 0..4u8 {
                 let mut key = face(c, skip);

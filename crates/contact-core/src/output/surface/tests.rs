@@ -206,7 +206,9 @@ fn labelled(m: &Mesh<3>) -> StepFields {
         w: Some(m.nodes.iter().flatten().map(|x| -x).collect()),
         zeta: Some((0..m.n_nodes()).map(|k| k as f64).collect()),
         sigma: Some(Stress::Solid(
-            (0..nc).map(|e| [e as f64, 1.0, 2.0, 3.0, 4.0, 5.0]).collect(),
+            (0..nc)
+                .map(|e| [e as f64, 1.0, 2.0, 3.0, 4.0, 5.0])
+                .collect(),
         )),
         von_mises: Some((0..nc).map(|e| e as f64 + 0.5).collect()),
         contact: Some(
@@ -230,9 +232,7 @@ fn labelled(m: &Mesh<3>) -> StepFields {
 fn restricted_fields_are_those_of_the_mapped_nodes_and_owning_cells() {
     let m = Mesh::cuboid(2.0, 0.5, 1.5, 4, 2, 3);
     let s = Surface::of_solid(&m);
-    let f = s
-        .restrict(labelled(&m), m.n_nodes(), m.n_cells())
-        .unwrap();
+    let f = s.restrict(labelled(&m), m.n_nodes(), m.n_cells()).unwrap();
     assert_eq!((f.n, f.t), (3, 0.75));
     let nodes = s.nodes(&m);
     let u = f.u.unwrap();
