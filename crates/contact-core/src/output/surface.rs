@@ -3,8 +3,8 @@
 //! all of a fine mesh (a 64³ Kuhn box: 274,625 nodes and 1,572,864 tetrahedra, of which
 //! 24,578 nodes and 49,152 boundary triangles are on its surface).
 //!
-//! The surface is found from the cells alone: the faces that belong to exactly one
-//! tetrahedron, each oriented counter-clockwise seen from outside (away from the owning
+//! The surface is found from the cells (the boundary facets only narrow the search): the
+//! faces that belong to exactly one tetrahedron, each oriented counter-clockwise seen from outside (away from the owning
 //! tetrahedron's fourth vertex, whatever the cell's own orientation). Its nodes are numbered
 //! compactly (0..) in the order of their original ids, and [`Surface::node_ids`] maps them
 //! back. On the surface, nodal fields are those of the mapped nodes and element fields (σ,
@@ -54,12 +54,30 @@ impl Surface {
     /// keeps only the faces seen an odd number of times, so the map holds the current front
     /// of unmatched faces, not every face: expected O(cells) time, and memory O(surface)
     /// besides the output for cells ordered as generators and mesh files order them.
+    ///
+    /// Only faces whose three nodes are nodes of the mesh's boundary facets are counted
+    /// (all nodes when it has none): a face of one tetrahedron has its nodes on the
+    /// boundary, and every cell of a face so filtered is still counted, so the answer is the
+    /// same, while only the boundary's faces (and the few interior ones spanning its edges)
+    /// are hashed, not all 12.6 M faces of the 64³ box.
     pub fn of_solid(m: &Mesh<3>) -> Surface {
+        let mut candidate = vec![m.facets.is_empty(); m.n_nodes()];
+        for f in &m.facets {
+            for &n in &f.nodes {
+                candidate[n] = true;
+            }
+        }
         let mut open: HashMap<[usize; 3], (usize, u8), foldhash::fast::RandomState> =
             HashMap::default();
         for (e, c) in m.cells().enumerate() {
+            if c.iter().filter(|&&n| candidate[n]).count() < 3 {
+                continue;
+            }
             for skip in 0..4u8 {
                 let mut key = face(c, skip);
+                if !key.iter().all(|&n| candidate[n]) {
+                    continue;
+                }
                 key.sort_unstable();
                 if open.remove(&key).is_none() {
                     open.insert(key, (e, skip));

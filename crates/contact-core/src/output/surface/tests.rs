@@ -281,3 +281,13 @@ fn a_field_of_the_wrong_length_is_named() {
         .unwrap_err();
     assert_eq!(e.field, "u");
 }
+
+/// The boundary facets only narrow the search: without them (every node a candidate) the
+/// surface is the same.
+#[test]
+fn the_facet_filter_does_not_change_the_surface() {
+    let mut m = Mesh::cuboid(2.0, 0.5, 1.5, 4, 2, 3);
+    let filtered = Surface::of_solid(&m);
+    m.facets.clear();
+    assert_eq!(Surface::of_solid(&m), filtered);
+}
