@@ -4,9 +4,9 @@
 //! 24,578 nodes and 49,152 boundary triangles are on its surface).
 //!
 //! The surface is found from the cells (the boundary facets only narrow the search): the
-//! faces that belong to exactly one tetrahedron, each oriented counter-clockwise seen from outside (away from the owning
-//! tetrahedron's fourth vertex, whatever the cell's own orientation). Its nodes are numbered
-//! compactly (0..) in the order of their original ids, and [`Surface::node_ids`] maps them
+//! faces that belong to exactly one tetrahedron, each oriented counter-clockwise seen from
+//! outside (away from the owning tetrahedron's fourth vertex, whatever the cell's own
+//! orientation). Its nodes are numbered compactly (0..) in the order of their original ids, and [`Surface::node_ids`] maps them
 //! back. On the surface, nodal fields are those of the mapped nodes and element fields (σ,
 //! von Mises) take the value of the face's owning tetrahedron.
 //!
