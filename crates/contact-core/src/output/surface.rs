@@ -67,8 +67,7 @@ impl Surface {
                 candidate[n] = true;
             }
         }
-        let mut open: HashMap<[usize; 3], (usize, u8), foldhash::fast::RandomState> =
-            HashMap::default();
+        let mut open: HashMap<[usize; 3], (usize, u8)> = HashMap::new();
         for (e, c) in m.cells().enumerate() {
             if c.iter().filter(|&&n| candidate[n]).count() < 3 {
                 continue;
