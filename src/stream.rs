@@ -64,6 +64,13 @@ impl Write for Counter {
     }
 }
 
+/// The number of bytes `render` writes, keeping none (blocking: it runs `render`).
+pub fn rendered_len(render: impl FnOnce(&mut dyn Write) -> io::Result<()>) -> io::Result<u64> {
+    let mut counter = Counter(0);
+    render(&mut counter)?;
+    Ok(counter.0)
+}
+
 /// [`blocking_body`] for GET; for HEAD the same headers with the body's length
 /// (`Content-Length`, counted by running `render` on a blocking thread into a counter) and no
 /// body, so a client can say how large a download is before fetching it.
@@ -75,13 +82,10 @@ pub async fn blocking_body_or_length(
     if method != Method::HEAD {
         return Ok(blocking_body(content_type, render));
     }
-    let bytes = tokio::task::spawn_blocking(move || {
-        let mut counter = Counter(0);
-        render(&mut counter).map(|_| counter.0)
-    })
-    .await
-    .map_err(|e| Problem::internal(format!("rendering task failed: {e}")))?
-    .map_err(|e| Problem::internal(e.to_string()))?;
+    let bytes = tokio::task::spawn_blocking(move || rendered_len(render))
+        .await
+        .map_err(|e| Problem::internal(format!("rendering task failed: {e}")))?
+        .map_err(|e| Problem::internal(e.to_string()))?;
     let mut resp = Response::new(Body::empty());
     let h = resp.headers_mut();
     h.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));

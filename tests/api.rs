@@ -273,12 +273,29 @@ fn whole_lifecycle_over_http() {
     // to itself, each a member of the archive (the browser's "ParaView" link is the archive).
     let mut archive = tar::Archive::new(tar.as_slice());
     let mut member_pvd = String::new();
+    let mut vtus = 0;
     for entry in archive.entries().unwrap() {
         let mut entry = entry.unwrap();
-        if entry.path().unwrap().to_string_lossy() == format!("{id}/result.pvd") {
+        let path = entry.path().unwrap().to_string_lossy().to_string();
+        if path == format!("{id}/result.pvd") {
             std::io::Read::read_to_string(&mut entry, &mut member_pvd).unwrap();
         }
+        // Each VTU member (streamed into the archive as it is rendered) is the step's file.
+        if let Some(n) = path
+            .strip_prefix(&format!("{id}/fields/step_"))
+            .and_then(|r| r.strip_suffix(".vtu"))
+        {
+            let mut member = Vec::new();
+            std::io::Read::read_to_end(&mut entry, &mut member).unwrap();
+            let n: usize = n.parse().unwrap();
+            assert!(
+                member == get(a, &format!("/jobs/{id}/fields/{n}.vtu")).body,
+                "archive member step {n}"
+            );
+            vtus += 1;
+        }
     }
+    assert_eq!(vtus, 9);
     let xml = roxmltree::Document::parse(&member_pvd).expect("the archive's PVD is XML");
     let files: Vec<&str> = xml
         .descendants()

@@ -10,7 +10,7 @@
 // The mesh is fetched once (with the first step); later steps are fetched without it and
 // kept in a small cache, so scrubbing back and forth does not refetch.
 //
-// A 3D job (its mesh has "dim": 3: tetrahedra, boundary_faces) is drawn by viewer3d.js
+// A 3D job (its mesh has "dim": 3; fetched as its boundary surface, surface=1) is drawn by viewer3d.js
 // (three.js, loaded only then) in place of the canvas; everything around the picture is the
 // same, with u, w of three components per node and von Mises per tetrahedron.
 
@@ -132,7 +132,10 @@ export class SimulationView {
     const t = summary.time || {};
     const tets = mesh?.tetrahedra?.length ?? m.tetrahedra;
     let cells;
-    if (mesh?.dim === 3) cells = `${mesh.nodes.length} nodes · ${tets ?? '?'} tetrahedra · ${mesh.boundary_faces.length} boundary triangles`;
+    if (mesh?.dim === 3) {
+      const nodes = mesh.surface ? m.nodes ?? '?' : mesh.nodes.length;
+      cells = `${nodes} nodes · ${tets ?? '?'} tetrahedra · ${(mesh.surface ? mesh.triangles : mesh.boundary_faces).length} boundary triangles`;
+    }
     else if (tets != null) cells = `${m.nodes} nodes · ${tets} tetrahedra`;
     else cells = `${m.nodes} nodes · ${m.triangles} triangles`;
     return el('p', { class: 'run-info' },

@@ -11,10 +11,14 @@
 //
 // viewer.js owns everything around the picture (toolbar, colour bar and range, time slider,
 // plots) and calls update() with the step's data; this module only draws. Data (from
-// GET /jobs/{id}/fields?mesh=1 of a 3D job):
-//   mesh: {dim: 3, nodes: [[x,y,z]], tetrahedra: [[a,b,c,d]],
-//          boundary_faces: [[[a,b,c], part | null, cell]], parts: [{type, group?}]}
-//   u: [ux0,uy0,uz0, ...], contact: [{node, slipping, tangential_velocity: [x,y,z], ...}]
+// GET /jobs/{id}/fields?mesh=1&surface=1 of a 3D job: the boundary surface only):
+//   mesh: {dim: 3, surface: true, nodes: [[x,y,z]] (surface nodes), node_ids: [...],
+//          triangles: [[a,b,c]], triangle_parts: [part | null], cells: [tetrahedron],
+//          parts: [{type, group?}]}
+//   u: [ux0,uy0,uz0, ...] at the surface nodes, von_mises: one per triangle,
+//   contact: [{node (surface numbering), slipping, tangential_velocity: [x,y,z], ...}]
+// The whole mesh (without surface=1: tetrahedra, boundary_faces: [[[a,b,c], part, cell]],
+// element fields per tetrahedron) is drawn the same way.
 // Frames are drawn on demand (a change of view or data), not continuously: with software
 // WebGL (no GPU) a frame of ~20k boundary triangles takes about 0.1 s.
 //
@@ -153,7 +157,11 @@ export class View3D {
    */
   constructor(mesh) {
     this.mesh = mesh;
-    this.faces = mesh.boundary_faces || [];
+    // [triangle, part, index of its value among the element fields]: on the surface form
+    // the element fields have one value per triangle, on the whole mesh one per tetrahedron.
+    this.faces = mesh.surface
+      ? mesh.triangles.map((t, f) => [t, mesh.triangle_parts[f], f])
+      : mesh.boundary_faces || [];
     this.kinds = partKinds(mesh);
     this.frames = 0;
     // The reference configuration's extent; `size` is its largest side.
@@ -480,7 +488,7 @@ export class View3D {
       mode === 'parts'
         ? el('span', { class: 'probe-value' }, `boundary: ${KINDS[edgeKind(this.kinds, part)].label}`)
         : el('span', { class: 'probe-value' }, `${label} = ${value === null ? 'not stored' : fmt(value)}`),
-      el('span', { class: 'probe-where' }, `at (${at.map((x) => fmt(x, 3)).join(', ')})${perCell && mode !== 'parts' ? ` · tetrahedron ${cell}` : ''}`),
+      el('span', { class: 'probe-where' }, `at (${at.map((x) => fmt(x, 3)).join(', ')})${perCell && mode !== 'parts' ? ` · tetrahedron ${this.mesh.surface ? this.mesh.cells[cell] : cell}` : ''}`),
     );
   }
 

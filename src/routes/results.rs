@@ -17,15 +17,17 @@ use crate::meshes::Meshes;
 use crate::problem::Problem;
 use crate::state::AppState;
 use crate::store::{JobRecord, JobStatus};
-use crate::stream::{blocking_body, blocking_body_or_length};
+use crate::stream::{blocking_body, blocking_body_or_length, rendered_len};
 use axum::extract::{Path, State};
 use axum::http::{header, HeaderValue, Method};
 use axum::response::{IntoResponse, Response};
 use contact_core::mesh::AnyMesh;
 use contact_core::output::fields::MeshJson;
 use contact_core::output::stored::decode_step;
+use contact_core::output::surface::Surface;
 use contact_core::output::vtk::{write_mesh_vtu, write_pvd};
 use contact_core::solve::stepper::{initial_fields_of, StepFields};
+use std::io::Write as _;
 use uuid::Uuid;
 
 const FIELD_NAMES: [&str; 6] = ["u", "w", "zeta", "sigma", "von_mises", "contact"];
@@ -271,17 +273,48 @@ pub async fn report(
     ))
 }
 
+/// The query of `/jobs/{id}/mesh`.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshQuery {
+    /// `1`/`true`: a 3D mesh's boundary surface instead of the whole mesh (a 2D mesh is
+    /// served whole either way).
+    surface: Option<SurfaceFlag>,
+}
+
+/// `?surface=1`: the boundary surface of a 3D job's mesh (its nodes, triangles and the
+/// nodes' ids in the whole mesh); a 2D job's mesh whole, with or without it.
 pub async fn mesh(
     State(state): State<AppState>,
     Path(id): Path<String>,
+    Params(q): Params<MeshQuery>,
 ) -> Result<Response, Problem> {
+    let with_surface = q.surface.is_some_and(|s| s.0);
     let rec = simulation(&state, &id).await?;
     // Built before the answer starts, so that a missing mesh is a 409, not a cut body.
     let meshes = state.rt.meshes.clone();
-    let (p, mesh) = blocking(move || scene_of(&meshes, &rec)).await?;
+    let (p, mesh, surface) = blocking(move || {
+        let (p, mesh) = scene_of(&meshes, &rec)?;
+        let surface = with_surface.then(|| Surface::of(&mesh)).flatten();
+        Ok((p, mesh, surface))
+    })
+    .await?;
     Ok(blocking_body("application/json", move |w| {
-        serde_json::to_writer(w, &MeshJson::new(&mesh, &p.boundary)).map_err(std::io::Error::other)
+        serde_json::to_writer(w, &mesh_json(&mesh, surface.as_ref(), &p.boundary))
+            .map_err(std::io::Error::other)
     }))
+}
+
+/// The mesh as served: its surface when there is one, else all of it.
+fn mesh_json<'a>(
+    mesh: &'a AnyMesh,
+    surface: Option<&'a Surface>,
+    parts: &'a [contact_core::problem::BoundaryPart],
+) -> MeshJson<'a> {
+    match (mesh, surface) {
+        (AnyMesh::Solid(m), Some(s)) => MeshJson::surface(m, s, parts),
+        _ => MeshJson::new(mesh, parts),
+    }
 }
 
 #[derive(serde::Serialize)]
@@ -304,7 +337,10 @@ pub struct FieldsQuery {
     /// A comma-separated subset of [`FIELD_NAMES`] (default: all; empty items are skipped).
     fields: Option<FieldList>,
     /// `1`/`true` adds the mesh, `0`/`false` (the default) does not.
-    mesh: Option<Flag>,
+    mesh: Option<MeshFlag>,
+    /// `1`/`true`: a 3D job's fields on its boundary surface only (and, with `mesh`, the
+    /// surface instead of the mesh); a 2D job's are served whole either way.
+    surface: Option<SurfaceFlag>,
 }
 
 #[derive(serde::Deserialize)]
@@ -329,22 +365,38 @@ impl TryFrom<String> for FieldList {
     }
 }
 
-#[derive(serde::Deserialize)]
-#[serde(try_from = "String")]
-struct Flag(bool);
-
-impl TryFrom<String> for Flag {
-    type Error = String;
-    fn try_from(o: String) -> Result<Self, String> {
-        match o.as_str() {
-            "0" | "false" => Ok(Flag(false)),
-            "1" | "true" => Ok(Flag(true)),
-            _ => Err(format!("mesh must be 1 or 0, not {o:?}")),
-        }
+/// A yes/no query parameter: `1`/`true` or `0`/`false`.
+fn flag(name: &str, o: &str) -> Result<bool, String> {
+    match o {
+        "0" | "false" => Ok(false),
+        "1" | "true" => Ok(true),
+        _ => Err(format!("{name} must be 1 or 0, not {o:?}")),
     }
 }
 
-/// `?step=N|last&fields=u,w,zeta,sigma,von_mises,contact&mesh=1`.
+#[derive(serde::Deserialize)]
+#[serde(try_from = "String")]
+struct MeshFlag(bool);
+
+impl TryFrom<String> for MeshFlag {
+    type Error = String;
+    fn try_from(o: String) -> Result<Self, String> {
+        flag("mesh", &o).map(MeshFlag)
+    }
+}
+
+#[derive(serde::Deserialize)]
+#[serde(try_from = "String")]
+struct SurfaceFlag(bool);
+
+impl TryFrom<String> for SurfaceFlag {
+    type Error = String;
+    fn try_from(o: String) -> Result<Self, String> {
+        flag("surface", &o).map(SurfaceFlag)
+    }
+}
+
+/// `?step=N|last&fields=u,w,zeta,sigma,von_mises,contact&mesh=1&surface=1`.
 pub async fn fields(
     State(state): State<AppState>,
     Path(id): Path<String>,
@@ -355,43 +407,55 @@ pub async fn fields(
         None => FIELD_NAMES.iter().map(|s| s.to_string()).collect(),
     };
     let with_mesh = q.mesh.is_some_and(|m| m.0);
+    let with_surface = q.surface.is_some_and(|s| s.0);
     let rec = simulation(&state, &id).await?;
     let spec = q.step.unwrap_or_else(|| "last".into());
     let st = state.clone();
-    let (mut f, rec, mesh) = blocking(move || {
+    let (f, rec, scene, surface) = blocking(move || {
         let n = pick_step(&available_steps(&st, rec.id)?, &spec)?;
-        let mesh = match with_mesh {
+        let scene = match with_mesh || with_surface {
             true => Some(scene_of(&st.rt.meshes, &rec)?),
             false => None,
         };
-        Ok((load_step(&st, &rec, n)?, rec, mesh))
+        let mut f = load_step(&st, &rec, n)?;
+        let keep = |name: &str| wanted.iter().any(|w| w == name);
+        if !keep("u") {
+            f.u = None
+        }
+        if !keep("w") {
+            f.w = None
+        }
+        if !keep("zeta") {
+            f.zeta = None
+        }
+        if !keep("sigma") {
+            f.sigma = None
+        }
+        if !keep("von_mises") {
+            f.von_mises = None
+        }
+        if !keep("contact") {
+            f.contact = None
+        }
+        let surface = match (&scene, with_surface) {
+            (Some((_, mesh)), true) => Surface::of(mesh),
+            _ => None,
+        };
+        if let (Some(s), Some((_, mesh))) = (&surface, &scene) {
+            f = s
+                .restrict(f, mesh.n_nodes(), mesh.n_cells())
+                .map_err(|e| Problem::internal(format!("stored step {n}: {e}")))?;
+        }
+        // The whole mesh is only kept to be served.
+        Ok((f, rec, scene.filter(|_| with_mesh), surface))
     })
     .await?;
-    let keep = |name: &str| wanted.iter().any(|w| w == name);
-    if !keep("u") {
-        f.u = None
-    }
-    if !keep("w") {
-        f.w = None
-    }
-    if !keep("zeta") {
-        f.zeta = None
-    }
-    if !keep("sigma") {
-        f.sigma = None
-    }
-    if !keep("von_mises") {
-        f.von_mises = None
-    }
-    if !keep("contact") {
-        f.contact = None
-    }
     Ok(blocking_body("application/json", move |w| {
         let doc = FieldsDoc {
             job: rec.id,
-            mesh: mesh
+            mesh: scene
                 .as_ref()
-                .map(|(p, mesh)| MeshJson::new(mesh, &p.boundary)),
+                .map(|(p, mesh)| mesh_json(mesh, surface.as_ref(), &p.boundary)),
             fields: &f,
         };
         serde_json::to_writer(w, &doc).map_err(std::io::Error::other)
@@ -453,9 +517,11 @@ pub async fn pvd(
 
 /// One uncompressed tar (POSIX ustar) whose members all sit in one folder named after the
 /// job: `<id>/scene.json`, `<id>/summary.json`, `<id>/result.pvd` and
-/// `<id>/fields/step_NNNNNN.vtu` for step 0 (the initial state) and every stored step. Each
-/// member is rendered just before it is written, so the archive is streamed, never held
-/// whole.
+/// `<id>/fields/step_NNNNNN.vtu` for step 0 (the initial state) and every stored step. The
+/// archive is streamed, never held whole, and so is each VTU member: a tar header states its
+/// member's length, so a VTU is rendered twice, once into a byte counter for the header and
+/// once into the body (a 1/64 box's VTU is some hundreds of MB; held in memory it would come
+/// on top of the job's own peak).
 pub async fn archive(
     State(state): State<AppState>,
     Path(id): Path<String>,
@@ -502,9 +568,29 @@ pub async fn archive(
         member("result.pvd", &pvd)?;
         for n in steps {
             let f = load_step(&st, &rec, n).map_err(io)?;
-            let mut buf = Vec::new();
-            write_mesh_vtu(&mut buf, &mesh, &f)?;
-            member(&name(n), &buf)?;
+            let size = rendered_len(|w| write_mesh_vtu(w, &mesh, &f))?;
+            let mut h = tar::Header::new_ustar();
+            h.set_entry_type(tar::EntryType::Regular);
+            h.set_mode(0o644);
+            h.set_uid(0);
+            h.set_gid(0);
+            h.set_size(size);
+            h.set_mtime(mtime);
+            h.set_path(format!("{id}/{}", name(n)))?;
+            h.set_cksum();
+            // The header, the body as it is rendered and the padding to the next 512-byte
+            // block: what `append_data` writes, without holding the body.
+            let out = tar.get_mut();
+            out.write_all(h.as_bytes())?;
+            let mut body = Counted(&mut *out, 0);
+            write_mesh_vtu(&mut body, &mesh, &f)?;
+            if body.1 != size {
+                return Err(std::io::Error::other(format!(
+                    "step {n}: the VTU rendered {} bytes, then {size}",
+                    body.1
+                )));
+            }
+            out.write_all(&[0; 512][..(512 - (size % 512) as usize) % 512])?;
         }
         tar.finish()
     });
@@ -517,4 +603,19 @@ pub async fn archive(
         HeaderValue::from_str(&disp).expect("ASCII"),
     );
     Ok(resp)
+}
+
+/// A writer that counts what passes through it.
+struct Counted<W>(W, u64);
+
+impl<W: std::io::Write> std::io::Write for Counted<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.0.write(buf)?;
+        self.1 += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.0.flush()
+    }
 }

@@ -1148,6 +1148,26 @@ async function mockJob3d(page, id, box, L, steps = 4) {
     dim: 3, nodes, tetrahedra: tets, boundary_faces: boundary,
     parts: [{ type: 'clamped', group: 'x0' }, { type: 'contact', group: 'z0' }, { type: 'traction' }],
   };
+  // The service's surface form (surface=1): the boundary nodes, ascending, renumbered; the
+  // fields at them and, per triangle, its tetrahedron's.
+  const ids = [...new Set(boundary.flatMap(([t]) => t))].sort((a, b) => a - b);
+  const index = new Map(ids.map((n, i) => [n, i]));
+  const surface = {
+    mesh: {
+      dim: 3, surface: true, nodes: ids.map((n) => nodes[n]), node_ids: ids,
+      triangles: boundary.map(([t]) => t.map((n) => index.get(n))),
+      triangle_parts: boundary.map(([, part]) => part), cells: boundary.map(([, , cell]) => cell),
+      parts: mesh.parts,
+    },
+  };
+  const onSurface = (doc) => {
+    const s = { job: doc.job, n: doc.n, t: doc.t };
+    for (const k of ['u', 'w']) if (doc[k]) s[k] = ids.flatMap((n) => doc[k].slice(3 * n, 3 * n + 3));
+    if (doc.zeta) s.zeta = ids.map((n) => doc.zeta[n]);
+    if (doc.von_mises) s.von_mises = boundary.map(([, , cell]) => doc.von_mises[cell]);
+    if (doc.contact) s.contact = doc.contact.map((c) => ({ ...c, node: index.get(c.node) }));
+    return s;
+  };
   const fieldsAt = (n) => {
     const t = n / steps;
     const u = [], w = [], zeta = [];
@@ -1204,6 +1224,11 @@ async function mockJob3d(page, id, box, L, steps = 4) {
       const doc = fieldsAt(step);
       const wanted = new Set((q.get('fields') || 'u,w,zeta,von_mises,contact').split(','));
       for (const k of ['u', 'w', 'zeta', 'von_mises', 'contact']) if (!wanted.has(k)) delete doc[k];
+      if (q.get('surface') === '1') {
+        const s = onSurface(doc);
+        if (q.get('mesh') === '1') s.mesh = surface.mesh;
+        return json(route, s);
+      }
       if (q.get('mesh') === '1') doc.mesh = mesh;
       return json(route, doc);
     }
@@ -1367,6 +1392,9 @@ async function testViewer3d() {
   await page.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 15_000 });
   await frameAfter(page, 0);
   check(mock.requests.some((r) => r.startsWith('/fields?') && r.includes('mesh=1')), 'the mesh comes with the first fields request');
+  const fieldRequests = mock.requests.filter((r) => r.startsWith('/fields?'));
+  check(fieldRequests.length > 0 && fieldRequests.every((r) => new URLSearchParams(r.slice('/fields?'.length)).get('surface') === '1'),
+    `the 3D view asks for the boundary surface only (surface=1 on all ${fieldRequests.length} fields requests)`);
   check((await page.locator('#mesh-canvas').count()) === 0, 'no 2D canvas for a 3D job');
   const renderer = await page.evaluate(() => {
     const gl = document.createElement('canvas').getContext('webgl2');
@@ -1609,9 +1637,22 @@ async function testViewer3d() {
     { preset: 'box-exp3', overrides: { h: '1/4', k: '1/4' } },
     'box-exp3 at h = k = 1/4 (a real 3D job)',
   );
-  const realPage = await openPage(null, `#job=${real}`);
+  const realFields = [];
+  const realPage = await openPage(async (p) => {
+    p.on('response', async (r) => {
+      const url = new URL(r.url());
+      if (url.pathname !== `/jobs/${real}/fields`) return;
+      const mesh = url.searchParams.get('mesh') === '1' ? (await r.json().catch(() => ({}))).mesh : undefined;
+      realFields.push({ surface: url.searchParams.get('surface'), mesh });
+    });
+  }, `#job=${real}`);
   await realPage.waitForSelector(`#viewer[data-state="ready"][data-job="${real}"]`, { timeout: 15_000 });
   await frameAfter(realPage, 0);
+  // The box at h = 1/4 (8×4×4 cubes): 2 triangles per boundary square, every node but the 7·3·3 interior ones.
+  const withMesh = realFields.find((f) => f.mesh);
+  check(realFields.length > 0 && realFields.every((f) => f.surface === '1') && withMesh?.mesh.surface === true
+    && withMesh.mesh.triangles.length === 4 * (8 * 4 + 4 * 4 + 4 * 8) && withMesh.mesh.nodes.length === 9 * 5 * 5 - 7 * 3 * 3,
+    `the real 3D job's view asked for the surface form (surface=1 on all ${realFields.length} fields requests) and got its ${withMesh?.mesh.triangles?.length} triangles on ${withMesh?.mesh.nodes?.length} nodes`);
   const realInfo = await realPage.textContent('.run-info');
   check(/tetrahedra/.test(realInfo), `the real job is shown as tetrahedra: ${realInfo.slice(0, 70)}…`);
   const rs = await stats3d(realPage);

@@ -393,6 +393,52 @@ def test_3d_job_fields_and_vtu(client: Client) -> None:
     assert np.array_equal(m.cell_data["sigma"][0], f.sigma)
 
 
+def test_3d_surface_fields_are_the_full_fields_on_the_boundary(client: Client) -> None:
+    job = client.submit("box-exp3", overrides={"h": "1/4", "k": "1/4"}).wait(progress=False)
+    # The box (0,2)×(0,1)×(0,1) at h = 1/4: 8×4×4 cubes; 2 triangles on each boundary
+    # square, and every node but the (nx−1)(ny−1)(nz−1) interior ones.
+    nx, ny, nz = 8, 4, 4
+    faces = 2 * 2 * (nx * ny + ny * nz + nx * nz)
+    surface_nodes = (nx + 1) * (ny + 1) * (nz + 1) - (nx - 1) * (ny - 1) * (nz - 1)
+    s = job.fields(surface=True)
+    full = job.fields()
+    assert s.surface and not full.surface and s.tetrahedra is None
+    assert s.nodes is not None and s.nodes.shape == (surface_nodes, 3)
+    assert s.node_ids is not None and s.node_ids.shape == (surface_nodes,)
+    assert s.boundary is not None and s.boundary.shape == (faces, 3)
+    assert s.boundary_cell is not None and s.boundary_part is not None
+    assert full.nodes is not None and full.tetrahedra is not None
+    assert np.array_equal(s.nodes, full.nodes[s.node_ids])
+    # The surface nodes are those on a face of the box.
+    lo, hi = full.nodes.min(axis=0), full.nodes.max(axis=0)
+    on_box = np.flatnonzero(((full.nodes == lo) | (full.nodes == hi)).any(axis=1))
+    assert np.array_equal(s.node_ids, on_box)
+    for name in ("u", "w"):
+        assert np.array_equal(getattr(s, name), getattr(full, name)[s.node_ids])
+    assert s.zeta is not None and full.zeta is not None
+    assert np.array_equal(s.zeta, full.zeta[s.node_ids])
+    assert s.von_mises is not None and full.von_mises is not None
+    assert np.array_equal(s.von_mises, full.von_mises[s.boundary_cell])
+    assert s.sigma is not None and full.sigma is not None
+    assert np.array_equal(s.sigma, full.sigma[s.boundary_cell])
+    # Each triangle is a face of its tetrahedron, in the whole mesh's numbering.
+    for tri, cell in zip(s.node_ids[s.boundary], s.boundary_cell):
+        assert set(tri) <= set(full.tetrahedra[cell])
+    c, fc = s.contact, full.contact
+    assert c is not None and fc is not None
+    assert np.array_equal(s.node_ids[c.node], fc.node)
+    assert np.array_equal(c.slip_velocity, fc.slip_velocity)
+    # Without the mesh, the fields are on the surface all the same.
+    u_only = job.fields(names=["u"], mesh=False, surface=True)
+    assert u_only.u is not None and s.u is not None and np.array_equal(u_only.u, s.u)
+    # A 2D job's fields are whole with or without surface.
+    plane = client.submit("paper-exp2", overrides={"h": "1/4", "k": "1/4"}).wait(progress=False)
+    a, b = plane.fields(surface=True), plane.fields()
+    assert not a.surface and a.triangles is not None and b.triangles is not None
+    assert a.u is not None and b.u is not None
+    assert np.array_equal(a.triangles, b.triangles) and np.array_equal(a.u, b.u)
+
+
 def test_token_is_sent_as_bearer(server_url: str) -> None:
     seen: list[str] = []
     with Client(server_url, token="s3cret") as c:

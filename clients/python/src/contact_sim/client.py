@@ -516,15 +516,20 @@ class Job:
         step: Union[int, str] = "last",
         names: Optional[Sequence[str]] = None,
         mesh: bool = True,
+        surface: bool = False,
     ) -> Fields:
         """Step ``step`` (a stored step, 0 for the initial state, or "last") as numpy
         arrays: ``names`` is a subset of u, w, zeta, sigma, von_mises, contact (default
-        all), ``mesh`` adds nodes, cells and the boundary. See :class:`Fields`."""
+        all), ``mesh`` adds nodes, cells and the boundary. ``surface``: a 3D job's fields
+        (and mesh) on its boundary surface only, a small part of a fine mesh (a 2D job's
+        come whole either way). See :class:`Fields`."""
         params: Dict[str, str] = {"step": str(step)}
         if names is not None:
             params["fields"] = ",".join(names)
         if mesh:
             params["mesh"] = "1"
+        if surface:
+            params["surface"] = "1"
         doc = self.client._json("GET", self._path("/fields"), params=params)
         dim = None
         if not mesh and ("u" in doc or "w" in doc) and "sigma" not in doc:

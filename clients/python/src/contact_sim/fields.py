@@ -60,7 +60,15 @@ class Fields:
     ``sigma`` (M, 3) as (xx, yy, xy) in 2D, (M, 6) as (xx, yy, zz, xy, yz, xz) in 3D;
     ``von_mises`` (M,). ``boundary`` holds the boundary facets (edges (F, 2) in 2D, faces
     (F, 3) in 3D), ``boundary_part`` their part index into ``parts`` (-1: traction-free) and,
-    in 3D, ``boundary_cell`` the tetrahedron each face bounds."""
+    in 3D, ``boundary_cell`` the tetrahedron each face bounds.
+
+    On the boundary surface of a 3D job (``surface`` true, from ``Job.fields(surface=True)``)
+    the mesh is the surface alone: ``nodes`` (S, 3) are the surface nodes, ``node_ids`` (S,)
+    their indices in the whole mesh, ``boundary`` (F, 3) the surface triangles in the surface
+    numbering (counter-clockwise seen from outside) with ``boundary_part`` and
+    ``boundary_cell``, and ``tetrahedra`` is None; ``u``, ``w`` (S, 3) and ``zeta`` (S,) are
+    at the surface nodes, ``sigma`` (F, 6) and ``von_mises`` (F,) one per triangle (its
+    tetrahedron's), and the contact nodes are numbered as the surface nodes."""
 
     job: str
     n: int
@@ -73,6 +81,8 @@ class Fields:
     boundary_part: Optional[IntArray] = None
     boundary_cell: Optional[IntArray] = None
     parts: List[Dict[str, Any]] = field(default_factory=list)
+    surface: bool = False
+    node_ids: Optional[IntArray] = None
     u: Optional[FloatArray] = None
     w: Optional[FloatArray] = None
     zeta: Optional[FloatArray] = None
@@ -84,9 +94,11 @@ class Fields:
         """One line: the step, its time and the shape of each array present (not the
         arrays themselves, which can hold millions of numbers)."""
         parts = [f"job={self.job!r}", f"n={self.n}", f"t={self.t:g}", f"dim={self.dim}"]
+        if self.surface:
+            parts.append("surface")
         for name in (
-            "nodes", "triangles", "tetrahedra", "boundary", "boundary_part", "boundary_cell",
-            "u", "w", "zeta", "sigma", "von_mises",
+            "nodes", "node_ids", "triangles", "tetrahedra", "boundary", "boundary_part",
+            "boundary_cell", "u", "w", "zeta", "sigma", "von_mises",
         ):
             a = getattr(self, name)
             if a is not None:
@@ -112,7 +124,13 @@ class Fields:
             dim = int(mesh["dim"])
             out.nodes = np.asarray(mesh["nodes"], dtype=np.float64).reshape(-1, dim)
             out.parts = [dict(p) for p in mesh.get("parts", [])]
-            if dim == 2:
+            if mesh.get("surface"):
+                out.surface = True
+                out.node_ids = np.asarray(mesh["node_ids"], dtype=np.int64)
+                out.boundary = np.asarray(mesh["triangles"], dtype=np.int64).reshape(-1, 3)
+                out.boundary_cell = np.asarray(mesh["cells"], dtype=np.int64)
+                facets = [(None, p) for p in mesh["triangle_parts"]]
+            elif dim == 2:
                 out.triangles = np.asarray(mesh["triangles"], dtype=np.int64).reshape(-1, 3)
                 facets = mesh["boundary_edges"]
                 out.boundary = np.asarray([f[0] for f in facets], dtype=np.int64).reshape(-1, 2)

@@ -2,6 +2,7 @@
 //! document per stored step with the requested nodal (u, w, ζ) and element (σ, von Mises)
 //! fields.
 
+use super::surface::Surface;
 use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::{BoundaryKind, BoundaryPart, Support};
 use serde::Serialize;
@@ -13,6 +14,7 @@ use serde::Serialize;
 pub enum MeshJson<'a> {
     Plane(PlaneMeshJson<'a>),
     Solid(SolidMeshJson<'a>),
+    Surface(SurfaceMeshJson<'a>),
 }
 
 #[derive(Debug, Serialize)]
@@ -36,6 +38,23 @@ pub struct SolidMeshJson<'a> {
     /// Boundary triangles (counter-clockwise seen from outside) with the index of their part
     /// (null: traction-free) and of the tetrahedron they bound (for cell fields).
     pub boundary_faces: Vec<([usize; 3], Option<usize>, usize)>,
+    pub parts: Vec<PartJson<'a>>,
+}
+
+/// The boundary surface of a 3D mesh ([`Surface`]): `surface` is true, `nodes` (x, y, z)
+/// are the surface nodes, `node_ids` their ids in the whole mesh, `triangles` (in the
+/// surface numbering, counter-clockwise seen from outside) with `triangle_parts` (null:
+/// traction-free) and `cells`, the tetrahedron each is a face of. Element fields served with
+/// it have one value per triangle (its tetrahedron's).
+#[derive(Debug, Serialize)]
+pub struct SurfaceMeshJson<'a> {
+    pub dim: usize,
+    pub surface: bool,
+    pub nodes: Vec<[f64; 3]>,
+    pub node_ids: &'a [usize],
+    pub triangles: &'a [[usize; 3]],
+    pub triangle_parts: Vec<Option<usize>>,
+    pub cells: &'a [usize],
     pub parts: Vec<PartJson<'a>>,
 }
 
@@ -68,6 +87,20 @@ impl<'a> MeshJson<'a> {
                 parts: part_list(parts),
             }),
         }
+    }
+
+    /// The boundary surface `surface` of the 3D mesh `m`, with the boundary parts.
+    pub fn surface(m: &Mesh<3>, surface: &'a Surface, parts: &'a [BoundaryPart]) -> Self {
+        MeshJson::Surface(SurfaceMeshJson {
+            dim: 3,
+            surface: true,
+            nodes: surface.nodes(m),
+            node_ids: &surface.node_ids,
+            triangles: &surface.triangles,
+            triangle_parts: surface.parts(m),
+            cells: &surface.cells,
+            parts: part_list(parts),
+        })
     }
 }
 

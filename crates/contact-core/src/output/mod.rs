@@ -4,6 +4,7 @@
 pub mod fields;
 pub mod stored;
 pub mod summary;
+pub mod surface;
 pub mod vtk;
 
 pub use summary::Summary;
