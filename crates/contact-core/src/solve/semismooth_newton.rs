@@ -465,6 +465,3 @@ impl SemismoothNewton {
         unreachable!()
     }
 }
-
-#[cfg(test)]
-mod tests;

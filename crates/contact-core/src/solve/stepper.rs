@@ -328,7 +328,10 @@ impl<const D: usize> Prepared<D> {
             velocity = velocity.with_hierarchy(h);
         }
         let smallness = smallness::check(problem, &mesh, &geo, &dofs, &mut velocity)?;
-        let mass = assembly::mass(&mesh, &geo);
+        let mass = match linear {
+            LinearPath::Multigrid => assembly::mass_in_pattern(&mesh, &geo),
+            _ => assembly::mass(&mesh, &geo),
+        };
         Ok(Prepared {
             linear,
             predicted_bytes,
@@ -415,12 +418,12 @@ impl<const D: usize> Simulation<D> {
         let (u, zeta) = initial_values(&problem, &mesh);
         let damage = match &problem.damage {
             Some(d) => {
-                let h = assembly::combine(
-                    1.0 / problem.k(),
-                    &mass,
-                    d.kappa,
-                    &assembly::laplacian(&mesh, &geo),
-                );
+                let laplacian = match linear {
+                    LinearPath::Multigrid => assembly::laplacian_in_pattern_of(&mesh, &geo, &mass),
+                    _ => assembly::laplacian(&mesh, &geo),
+                };
+                let h = assembly::combine(1.0 / problem.k(), &mass, d.kappa, &laplacian);
+                drop(laplacian);
                 let mut solver = match linear {
                     LinearPath::Multigrid => {
                         let mg = multilevel::scalar_solver(&mesh, h.clone(), linear).map_err(

@@ -4,15 +4,17 @@
 //! loads that make Γ3 all slip, all stick, or alternate, tiny and huge ω_i, and a
 //! slip-weakening law near the smallness bound.
 
-use super::*;
-use crate::fem::{assembly, multilevel, DofMap, Geometry};
-use crate::linalg::dense::min_eig_scaled;
-use crate::linalg::multigrid::Params;
-use crate::linalg::{schur_complement, Cholesky, SchurPath};
-use crate::scene::{self, presets};
-use crate::solve::{friction_isotropic, friction_reduced};
+use contact_core::fem::{assembly, multilevel, DofMap, Geometry};
+use contact_core::linalg::dense::min_eig_scaled;
+use contact_core::linalg::multigrid::{Hierarchy, Params};
+use contact_core::linalg::{schur_complement, Cholesky, Csr, SchurPath};
+use contact_core::problem::FrictionLaw;
+use contact_core::scene::{self, presets};
+use contact_core::solve::semismooth_newton::{NewtonReport, SemismoothNewton};
+use contact_core::solve::{friction_isotropic, friction_reduced, SolverSettings};
 use nalgebra::DMatrix;
 use serde_json::{json, Value};
+use std::sync::Arc;
 
 /// A velocity operator on all free DOFs with its hierarchy, and the data of its Γ3.
 struct Case {
@@ -266,8 +268,8 @@ fn three_dimensional_isotropic_friction() {
 /// dense path's λ_min(W^{-½} S W^{-½}), in 2D and 3D.
 #[test]
 fn lanczos_smallness_matches_the_dense_eigenvalue() {
-    use crate::linalg::LinearSolver;
-    use crate::solve::smallness::min_eig_by_lanczos;
+    use contact_core::linalg::LinearSolver;
+    use contact_core::solve::smallness::min_eig_by_lanczos;
     for c in [
         case::<2>("paper-convergence", json!({"h": "1/16"})),
         case::<3>("box-exp3", json!({"h": "1/6"})),
