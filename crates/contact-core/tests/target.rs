@@ -69,10 +69,11 @@ fn paper_targets_are_met_without_waste() {
 }
 
 /// The target 0.05 above chooses h = 1/128, the reference's own h, so its "true error" there
-/// (0.0028) is the k-part alone. Against a reference finer in h (h = 1/256 at the chosen k)
-/// the chosen run's h-part is 0.020 (h = 1/64: 0.041; with the observed order ≈ 1 about 0.04
-/// and 0.08 from the limit), so the choice is within the target and far from wasteful, and
-/// no coarser h would do. Ignored: the h = 1/256 reference alone takes about 16 s.
+/// (0.020, at k = 1/16) is the k-part alone. Against a reference finer in h (h = 1/256 at the
+/// chosen k) the chosen run's h-part is 0.020 (h = 1/64: about 0.04; with the observed order
+/// ≈ 1 about 0.04 and 0.08 from the limit), so the choice is within the target and far from
+/// wasteful, and no coarser h would do. Ignored: the h = 1/256 reference alone takes about
+/// 16 s.
 #[test]
 #[ignore = "a reference at h = 1/256 (about 16 s); run with --ignored"]
 fn the_finest_paper_choice_is_measured_against_a_finer_reference() {

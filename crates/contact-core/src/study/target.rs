@@ -11,14 +11,18 @@
 //!    the coarsest resolution of 2, 4, 8, 16 cells per unit length that fits the domain.
 //! 2. [`plan`]: the error model from the ladders' differences, the cost model from their times,
 //!    the cheapest (h, k) of the nested grid whose predicted error is below target/SAFETY
-//!    within the limits. A ladder gets one more level while that level is predicted to cost
-//!    at most [`PILOT_SHARE`] of the chosen run (up to [`MAX_PILOT_LEVELS`]), and the plan is
-//!    made again.
+//!    within the limits. It only decides whether the target is within reach: pilots are
+//!    pre-asymptotic and the model's choice can be a whole level too fine. While it finds
+//!    none, the ladders are extended towards the most accurate run within the limits (up to
+//!    [`MAX_PILOT_LEVELS`]), and the plan is made again.
 //! 3. Out of reach (limits, budget): [`StudyError::Unreachable`], before the expensive run.
-//! 4. The chosen run (its stored steps go to a [`Sink`]) beside its (2h, 2k) companion; the
-//!    error bar |f − I f_2h| / |f| (the service's error estimate, model order 1) checks it.
-//!    When the bar is above the target, one more level (h/2, k/2), whose companion is the
-//!    run just made.
+//! 4. The walk: from the cheapest candidate (2n0, 2N0) up, each level (its stored steps go to
+//!    a [`Sink`]) beside its (2h, 2k) companion; the error bar |f − I f_2h| / |f| (the
+//!    service's error estimate, model order 1) checks it, and the first level that passes is
+//!    the result. Otherwise h or k is halved, whichever the model predicts to buy more error
+//!    per doubling of the work; each such step adds a point to the model, which is fitted
+//!    again. Each step at least doubles the work, so the walk costs at most about twice its
+//!    last level.
 
 use super::levels::{self, LevelRun, Snapshot, StatsAccumulator, Work};
 use super::plan::{self, Candidate, CostModel, ErrorModel, Timing};
@@ -45,9 +49,10 @@ pub const PILOT_STEPS: usize = 4;
 pub const FIRST_PILOT_LEVELS: usize = 3;
 /// Levels of a pilot ladder at most.
 pub const MAX_PILOT_LEVELS: usize = 6;
-/// A pilot ladder is extended while its next level is predicted to cost at most this share
-/// of the chosen run: the pilots then add at most about 2 × 2 × 1/6 of it in all (each
-/// ladder a geometric series).
+/// While the target is out of reach by the fit, a pilot ladder is extended while its next
+/// level is predicted to cost at most this share of the most accurate run within the limits
+/// (and at most 4 × the pilots so far): a refinement of the fit that may bring the target
+/// within reach, at a small share of the run it would lead to.
 pub const PILOT_SHARE: f64 = 1.0 / 6.0;
 /// The grid of candidates: n0·2^i and N0·2^j, i ≤ this, j ≤ 2 × this.
 const MAX_DOUBLINGS: u32 = 12;
@@ -746,10 +751,10 @@ fn run_in<const D: usize>(
             .collect();
         let choice = plan::cheapest(&feasible, spec.error);
         let mut extended = false;
-        // Out of reach by this fit, the pilots are still refined towards the most accurate
-        // run within the limits (a pre-asymptotic fit may be what puts the target out of
-        // reach), but only by levels costing at most 4 × the pilots so far: a refusal must
-        // stay cheap.
+        // Within reach, the walk's own levels refine the fit. Out of reach by this fit, the
+        // pilots are refined towards the most accurate run within the limits (a
+        // pre-asymptotic fit may be what puts the target out of reach), but only by levels
+        // costing at most 4 × the pilots so far: a refusal must stay cheap.
         let spent: f64 = runs.values().map(|r| r.seconds).sum();
         let allowed = match choice {
             Some(_) => None,
