@@ -1,17 +1,19 @@
 //! The planner of a target study (docs/src/explanation/numerics.md#target-studies): an
 //! error model e(h, k) ≈ a·h^p + b·k^q and a cost model t ≈ c·N^α·(T/k) fitted from cheap
 //! pilot runs, and the cheapest (h, k) of the nested grid whose predicted error is below the
-//! target divided by [`SAFETY`].
+//! target divided by [`SAFETY`]: whether the target is within reach. Which run is chosen is
+//! decided by measured error bars ([`super::target`]'s walk), the model giving its direction.
 //!
 //! Pure arithmetic on figures the runs measured; running them is [`super::target`]'s.
 
 use super::compare::least_squares_order;
 use serde::Serialize;
 
-/// The planner aims at target / SAFETY. The model is extrapolated from coarse levels by one
-/// to three halvings, over which the observed orders drift (about 0.1 per level in the
-/// paper's Table 1, i.e. 10–20 % on the predicted error); the coefficient's convention (see
-/// [`fit_part`]) already errs on the large side, so the margin is 25 %.
+/// The plan (whether the target is within reach) aims at target / SAFETY. The model is
+/// extrapolated from coarse levels by one to three halvings, over which the observed orders
+/// drift (about 0.1 per level in the paper's Table 1, i.e. 10–20 % on the predicted error);
+/// the coefficient's convention (see [`fit_part`]) already errs on the large side, so the
+/// margin is 25 %.
 pub const SAFETY: f64 = 1.25;
 /// Fitted orders are clamped to this range: below it a ladder is not in its asymptotic
 /// regime (the errors barely shrink) and a smaller order would send the planner to meshes

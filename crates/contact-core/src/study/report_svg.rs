@@ -353,13 +353,13 @@ pub fn target_report(r: &TargetResult) -> String {
             panel.py(p.1) - 3.5
         );
     }
-    // Each run at a chosen (h, k), named; the last (the one whose fields are served) is
-    // `chosen-run`.
+    // Each level of the walk, named; the last (the one whose fields are served) is
+    // `chosen-run`, the others `attempt-1`, `attempt-2`, … in the order they ran.
     for (i, (&(tp, ep, tm, em), a)) in chosen.iter().zip(&r.attempts).enumerate() {
         let id = if i + 1 == chosen.len() {
-            "chosen-run"
+            "chosen-run".to_string()
         } else {
-            "first-choice"
+            format!("attempt-{}", i + 1)
         };
         let _ = writeln!(
             out,

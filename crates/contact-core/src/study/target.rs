@@ -11,14 +11,18 @@
 //!    the coarsest resolution of 2, 4, 8, 16 cells per unit length that fits the domain.
 //! 2. [`plan`]: the error model from the ladders' differences, the cost model from their times,
 //!    the cheapest (h, k) of the nested grid whose predicted error is below target/SAFETY
-//!    within the limits. A ladder gets one more level while that level is predicted to cost
-//!    at most [`PILOT_SHARE`] of the chosen run (up to [`MAX_PILOT_LEVELS`]), and the plan is
-//!    made again.
+//!    within the limits. It only decides whether the target is within reach: pilots are
+//!    pre-asymptotic and the model's choice can be a whole level too fine. While it finds
+//!    none, the ladders are extended towards the most accurate run within the limits (up to
+//!    [`MAX_PILOT_LEVELS`]), and the plan is made again.
 //! 3. Out of reach (limits, budget): [`StudyError::Unreachable`], before the expensive run.
-//! 4. The chosen run (its stored steps go to a [`Sink`]) beside its (2h, 2k) companion; the
-//!    error bar |f − I f_2h| / |f| (the service's error estimate, model order 1) checks it.
-//!    When the bar is above the target, one more level (h/2, k/2), whose companion is the
-//!    run just made.
+//! 4. The walk: from the cheapest candidate (2n0, 2N0) up, each level (its stored steps go to
+//!    a [`Sink`]) beside its (2h, 2k) companion; the error bar |f − I f_2h| / |f| (the
+//!    service's error estimate, model order 1) checks it, and the first level that passes is
+//!    the result. Otherwise h or k is halved, whichever the model predicts to buy more error
+//!    per doubling of the work; each such step adds a point to the model, which is fitted
+//!    again. Each step at least doubles the work, so the walk costs at most about twice its
+//!    last level.
 
 use super::levels::{self, LevelRun, Snapshot, StatsAccumulator, Work};
 use super::plan::{self, Candidate, CostModel, ErrorModel, Timing};
@@ -45,9 +49,10 @@ pub const PILOT_STEPS: usize = 4;
 pub const FIRST_PILOT_LEVELS: usize = 3;
 /// Levels of a pilot ladder at most.
 pub const MAX_PILOT_LEVELS: usize = 6;
-/// A pilot ladder is extended while its next level is predicted to cost at most this share
-/// of the chosen run: the pilots then add at most about 2 × 2 × 1/6 of it in all (each
-/// ladder a geometric series).
+/// While the target is out of reach by the fit, a pilot ladder is extended while its next
+/// level is predicted to cost at most this share of the most accurate run within the limits
+/// (and at most 4 × the pilots so far): a refinement of the fit that may bring the target
+/// within reach, at a small share of the run it would lead to.
 pub const PILOT_SHARE: f64 = 1.0 / 6.0;
 /// The grid of candidates: n0·2^i and N0·2^j, i ≤ this, j ≤ 2 × this.
 const MAX_DOUBLINGS: u32 = 12;
@@ -676,7 +681,7 @@ fn run_in<const D: usize>(
     let mut runs: BTreeMap<(usize, usize), LevelRun<D>> = BTreeMap::new();
     let mut h_ladder: Vec<usize> = (0..FIRST_PILOT_LEVELS).map(|i| n0 << i).collect();
     let mut k_ladder: Vec<usize> = (0..FIRST_PILOT_LEVELS).map(|i| s0 << i).collect();
-    let (model, cost, choice, candidates) = loop {
+    let (mut model, cost, choice, candidates, scale) = loop {
         let wanted: BTreeSet<(usize, usize)> = h_ladder
             .iter()
             .map(|&n| (n, s_h))
@@ -746,13 +751,13 @@ fn run_in<const D: usize>(
             .collect();
         let choice = plan::cheapest(&feasible, spec.error);
         let mut extended = false;
-        // Out of reach by this fit, the pilots are still refined towards the most accurate
-        // run within the limits (a pre-asymptotic fit may be what puts the target out of
-        // reach), but only by levels costing at most 4 × the pilots so far: a refusal must
-        // stay cheap.
+        // Within reach, the walk's own levels refine the fit. Out of reach by this fit, the
+        // pilots are refined towards the most accurate run within the limits (a
+        // pre-asymptotic fit may be what puts the target out of reach), but only by levels
+        // costing at most 4 × the pilots so far: a refusal must stay cheap.
         let spent: f64 = runs.values().map(|r| r.seconds).sum();
         let allowed = match choice {
-            Some(c) => Some(PILOT_SHARE * c.predicted_seconds),
+            Some(_) => None,
             None => plan::most_accurate(&feasible)
                 .map(|c| (PILOT_SHARE * c.predicted_seconds).min(4.0 * spent)),
         };
@@ -773,108 +778,171 @@ fn run_in<const D: usize>(
             }
         }
         if !extended {
-            break (model, cost, choice, candidates);
+            break (model, cost, choice, candidates, scale);
         }
     };
     let frontier = frontier(&candidates);
-    let Some(first) = choice else {
+    if choice.is_none() {
         return Err(unreachable(planner, &model, &cost, &candidates));
-    };
+    }
 
-    // The chosen run, checked by its (2h, 2k) companion; once more at (h/2, k/2) if the
-    // check fails.
+    // The walk: from the cheapest candidate up, each level checked by its (2h, 2k) error bar
+    // and, while the bar is above the target, refined in h or in k, whichever the model says
+    // buys more error per unit of cost. A level a pilot ran is checked on the pilot's fields
+    // and run again (for its stored steps) only when it passes.
     let mut attempts: Vec<Attempt> = Vec::new();
-    let mut current = first;
-    let mut previous: Option<((usize, usize), LevelRun<D>)> = None;
-    let chosen_run = loop {
-        let level = (current.n, current.steps);
+    let mut made: BTreeMap<(usize, usize), LevelRun<D>> = BTreeMap::new();
+    let mut level = (n0 << 1, s0 << 1);
+    let mut previous: Option<(usize, usize)> = None;
+    let (mut h_points, mut k_points) = (model.h.points.clone(), model.k.points.clone());
+    let summary = loop {
         let companion_level = (level.0 / 2, level.1 / 2);
-        let reused = previous
-            .as_ref()
-            .filter(|p| p.0 == companion_level)
-            .map(|p| &p.1)
-            .or_else(|| runs.get(&companion_level));
+        let companion_reused =
+            made.contains_key(&companion_level) || runs.contains_key(&companion_level);
+        let pilot = runs.contains_key(&level);
+        if !companion_reused && (pilot || exec.threads < 2) {
+            total_steps.fetch_add(companion_level.1, Ordering::Relaxed);
+            let work = Work {
+                problem: planner.problem(companion_level),
+                keep: BTreeSet::from([companion_level.1]),
+                is_reference: false,
+                share: None,
+                keep_u,
+            };
+            let c = levels::run_level::<D>(&work, exec.settings, &tick, None)?;
+            made.insert(companion_level, c);
+        }
+        if let (Some(from), true) = (previous, pilot) {
+            let prev = made.get(&from).or_else(|| runs.get(&from)).expect("ran");
+            learn(
+                planner,
+                scale,
+                (from, prev),
+                (level, &runs[&level]),
+                &mut h_points,
+                &mut k_points,
+            );
+            model = ErrorModel {
+                h: plan::fit_part(&h_points),
+                k: plan::fit_part(&k_points),
+            };
+        }
+        let pilot_bar = pilot.then(|| {
+            let c = made
+                .get(&companion_level)
+                .or_else(|| runs.get(&companion_level))
+                .expect("the companion ran");
+            relative_difference(c, &runs[&level], spec.quantity)
+        });
+        let next = next_level(planner, &model, &cost, level, &|l| {
+            made.contains_key(&l) || runs.contains_key(&l)
+        });
+        let attempt = |model: &ErrorModel,
+                       estimated: f64,
+                       seconds: f64,
+                       companion: &LevelRun<D>,
+                       reused: bool| {
+            let (h, k) = (planner.h(level.0), planner.k(level.1));
+            Attempt {
+                h,
+                k,
+                refine: spec.given_mesh().then(|| level.0.trailing_zeros() as usize),
+                steps: level.1,
+                unknowns: planner.unknowns(level) as usize,
+                predicted_error: model.predict(h, k),
+                estimated_error: estimated,
+                check_passed: estimated <= spec.error,
+                predicted_seconds: cost.predict(planner.unknowns(level), level.1),
+                seconds,
+                companion: Companion {
+                    h: planner.h(companion_level.0),
+                    k: planner.k(companion_level.1),
+                    seconds: companion.seconds,
+                    reused,
+                },
+            }
+        };
+        if let (Some(bar), Some(to)) = (pilot_bar, next) {
+            if bar > spec.error {
+                let c = made
+                    .get(&companion_level)
+                    .or_else(|| runs.get(&companion_level))
+                    .expect("the companion ran");
+                attempts.push(attempt(
+                    &model,
+                    bar,
+                    runs[&level].seconds,
+                    c,
+                    companion_reused,
+                ));
+                previous = Some(level);
+                level = to;
+                continue;
+            }
+        }
+        // The level is run with its stored steps (beside its companion, if that is new).
         let problem = planner.problem(level);
         sink.restart().map_err(StudyError::Output)?;
-        total_steps.fetch_add(
-            level.1
-                + if reused.is_some() {
-                    0
-                } else {
-                    companion_level.1
-                },
-            Ordering::Relaxed,
-        );
-        let companion_work = Work {
-            problem: planner.problem(companion_level),
-            keep: BTreeSet::from([companion_level.1]),
-            is_reference: false,
-            share: None,
-            keep_u,
-        };
-        let ((run, summary), companion_run) = if reused.is_some() {
-            (run_chosen::<D>(&problem, exec, keep_u, sink, &tick)?, None)
-        } else if exec.threads >= 2 {
-            std::thread::scope(|s| {
-                let c =
-                    s.spawn(|| levels::run_level::<D>(&companion_work, exec.settings, &tick, None));
-                let chosen = run_chosen::<D>(&problem, exec, keep_u, sink, &tick);
-                let companion = c.join().expect("companion run panicked");
-                Ok::<_, StudyError>((chosen?, Some(companion?)))
-            })?
-        } else {
-            let companion = levels::run_level::<D>(&companion_work, exec.settings, &tick, None)?;
-            (
-                run_chosen::<D>(&problem, exec, keep_u, sink, &tick)?,
-                Some(companion),
-            )
-        };
-        let companion = companion_run.as_ref().or(reused).expect("a companion");
+        total_steps.fetch_add(level.1, Ordering::Relaxed);
+        let (run, summary) =
+            if made.contains_key(&companion_level) || runs.contains_key(&companion_level) {
+                run_chosen::<D>(&problem, exec, keep_u, sink, &tick)?
+            } else {
+                total_steps.fetch_add(companion_level.1, Ordering::Relaxed);
+                let work = Work {
+                    problem: planner.problem(companion_level),
+                    keep: BTreeSet::from([companion_level.1]),
+                    is_reference: false,
+                    share: None,
+                    keep_u,
+                };
+                let (chosen, companion) = std::thread::scope(|s| {
+                    let c = s.spawn(|| levels::run_level::<D>(&work, exec.settings, &tick, None));
+                    let chosen = run_chosen::<D>(&problem, exec, keep_u, sink, &tick);
+                    (chosen, c.join().expect("companion run panicked"))
+                });
+                made.insert(companion_level, companion?);
+                chosen?
+            };
+        let companion = made
+            .get(&companion_level)
+            .or_else(|| runs.get(&companion_level))
+            .expect("the companion ran");
         let estimated = relative_difference(companion, &run, spec.quantity);
-        attempts.push(Attempt {
-            h: current.h,
-            k: current.k,
-            refine: spec.given_mesh().then(|| level.0.trailing_zeros() as usize),
-            steps: level.1,
-            unknowns: planner.unknowns(level) as usize,
-            predicted_error: current.predicted_error,
-            estimated_error: estimated,
-            check_passed: estimated <= spec.error,
-            predicted_seconds: current.predicted_seconds,
-            seconds: run.seconds,
-            companion: Companion {
-                h: planner.h(companion_level.0),
-                k: planner.k(companion_level.1),
-                seconds: companion.seconds,
-                reused: companion_run.is_none(),
-            },
-        });
-        let next = (level.0 * 2, level.1 * 2);
-        let spent = planner.started.elapsed().as_secs_f64();
-        // The measured time, scaled by the cost model, predicts the finer run.
-        let scale = cost.predict(planner.unknowns(next), next.1)
-            / cost.predict(planner.unknowns(level), level.1);
-        let next_seconds = run.seconds * scale;
-        let once_more = estimated > spec.error
-            && attempts.len() < 2
-            && planner.breaks(next).is_none()
-            && spec.budget_s.is_none_or(|b| spent + next_seconds <= b);
-        if !once_more {
-            break (run, summary);
+        if let (Some(from), false) = (previous, pilot) {
+            let prev = made.get(&from).or_else(|| runs.get(&from)).expect("ran");
+            learn(
+                planner,
+                scale,
+                (from, prev),
+                (level, &run),
+                &mut h_points,
+                &mut k_points,
+            );
+            model = ErrorModel {
+                h: plan::fit_part(&h_points),
+                k: plan::fit_part(&k_points),
+            };
         }
-        current = Candidate {
-            n: next.0,
-            steps: next.1,
-            h: planner.h(next.0),
-            k: planner.k(next.1),
-            unknowns: planner.unknowns(next),
-            predicted_error: model.predict(planner.h(next.0), planner.k(next.1)),
-            predicted_seconds: next_seconds,
-        };
-        // The first chosen run is the (2h, 2k) companion of the next.
-        previous = Some((level, run));
+        attempts.push(attempt(
+            &model,
+            estimated,
+            run.seconds,
+            companion,
+            companion_reused,
+        ));
+        let next = next_level(planner, &model, &cost, level, &|l| {
+            made.contains_key(&l) || runs.contains_key(&l)
+        });
+        match next {
+            Some(to) if estimated > spec.error => {
+                made.insert(level, run);
+                previous = Some(level);
+                level = to;
+            }
+            _ => break summary,
+        }
     };
-    let (_, summary) = chosen_run;
     let chosen = attempts.last().cloned().expect("one attempt");
     let pilots = runs
         .iter()
@@ -906,6 +974,77 @@ fn run_in<const D: usize>(
         seconds: planner.started.elapsed().as_secs_f64(),
         threads: exec.threads,
     })
+}
+
+/// Adds what one step of the walk measured to the error model's points: when `to` halves h
+/// (or k) of `from` alone, the relative difference of their fields (over the pilots' `scale`)
+/// is a point of the h (or k) part at x = h (or k) of `from`, in place of any earlier point at
+/// that x (a pilot's: the walk's levels are finer in the other parameter or equal). Points
+/// stay coarsest first, so the fit takes its order from the finest differences known.
+fn learn<const D: usize>(
+    planner: &Planner,
+    scale: f64,
+    from: ((usize, usize), &LevelRun<D>),
+    to: ((usize, usize), &LevelRun<D>),
+    h_points: &mut Vec<(f64, f64)>,
+    k_points: &mut Vec<(f64, f64)>,
+) {
+    let ((a, ra), (b, rb)) = (from, to);
+    let (x, points) = if b == (a.0 * 2, a.1) {
+        (planner.h(a.0), h_points)
+    } else if b == (a.0, a.1 * 2) {
+        (planner.k(a.1), k_points)
+    } else {
+        return;
+    };
+    let (d, _) = difference(ra, rb, planner.spec.quantity);
+    let d = if d == 0.0 { 0.0 } else { d / scale };
+    points.retain(|p| (p.0 - x).abs() > 1e-9 * x);
+    points.push((x, d));
+    points.sort_by(|p, q| q.0.partial_cmp(&p.0).unwrap_or(std::cmp::Ordering::Equal));
+}
+
+/// The next level of the walk from `level`: h or k halved, whichever the error model predicts
+/// to reduce the error more per doubling of the work (unknowns × steps: deterministic, unlike
+/// measured times, so the walk does not depend on the machine's load). Only levels within the
+/// limits and the budget (time spent, the level's predicted time and its companion's unless
+/// it ran) qualify; ties go to the cheaper level.
+fn next_level(
+    planner: &Planner,
+    model: &ErrorModel,
+    cost: &CostModel,
+    level: (usize, usize),
+    known: &dyn Fn((usize, usize)) -> bool,
+) -> Option<(usize, usize)> {
+    let (n0, s0) = (planner.spec.n0, PILOT_STEPS);
+    let work = |l: (usize, usize)| planner.unknowns(l) * l.1 as f64;
+    let error = |l: (usize, usize)| model.predict(planner.h(l.0), planner.k(l.1));
+    let seconds = |l: (usize, usize)| cost.predict(planner.unknowns(l), l.1);
+    let spent = planner.started.elapsed().as_secs_f64();
+    [(level.0 * 2, level.1), (level.0, level.1 * 2)]
+        .into_iter()
+        .filter(|&(n, steps)| n <= n0 << MAX_DOUBLINGS && steps <= s0 << (2 * MAX_DOUBLINGS))
+        .filter(|&to| planner.breaks(to).is_none())
+        .filter(|&to| {
+            let companion = (to.0 / 2, to.1 / 2);
+            let more = seconds(to)
+                + if known(companion) {
+                    0.0
+                } else {
+                    seconds(companion)
+                };
+            planner.spec.budget_s.is_none_or(|b| spent + more <= b)
+        })
+        .map(|to| {
+            let gain = (error(level) - error(to)) / (work(to) / work(level)).log2();
+            (to, gain, work(to))
+        })
+        .max_by(|a, b| {
+            a.1.partial_cmp(&b.1)
+                .unwrap_or(std::cmp::Ordering::Equal)
+                .then(b.2.partial_cmp(&a.2).unwrap_or(std::cmp::Ordering::Equal))
+        })
+        .map(|c| c.0)
 }
 
 /// The candidates within the limits that no other beats in both predicted time and error,
@@ -1083,13 +1222,17 @@ impl TargetResult {
             c.seconds,
         );
         if self.attempts.len() > 1 {
-            let a = &self.attempts[0];
-            s += &format!(
-                "first choice h = {}, k = {}: estimated {:.4} above the target, refined once\n",
-                frac(a.h),
-                frac(a.k),
-                a.estimated_error
-            );
+            s += "walk:";
+            for a in &self.attempts {
+                s += &format!(
+                    " ({}, {}) bar {:.4}{};",
+                    frac(a.h),
+                    frac(a.k),
+                    a.estimated_error,
+                    if a.check_passed { " passed" } else { "" }
+                );
+            }
+            s += "\n";
         }
         let m = &self.error_model;
         s += &format!(
