@@ -923,8 +923,11 @@ fn target_studies_over_http() {
     let s = get(a, &format!("/jobs/{id}/summary")).json();
     assert_eq!(s["kind"], "target");
     let chosen = &s["chosen"];
+    // The run is the first of the walk whose (2h, 2k) error bar meets the target; the model's
+    // prediction only orders the walk, so it is not bounded by the target.
     assert!(chosen["estimated_error"].as_f64().unwrap() <= 0.2, "{s}");
-    assert!(chosen["predicted_error"].as_f64().unwrap() <= 0.2 / 1.25);
+    assert_eq!(chosen["check_passed"], true, "{s}");
+    assert!(chosen["predicted_error"].as_f64().unwrap() > 0.0, "{s}");
     assert!(s["error_model"]["h"]["order"].is_number());
     let steps = chosen["steps"].as_u64().unwrap();
     assert_eq!(s["run"]["time"]["steps"], steps, "{}", s["run"]["time"]);
