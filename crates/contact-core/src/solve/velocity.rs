@@ -221,6 +221,11 @@ impl VelocityStep {
         (self.k.as_ref(), self.n_i)
     }
 
+    /// K on all free DOFs, shared (no copy).
+    pub fn shared_operator(&self) -> Arc<Csr> {
+        self.k.clone()
+    }
+
     /// One solve with K_II, in place (for benchmarks): a substitution pair on the direct
     /// path, a multigrid-CG solve from zero to 1e-10 relative on the other.
     pub fn substitute(&mut self, v: &mut [f64]) {
