@@ -12,6 +12,22 @@ pub fn min_eig_scaled(a: &DMatrix<f64>, d: &[f64]) -> f64 {
     scaled.symmetric_eigenvalues().min()
 }
 
+/// Largest eigenvalue of the symmetric tridiagonal matrix with diagonal `alphas` and
+/// off-diagonal `betas` (the Lanczos matrix T_k; `betas` may hold one entry more than used).
+pub fn tridiagonal_max_eig(alphas: &[f64], betas: &[f64]) -> f64 {
+    let k = alphas.len();
+    let t = DMatrix::from_fn(k, k, |i, j| {
+        if i == j {
+            alphas[i]
+        } else if i + 1 == j || j + 1 == i {
+            betas[i.min(j)]
+        } else {
+            0.0
+        }
+    });
+    t.symmetric_eigenvalues().max()
+}
+
 /// Solves A_FF x = r for the principal sub-matrix of A on the index set `f`.
 /// Returns None when the sub-matrix is not positive definite.
 pub fn solve_principal(a: &DMatrix<f64>, f: &[usize], r: &[f64]) -> Option<Vec<f64>> {

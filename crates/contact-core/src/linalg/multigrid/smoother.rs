@@ -13,8 +13,9 @@
 #![allow(clippy::needless_range_loop)] // Index loops over nodes, blocks and components spell out the formulas.
 
 use super::Blocks;
+use crate::linalg::dense::tridiagonal_max_eig;
 use crate::linalg::{Csr, LinearOperator};
-use nalgebra::{DMatrix, SymmetricEigen};
+use nalgebra::DMatrix;
 
 /// Lanczos steps of the λ_max estimate.
 const LANCZOS_STEPS: usize = 12;
@@ -176,17 +177,7 @@ pub fn lambda_max(a: &impl LinearOperator, d: &BlockJacobi) -> f64 {
         std::mem::swap(&mut v_prev, &mut v);
         v.iter_mut().zip(&w).for_each(|(v, w)| *v = w / beta);
     }
-    let m = alphas.len();
-    let t = DMatrix::from_fn(m, m, |i, j| {
-        if i == j {
-            alphas[i]
-        } else if i + 1 == j || j + 1 == i {
-            betas[i.min(j)]
-        } else {
-            0.0
-        }
-    });
-    SymmetricEigen::new(t).eigenvalues.max()
+    tridiagonal_max_eig(&alphas, &betas)
 }
 
 /// The Chebyshev smoother of one level.
