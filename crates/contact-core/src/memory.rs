@@ -22,6 +22,7 @@
 //! which is not counted: it depends on the Γ3 part of the boundary, known only once the mesh
 //! is tagged.
 
+use crate::linalg::projection::{SolutionSpace, CAPACITY};
 use crate::linalg::LinearPath;
 use crate::problem::Problem;
 
@@ -171,7 +172,10 @@ pub fn predict(p: &Problem) -> Prediction {
     };
     // With a Γ3 the multigrid path solves K_II through K's own hierarchy: no K_II copy.
     let shared_k_ii = if c.contact { csr(nnz_k, n) } else { 0.0 };
-    let multigrid = PROCESS + base - shared_k_ii + hierarchy_k + hierarchy_h + full_space;
+    // The earlier steps' solutions whose projection starts each K_II solve.
+    let solution_space = 8.0 * SolutionSpace::vectors(CAPACITY) as f64 * n;
+    let multigrid =
+        PROCESS + base - shared_k_ii + hierarchy_k + hierarchy_h + full_space + solution_space;
     Prediction {
         direct: (direct.max(assembly + base)) as u64,
         multigrid: multigrid as u64,

@@ -92,11 +92,18 @@ fn compare_with<const D: usize>(
         close(a.zeta_min, b.zeta_min, &format!("{at} min ζ"));
         assert_eq!(a.slip_nodes, b.slip_nodes, "{at}: slip nodes");
         assert!(b.velocity.residual <= 1e-10 && b.damage.is_none_or(|d| d.residual <= 1e-10));
-        assert!(
-            b.velocity.krylov_iterations > 0,
-            "{at}: the multigrid path was taken"
-        );
     }
+    // A step may need no iteration at all: its starting guess, the projection onto the
+    // earlier solutions, can already meet the tolerance (step 2 of a load that grows in
+    // proportion).
+    assert!(
+        multi
+            .iter()
+            .map(|r| r.velocity.krylov_iterations)
+            .sum::<usize>()
+            > 0,
+        "{preset}: the multigrid path was taken"
+    );
     let slipped = multi.iter().filter(|r| r.slip_nodes > 0).count();
     if slipped > 0 {
         assert!(d_slip.starts_with("dense Schur complement"), "{d_slip}");
@@ -279,4 +286,28 @@ fn slipping_friction_agrees_on_the_newton_path() {
         let slipped = compare_with::<3>(preset, mesh, 3, expect, &edits);
         assert!(slipped > 0, "{preset} {edits:?}: no step slipped");
     }
+}
+
+/// 24 steps on the geometric path: the space of earlier solutions whose projection starts
+/// each K_II solve fills (12 vectors) and is compressed twice; the norms still agree with the
+/// direct path, and the starting guesses pay: once the space has a few vectors, the solves
+/// take well under half the iterations of the first step's (which starts from zero).
+#[test]
+fn a_long_run_agrees_through_the_compressions_of_its_starting_guesses() {
+    compare::<3>(
+        "box-exp3",
+        json!({"h": "1/8"}),
+        24,
+        "multigrid (geometric, 2 levels)",
+    );
+    let (reports, _) = simulate::<3>(problem("box-exp3", json!({"h": "1/8"}), 24, "multigrid"));
+    let its: Vec<usize> = reports
+        .iter()
+        .map(|r| r.velocity.krylov_iterations)
+        .collect();
+    let late = its[8..].iter().max().unwrap();
+    assert!(
+        2 * late < its[0],
+        "Krylov iterations a step: {its:?} (the late ones at most {late})"
+    );
 }

@@ -1,7 +1,8 @@
 //! The linear algebra of the scheme: sparse storage, the linear-solver layer
 //! ([`solver::LinearSolver`]: the direct factor, or conjugate gradients preconditioned by a
 //! multigrid V-cycle), and small dense helpers. One algorithm per file: the cached sparse
-//! Cholesky ([`cholesky`]), conjugate gradients ([`pcg`]), the multigrid hierarchy with its
+//! Cholesky ([`cholesky`]), conjugate gradients ([`pcg`]) and their starting guesses from
+//! earlier solutions ([`projection`]), the multigrid hierarchy with its
 //! coarsening and smoother ([`multigrid`]), sparse products ([`galerkin`]), the Schur
 //! complement onto Γ3 ([`schur`]).
 
@@ -12,6 +13,7 @@ pub mod galerkin;
 pub mod multigrid;
 pub mod operator;
 pub mod pcg;
+pub mod projection;
 pub mod schur;
 pub mod solver;
 

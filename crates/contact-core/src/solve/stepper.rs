@@ -42,7 +42,8 @@ pub struct State {
     /// Warm starts of the two sub-problem solvers after step n, filled only by
     /// [`Simulation::checkpoint_state`] (empty otherwise): the tangential velocities on Γ3
     /// and the damage active set (0 free, 1 at ζ = 0, 2 at ζ = 1). Restoring them makes a
-    /// resumed run repeat an uninterrupted one bit for bit; without them it agrees to the
+    /// resumed run on the direct path repeat an uninterrupted one bit for bit; without them,
+    /// or on the multigrid path (whose CG starting guesses are not kept), it agrees to the
     /// solver tolerance.
     #[serde(default)]
     pub contact_velocity: Vec<f64>,
