@@ -102,10 +102,11 @@ fn factor_entries(d: f64, n: f64) -> f64 {
     }
 }
 
-/// The geometric hierarchies of K and H as a multiple of K's bytes: fitted to the measured
-/// peaks of box-exp3 at 1/16, 1/24, 1/32 and 1/48 (`contact-sim bench --linear-solver
-/// multigrid`: 84, 280, 606 and 1,958 MiB; predicted 80, 262, 607 and 2,014 MiB).
-const GEOMETRIC_HIERARCHY: f64 = 1.0;
+/// The geometric hierarchies of K and H as a multiple of K's bytes (H's finest level shares
+/// H's storage with the damage step): fitted to the measured peaks of box-exp3, g = 20, at
+/// 1/16, 1/24 and 1/32 (`contact-sim bench --linear-solver multigrid`: 60, 184 and 410 MiB;
+/// predicted 68, 202 and 460 MiB) and 1/64 (3,338 MiB before H was shared).
+const GEOMETRIC_HIERARCHY: f64 = 0.8;
 
 /// With a Γ3 the multigrid path's hierarchy is K's on all free DOFs (K shared, K_II never
 /// copied), plus the slipping steps' truncated preconditioner and Newton vectors, as a

@@ -32,9 +32,10 @@ pub struct Krylov {
 }
 
 impl Krylov {
-    /// The V-cycle (for a caller that runs CG on a related operator itself).
-    pub fn into_vcycle(self) -> VCycle {
-        self.vcycle
+    /// The operator and its V-cycle (for a caller that runs CG on a related operator
+    /// itself, sharing the operator's storage).
+    pub fn into_parts(self) -> (Arc<Csr>, VCycle) {
+        (self.a, self.vcycle)
     }
 }
 

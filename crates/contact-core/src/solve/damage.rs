@@ -21,8 +21,9 @@
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::linalg::multigrid::VCycle;
 use crate::linalg::pcg::{self, PcgWork, Preconditioner};
-use crate::linalg::{Cholesky, Csr, LinearSolver};
+use crate::linalg::{Cholesky, Csr, LinearOperator, LinearSolver};
 use faer::sparse::SparseColMat;
+use std::sync::Arc;
 
 /// Conjugate gradients on the multigrid path solve each masked system to this fraction of
 /// the step's tolerance (max norm, relative to ‖g‖∞).
@@ -46,12 +47,41 @@ struct Factored {
     chol: Cholesky,
 }
 
-/// The multigrid path: the masked H explicitly, and CG with the V-cycle of H.
+/// The multigrid path: CG on the masked H (applied from H's storage) with the V-cycle of H.
 struct Iterative {
-    masked: Csr,
     vcycle: VCycle,
     work: PcgWork,
     buffer: Vec<f64>,
+}
+
+/// H with the rows and columns of the active nodes replaced by the identity, applied from
+/// H's storage (the masked matrix is never formed).
+struct Masked<'a> {
+    h: &'a Csr,
+    active: &'a [Bound],
+}
+
+impl LinearOperator for Masked<'_> {
+    fn dim(&self) -> usize {
+        self.h.nrows
+    }
+
+    fn apply(&self, x: &[f64], y: &mut [f64]) {
+        let h = self.h;
+        for (r, yr) in y.iter_mut().enumerate() {
+            *yr = if self.active[r] != Bound::Free {
+                x[r]
+            } else {
+                let row = h.indptr[r]..h.indptr[r + 1];
+                h.indices[row.clone()]
+                    .iter()
+                    .zip(&h.values[row])
+                    .filter(|(&c, _)| self.active[c as usize] == Bound::Free)
+                    .map(|(&c, &v)| v * x[c as usize])
+                    .sum()
+            };
+        }
+    }
 }
 
 enum Linear {
@@ -81,7 +111,8 @@ impl Preconditioner for MaskedVCycle<'_> {
 }
 
 pub struct DamageStep {
-    h: Csr,
+    /// Shared with the multigrid hierarchy's finest level on that path.
+    h: Arc<Csr>,
     diag: Vec<f64>,
     linear: Linear,
     /// Active set the current factor (or masked operator) was made for.
@@ -95,32 +126,32 @@ pub struct DamageStep {
 }
 
 impl DamageStep {
-    /// The direct path.
-    pub fn new(h: Csr) -> Result<Self, SolveError> {
-        Self::with_solver(h, None)
+    /// The multigrid path: CG on the masked systems preconditioned by `solver`'s V-cycle,
+    /// whose operator is H (shared, not copied).
+    pub fn multigrid(solver: LinearSolver) -> Result<Self, SolveError> {
+        let LinearSolver::Multigrid(k) = solver else {
+            panic!("DamageStep::multigrid takes a multigrid solver of H");
+        };
+        let (h, vcycle) = k.into_parts();
+        let n = h.nrows;
+        Ok(DamageStep {
+            diag: h.diagonal(),
+            linear: Linear::Multigrid(Box::new(Iterative {
+                vcycle,
+                work: PcgWork::new(n),
+                buffer: vec![0.0; n],
+            })),
+            h,
+            factored: vec![Bound::Free; n],
+            active: vec![Bound::Free; n],
+            refactorizations: 0,
+            krylov: 0,
+        })
     }
 
-    /// The step on a given solver of H: a direct one is replaced by the masked factor; a
-    /// multigrid one preconditions CG on the masked systems.
-    pub fn with_solver(h: Csr, solver: Option<LinearSolver>) -> Result<Self, SolveError> {
+    /// The direct path: H's factor, refactored for the masked systems.
+    pub fn new(h: Csr) -> Result<Self, SolveError> {
         let n = h.nrows;
-        if let Some(LinearSolver::Multigrid(k)) = solver {
-            let vcycle = k.into_vcycle();
-            return Ok(DamageStep {
-                diag: h.diagonal(),
-                linear: Linear::Multigrid(Box::new(Iterative {
-                    masked: h.clone(),
-                    vcycle,
-                    work: PcgWork::new(n),
-                    buffer: vec![0.0; n],
-                })),
-                h,
-                factored: vec![Bound::Free; n],
-                active: vec![Bound::Free; n],
-                refactorizations: 0,
-                krylov: 0,
-            });
-        }
         let lower = h.lower_csc();
         let (sym, vals) = lower.as_ref().parts();
         let mut entries = Vec::with_capacity(vals.len());
@@ -136,7 +167,7 @@ impl DamageStep {
         })?;
         Ok(DamageStep {
             diag: h.diagonal(),
-            h,
+            h: Arc::new(h),
             linear: Linear::Direct(Box::new(Factored {
                 lower,
                 entries,
@@ -155,28 +186,12 @@ impl DamageStep {
         self.krylov
     }
 
-    /// Refactor H (direct path) or remake the masked H (multigrid path) with the rows and
-    /// columns of `active` replaced by the identity.
+    /// Refactor H with the rows and columns of `active` replaced by the identity (direct
+    /// path; the multigrid path applies the masked H from H's storage).
     fn factor_for(&mut self, active: &[Bound]) -> Result<(), SolveError> {
         let f = match &mut self.linear {
             Linear::Direct(f) => f,
-            Linear::Multigrid(it) => {
-                let h = &self.h;
-                for r in 0..h.nrows {
-                    for p in h.indptr[r]..h.indptr[r + 1] {
-                        let c = h.indices[p] as usize;
-                        it.masked.values[p] =
-                            if active[r] != Bound::Free || active[c] != Bound::Free {
-                                if r == c {
-                                    1.0
-                                } else {
-                                    0.0
-                                }
-                            } else {
-                                h.values[p]
-                            };
-                    }
-                }
+            Linear::Multigrid(_) => {
                 self.factored.copy_from_slice(active);
                 return Ok(());
             }
@@ -334,11 +349,11 @@ impl DamageStep {
                     }
                 }
                 let Iterative {
-                    masked,
                     vcycle,
                     work,
                     buffer,
                 } = &mut **it;
+                let masked = Masked { h: &self.h, active };
                 let mut pre = MaskedVCycle {
                     vcycle,
                     active,
@@ -346,7 +361,7 @@ impl DamageStep {
                 };
                 let atol = KRYLOV_FRACTION * settings.tolerance * scale;
                 let rep = pcg::solve(
-                    masked,
+                    &masked,
                     &mut pre,
                     rhs,
                     zeta,
@@ -542,7 +557,7 @@ mod tests {
                 crate::linalg::LinearPath::Multigrid,
             )
             .unwrap();
-            let mut solver = DamageStep::with_solver(h.clone(), Some(mg)).unwrap();
+            let mut solver = DamageStep::multigrid(mg).unwrap();
             let mut direct = DamageStep::new(h.clone()).unwrap();
             let mut zeta = vec![1.0; nn];
             let mut zeta_d = zeta.clone();

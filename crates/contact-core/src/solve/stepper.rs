@@ -427,13 +427,13 @@ impl<const D: usize> Simulation<D> {
                 drop(laplacian);
                 let mut solver = match linear {
                     LinearPath::Multigrid => {
-                        let mg = multilevel::scalar_solver(&mesh, h.clone(), linear).map_err(
-                            |source| SolveError::Factor {
+                        let mg = multilevel::scalar_solver(&mesh, h, linear).map_err(|source| {
+                            SolveError::Factor {
                                 what: "damage",
                                 source,
-                            },
-                        )?;
-                        DamageStep::with_solver(h, Some(mg))?
+                            }
+                        })?;
+                        DamageStep::multigrid(mg)?
                     }
                     _ => DamageStep::new(h)?,
                 };
