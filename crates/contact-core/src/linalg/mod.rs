@@ -3,13 +3,14 @@
 //! multigrid V-cycle), and small dense helpers. One algorithm per file: the cached sparse
 //! Cholesky ([`cholesky`]), conjugate gradients ([`pcg`]), the multigrid hierarchy with its
 //! coarsening and smoother ([`multigrid`]), sparse products ([`galerkin`]), the Schur
-//! complement onto Γ3 ([`schur`]).
+//! complement onto Γ3 ([`schur`]), the nested-dissection ordering ([`nested_dissection`]).
 
 pub mod cholesky;
 pub mod csr;
 pub mod dense;
 pub mod galerkin;
 pub mod multigrid;
+pub mod nested_dissection;
 pub mod operator;
 pub mod pcg;
 pub mod schur;
