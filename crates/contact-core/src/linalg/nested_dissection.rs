@@ -626,8 +626,7 @@ fn refine(graph: &Graph, side: &mut [Side]) {
                     push(&mut heaps, side, &mut stamp, u);
                 }
             }
-            for i in first..pulled.len() {
-                let u = pulled[i];
+            for &u in &pulled[first..] {
                 for e in graph.nbrs(u) {
                     let x = graph.adj[e] as usize;
                     if side[x] == Side::Separator && !locked[x] {
