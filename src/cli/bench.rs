@@ -32,6 +32,10 @@ pub struct BenchArgs {
     /// operator, by blocked solves and as the trailing block of the factor, at each level.
     #[arg(long)]
     pub schur: bool,
+    /// Instead: fill nnz(L) and factor times of the preset's K_II ordered by AMD and by
+    /// nested dissection, at each level.
+    #[arg(long)]
+    pub orderings: bool,
 }
 
 pub fn main(args: BenchArgs) -> ExitCode {
@@ -40,6 +44,15 @@ pub fn main(args: BenchArgs) -> ExitCode {
         // The threads a study uses by default.
         let threads = study::Execution::default().threads;
         return match bench::tables(repeat, threads) {
+            Ok(r) => {
+                println!("{}", pretty(&r));
+                ExitCode::SUCCESS
+            }
+            Err(e) => fail(1, &e.to_string()),
+        };
+    }
+    if args.orderings {
+        return match bench::orderings(&args.preset, &args.levels, repeat) {
             Ok(r) => {
                 println!("{}", pretty(&r));
                 ExitCode::SUCCESS

@@ -322,6 +322,87 @@ pub fn schur(
     Ok(out)
 }
 
+/// The factor of K_II under one ordering: its fill and times.
+#[derive(Debug, Clone, Serialize)]
+pub struct OrderingFigures {
+    pub ordering: crate::linalg::cholesky::Ordering,
+    /// Stored entries of L.
+    pub nnz_l: usize,
+    /// Ordering, symbolic analysis and first numeric factorisation.
+    pub analyse_and_factor_s: f64,
+    /// One numeric factorisation on the analysed pattern (fastest of `repeat`).
+    pub numeric_s: f64,
+}
+
+/// AMD against nested dissection on K_II of one level.
+#[derive(Debug, Clone, Serialize)]
+pub struct OrderingLevel {
+    pub level: usize,
+    pub unknowns: usize,
+    pub amd: OrderingFigures,
+    pub nested_dissection: OrderingFigures,
+    /// nnz(L) of AMD over that of nested dissection.
+    pub fill_ratio: f64,
+    /// Numeric factor time of AMD over that of nested dissection.
+    pub numeric_ratio: f64,
+}
+
+/// [`OrderingLevel`] of `preset` at each 1/h = 1/k in `levels` (numeric times the fastest
+/// of `repeat`). The scene is set up on the multigrid path, so no factor is made before.
+pub fn orderings(
+    preset: &str,
+    levels: &[usize],
+    repeat: usize,
+) -> Result<Vec<OrderingLevel>, Box<dyn std::error::Error>> {
+    use crate::linalg::cholesky::{Cholesky, Ordering};
+    let mut out = Vec::new();
+    for &level in levels {
+        let mut problem = leveled(preset, level)?;
+        problem.linear = LinearPath::Multigrid;
+        let (k, n_i) = match problem.dim() {
+            2 => {
+                let sim = Simulation::<2>::new(problem, SolverSettings::default())?;
+                let (k, n_i) = sim.velocity_operator();
+                (k.clone(), n_i)
+            }
+            _ => {
+                let sim = Simulation::<3>::new(problem, SolverSettings::default())?;
+                let (k, n_i) = sim.velocity_operator();
+                (k.clone(), n_i)
+            }
+        };
+        let lower = k.block(0..n_i, 0..n_i).lower_csc();
+        let figures = |ordering: Ordering| -> Result<OrderingFigures, Box<dyn std::error::Error>> {
+            let t = Instant::now();
+            let mut chol = Cholesky::by(lower.as_ref(), ordering)?;
+            let analyse_and_factor_s = t.elapsed().as_secs_f64();
+            let mut numeric_s = f64::INFINITY;
+            for _ in 0..repeat {
+                let t = Instant::now();
+                chol.refactor(lower.as_ref())?;
+                numeric_s = numeric_s.min(t.elapsed().as_secs_f64());
+            }
+            Ok(OrderingFigures {
+                ordering,
+                nnz_l: chol.nnz_l(),
+                analyse_and_factor_s,
+                numeric_s,
+            })
+        };
+        let amd = figures(Ordering::Amd)?;
+        let nested_dissection = figures(Ordering::NestedDissection)?;
+        out.push(OrderingLevel {
+            level,
+            unknowns: n_i,
+            fill_ratio: amd.nnz_l as f64 / nested_dissection.nnz_l as f64,
+            numeric_ratio: amd.numeric_s / nested_dissection.numeric_s,
+            amd,
+            nested_dissection,
+        });
+    }
+    Ok(out)
+}
+
 /// The paper's Tables 1 and 2 computed together (one shared h = k = 1/128 reference, a
 /// fresh cache each repetition), against the reference run alone measured in the same
 /// process: the ratio says what the ten ladder levels and all the error evaluations add to

@@ -38,10 +38,21 @@ pub fn velocity_solver<const D: usize>(
     path: LinearPath,
 ) -> Result<LinearSolver, FactorError> {
     if path != LinearPath::Multigrid {
-        return LinearSolver::direct(&a);
+        return direct::<D>(&a);
     }
     let (blocks, coarsening) = velocity_levels(mesh, dofs, lead);
     LinearSolver::multigrid(Arc::new(a), blocks, coarsening)
+}
+
+/// The direct factor of an operator on a D-dimensional mesh: in 3D the ordering of less
+/// fill of AMD and nested dissection (nested dissection wins on the boxes from a few
+/// thousand unknowns on, docs/src/speed/speed.md); in 2D AMD.
+fn direct<const D: usize>(a: &Csr) -> Result<LinearSolver, FactorError> {
+    if D == 3 {
+        LinearSolver::direct_least_fill(a)
+    } else {
+        LinearSolver::direct(a)
+    }
 }
 
 /// The node blocks and the coarsening of a velocity-type operator on its first `lead` free
@@ -121,7 +132,7 @@ pub fn scalar_solver<const D: usize>(
     path: LinearPath,
 ) -> Result<LinearSolver, FactorError> {
     if path != LinearPath::Multigrid {
-        return LinearSolver::direct(&a);
+        return direct::<D>(&a);
     }
     let n = a.nrows;
     let coarsening = geometric_scalar(mesh).unwrap_or_else(|| Coarsening::Aggregation {

@@ -1,11 +1,13 @@
-//! Sparse Cholesky LLᵀ with faer's low-level API: the symbolic analysis (AMD ordering,
-//! supernodal structure) is done once, the numeric factor lives in our own buffer and can be
+//! Sparse Cholesky LLᵀ with faer's low-level API: the symbolic analysis (AMD ordering, or
+//! the lesser fill of AMD and nested dissection, [`super::nested_dissection`]; supernodal
+//! structure) is done once, the numeric factor lives in our own buffer and can be
 //! recomputed for new values on the same pattern, and solves reuse one scratch buffer.
 //!
 //! faer's automatic simplicial/supernodal switch picks the slower variant for P1 meshes of
 //! these sizes (measured here: 2–5× slower), so the supernodal path is forced. Parallelism is `Seq`:
 //! jobs and the two sub-problems of a step are parallel instead.
 
+use super::nested_dissection;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::perm::PermRef;
@@ -38,6 +40,43 @@ pub struct Cholesky {
     factor_scratch: MemBuffer,
     /// Scratch for single right-hand-side solves.
     solve_scratch: MemBuffer,
+    ordering: Ordering,
+}
+
+/// How the rows of a factor were ordered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Ordering {
+    /// Approximate minimum degree (faer's).
+    Amd,
+    /// [`super::nested_dissection`].
+    NestedDissection,
+    /// An ordering the caller gave.
+    Given,
+}
+
+/// The supernodal symbolic analysis of `a_lower` with the ordering `forward`, else AMD.
+fn analyse(
+    a_lower: SparseColMatRef<'_, usize, f64>,
+    forward: Option<&[usize]>,
+) -> Result<SymbolicCholesky<usize>, FactorError> {
+    let params = CholeskySymbolicParams {
+        supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+        ..Default::default()
+    };
+    let inverse = forward.map(|f| {
+        let mut inv = vec![0; f.len()];
+        for (i, &p) in f.iter().enumerate() {
+            inv[p] = i;
+        }
+        inv
+    });
+    let ordering = match (forward, &inverse) {
+        (Some(f), Some(inv)) => SymmetricOrdering::Custom(PermRef::new_checked(f, inv, f.len())),
+        _ => SymmetricOrdering::Amd,
+    };
+    factorize_symbolic_cholesky(a_lower.symbolic(), Side::Lower, ordering, params)
+        .map_err(FactorError::Symbolic)
 }
 
 impl Clone for Cholesky {
@@ -47,6 +86,7 @@ impl Clone for Cholesky {
             l_values: self.l_values.clone(),
             factor_scratch: factor_scratch(&self.symbolic),
             solve_scratch: MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, Par::Seq)),
+            ordering: self.ordering,
         }
     }
 }
@@ -70,6 +110,36 @@ impl Cholesky {
         Self::with_ordering(a_lower, None)
     }
 
+    /// [`Cholesky::new`] with the ordering of smaller fill of AMD and nested dissection
+    /// (both symbolic analyses are made, a small cost next to the numeric factorisation;
+    /// AMD on a tie).
+    pub fn least_fill(a_lower: SparseColMatRef<'_, usize, f64>) -> Result<Self, FactorError> {
+        let amd = analyse(a_lower, None)?;
+        let nd_order = nested_dissection::order(a_lower.symbolic());
+        let nd = analyse(a_lower, Some(&nd_order))?;
+        let (symbolic, ordering) = if nd.len_val() < amd.len_val() {
+            (nd, Ordering::NestedDissection)
+        } else {
+            (amd, Ordering::Amd)
+        };
+        Self::from_symbolic(symbolic, ordering, a_lower)
+    }
+
+    /// [`Cholesky::new`] with the given ordering method (for comparisons).
+    pub fn by(
+        a_lower: SparseColMatRef<'_, usize, f64>,
+        ordering: Ordering,
+    ) -> Result<Self, FactorError> {
+        match ordering {
+            Ordering::Amd | Ordering::Given => Self::new(a_lower),
+            Ordering::NestedDissection => {
+                let order = nested_dissection::order(a_lower.symbolic());
+                let symbolic = analyse(a_lower, Some(&order))?;
+                Self::from_symbolic(symbolic, ordering, a_lower)
+            }
+        }
+    }
+
     /// [`Cholesky::new`] with the symmetric ordering `forward` (row i of the factored
     /// P A Pᵀ is row `forward[i]` of A) instead of AMD; the analysis may still reorder within
     /// it (postordering), which [`Cholesky::forward`] reports.
@@ -77,35 +147,33 @@ impl Cholesky {
         a_lower: SparseColMatRef<'_, usize, f64>,
         forward: Option<&[usize]>,
     ) -> Result<Self, FactorError> {
-        let params = CholeskySymbolicParams {
-            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
-            ..Default::default()
+        let ordering = match forward {
+            Some(_) => Ordering::Given,
+            None => Ordering::Amd,
         };
-        let inverse = forward.map(|f| {
-            let mut inv = vec![0; f.len()];
-            for (i, &p) in f.iter().enumerate() {
-                inv[p] = i;
-            }
-            inv
-        });
-        let ordering = match (forward, &inverse) {
-            (Some(f), Some(inv)) => {
-                SymmetricOrdering::Custom(PermRef::new_checked(f, inv, f.len()))
-            }
-            _ => SymmetricOrdering::Amd,
-        };
-        let symbolic =
-            factorize_symbolic_cholesky(a_lower.symbolic(), Side::Lower, ordering, params)
-                .map_err(FactorError::Symbolic)?;
+        Self::from_symbolic(analyse(a_lower, forward)?, ordering, a_lower)
+    }
+
+    fn from_symbolic(
+        symbolic: SymbolicCholesky<usize>,
+        ordering: Ordering,
+        a_lower: SparseColMatRef<'_, usize, f64>,
+    ) -> Result<Self, FactorError> {
         let solve_scratch = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
         let mut this = Cholesky {
             l_values: Arc::new(vec![0.0; symbolic.len_val()]),
             factor_scratch: factor_scratch(&symbolic),
             symbolic: Arc::new(symbolic),
             solve_scratch,
+            ordering,
         };
         this.refactor(a_lower)?;
         Ok(this)
+    }
+
+    /// The ordering method of the factor.
+    pub fn ordering(&self) -> Ordering {
+        self.ordering
     }
 
     pub fn n(&self) -> usize {

@@ -4,13 +4,14 @@
 //! Cholesky ([`cholesky`]), conjugate gradients ([`pcg`]) and their starting guesses from
 //! earlier solutions ([`projection`]), the multigrid hierarchy with its
 //! coarsening and smoother ([`multigrid`]), sparse products ([`galerkin`]), the Schur
-//! complement onto Γ3 ([`schur`]).
+//! complement onto Γ3 ([`schur`]), the nested-dissection ordering ([`nested_dissection`]).
 
 pub mod cholesky;
 pub mod csr;
 pub mod dense;
 pub mod galerkin;
 pub mod multigrid;
+pub mod nested_dissection;
 pub mod operator;
 pub mod pcg;
 pub mod projection;
