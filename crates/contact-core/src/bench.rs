@@ -277,18 +277,7 @@ pub fn schur(
     let mut out = Vec::new();
     for &level in levels {
         let problem = leveled(preset, level)?;
-        let (k, n_i) = match problem.dim() {
-            2 => {
-                let sim = Simulation::<2>::new(problem, SolverSettings::default())?;
-                let (k, n_i) = sim.velocity_operator();
-                (k.clone(), n_i)
-            }
-            _ => {
-                let sim = Simulation::<3>::new(problem, SolverSettings::default())?;
-                let (k, n_i) = sim.velocity_operator();
-                (k.clone(), n_i)
-            }
-        };
+        let (k, n_i) = velocity_operator(problem)?;
         let t0 = Instant::now();
         let k_ii = Cholesky::new(k.block(0..n_i, 0..n_i).lower_csc().as_ref())?;
         let factor_s = t0.elapsed().as_secs_f64();
@@ -347,6 +336,25 @@ pub struct OrderingLevel {
     pub numeric_ratio: f64,
 }
 
+/// The free-DOF velocity operator K of a problem's set-up and its interior count n_I.
+fn velocity_operator(
+    problem: crate::problem::Problem,
+) -> Result<(crate::linalg::Csr, usize), Box<dyn std::error::Error>> {
+    let (k, n_i) = match problem.dim() {
+        2 => {
+            let sim = Simulation::<2>::new(problem, SolverSettings::default())?;
+            let (k, n_i) = sim.velocity_operator();
+            (k.clone(), n_i)
+        }
+        _ => {
+            let sim = Simulation::<3>::new(problem, SolverSettings::default())?;
+            let (k, n_i) = sim.velocity_operator();
+            (k.clone(), n_i)
+        }
+    };
+    Ok((k, n_i))
+}
+
 /// [`OrderingLevel`] of `preset` at each 1/h = 1/k in `levels` (numeric times the fastest
 /// of `repeat`). The scene is set up on the multigrid path, so no factor is made before.
 pub fn orderings(
@@ -359,18 +367,7 @@ pub fn orderings(
     for &level in levels {
         let mut problem = leveled(preset, level)?;
         problem.linear = LinearPath::Multigrid;
-        let (k, n_i) = match problem.dim() {
-            2 => {
-                let sim = Simulation::<2>::new(problem, SolverSettings::default())?;
-                let (k, n_i) = sim.velocity_operator();
-                (k.clone(), n_i)
-            }
-            _ => {
-                let sim = Simulation::<3>::new(problem, SolverSettings::default())?;
-                let (k, n_i) = sim.velocity_operator();
-                (k.clone(), n_i)
-            }
-        };
+        let (k, n_i) = velocity_operator(problem)?;
         let lower = k.block(0..n_i, 0..n_i).lower_csc();
         let figures = |ordering: Ordering| -> Result<OrderingFigures, Box<dyn std::error::Error>> {
             let t = Instant::now();
