@@ -311,3 +311,41 @@ fn a_long_run_agrees_through_the_compressions_of_its_starting_guesses() {
         "Krylov iterations a step: {its:?} (the late ones at most {late})"
     );
 }
+
+/// 16 steps that all slip on the geometric path: each step after the first starts from the
+/// minimiser of the energy over the span of the earlier velocities, the norms agree with the
+/// direct path, and the starting points pay: the late steps take one Newton iteration and
+/// under half the first slipping step's Krylov iterations (which starts from the stick
+/// solution).
+#[test]
+fn a_slipping_run_starts_its_steps_from_the_earlier_velocities() {
+    let g2 = ("/friction", json!({"law": "tresca", "g": 2.0}));
+    let slipped = compare_with::<3>(
+        "box-exp3",
+        json!({"h": "1/8"}),
+        16,
+        "multigrid (geometric, 2 levels)",
+        std::slice::from_ref(&g2),
+    );
+    assert_eq!(slipped, 16, "every step slips with g = 2");
+    let mut doc = presets::get("box-exp3").expect("preset");
+    doc["time"] = json!({"T": 1, "N": 16});
+    doc["solver"] = json!({"linear": "multigrid"});
+    doc["friction"] = g2.1;
+    let p = scene::validate(&doc).expect("scene");
+    let (reports, _) = simulate::<3>(p);
+    let newton: Vec<usize> = reports.iter().map(|r| r.velocity.iterations).collect();
+    let krylov: Vec<usize> = reports
+        .iter()
+        .map(|r| r.velocity.krylov_iterations)
+        .collect();
+    assert!(
+        newton[8..].iter().all(|&n| n <= 1),
+        "Newton iterations a step: {newton:?}"
+    );
+    let late = krylov[8..].iter().max().unwrap();
+    assert!(
+        2 * late < krylov[0],
+        "Krylov iterations a step: {krylov:?} (the late ones at most {late})"
+    );
+}

@@ -48,6 +48,11 @@ pub struct PcgWork {
 }
 
 impl PcgWork {
+    /// b − A x of the last solve's x, computed afresh at its end (not the recursive one).
+    pub fn residual(&self) -> &[f64] {
+        &self.r
+    }
+
     pub fn new(n: usize) -> Self {
         PcgWork {
             r: vec![0.0; n],
@@ -91,7 +96,12 @@ pub fn solve(
     let PcgWork { r, z, p, q } = work;
     let mut iterations = 0;
     let mut negative_curvature = false;
-    residual(a, b, x, r);
+    if x.iter().all(|&v| v == 0.0) {
+        // A cold start: r = b, without a product.
+        r.copy_from_slice(b);
+    } else {
+        residual(a, b, x, r);
+    }
     let mut res = max_abs(r);
     for _ in 0..=RESTARTS {
         if res <= atol || iterations >= max_iterations || negative_curvature {

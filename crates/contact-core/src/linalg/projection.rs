@@ -93,17 +93,44 @@ impl SolutionSpace {
     /// x ← x̄ = Σ_i (x̃_iᵀ b) x̃_i, the A-orthogonal projection of A⁻¹ b onto the span (zero
     /// when the span is empty).
     pub fn project(&mut self, b: &[f64], x: &mut [f64]) {
+        let c = self.coordinates(b);
+        self.combine(&c, x);
+    }
+
+    /// The basis x̃_1 … x̃_l.
+    pub fn basis(&self) -> &[Vec<f64>] {
+        &self.basis
+    }
+
+    /// x̃_iᵀ b for each basis vector (the coordinates of the projection of A⁻¹ b).
+    pub fn coordinates(&self, b: &[f64]) -> Vec<f64> {
+        self.basis.iter().map(|v| dot(v, b)).collect()
+    }
+
+    /// Coordinates of the newest solution added (x = Σ_i c_i x̃_i), if any.
+    pub fn newest(&self) -> Option<Vec<f64>> {
+        self.history.back().map(|c| {
+            let mut c = c.clone();
+            c.resize(self.basis.len(), 0.0);
+            c
+        })
+    }
+
+    /// x ← Σ_i c_i x̃_i, which becomes the guess that the next [`SolutionSpace::extend`]
+    /// measures the new solution from.
+    pub fn combine(&mut self, c: &[f64], x: &mut [f64]) {
+        assert_eq!(c.len(), self.basis.len());
         x.iter_mut().for_each(|v| *v = 0.0);
-        self.coefficients.clear();
-        for v in &self.basis {
-            let c = dot(v, b);
+        for (v, &c) in self.basis.iter().zip(c) {
             x.iter_mut().zip(v).for_each(|(x, v)| *x += c * v);
-            self.coefficients.push(c);
         }
+        self.coefficients.clear();
+        self.coefficients.extend_from_slice(c);
         self.guess.copy_from_slice(x);
     }
 
-    /// Adds the solution `x` of the system whose guess [`SolutionSpace::project`] gave last:
+    /// Adds the solution `x` of the system whose guess [`SolutionSpace::project`] (or
+    /// [`SolutionSpace::combine`]) gave last:
     /// d = x − x̄, d ← d − Σ_i (x̃_iᵀ A d) x̃_i, x̃_{l+1} = d / ‖d‖_A. One product with `a`:
     /// A d taken as the solve's initial minus final residual would be accurate only to the
     /// solve's tolerance relative to ‖A d‖, which degrades the basis as the guesses improve

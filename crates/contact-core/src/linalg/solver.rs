@@ -209,6 +209,16 @@ impl LinearSolver {
         }
     }
 
+    /// b − A x of the last solve on the iterative paths (the true residual its stopping test
+    /// was passed on); None on the direct path, which does not form it.
+    pub fn last_residual(&self) -> Option<&[f64]> {
+        match self {
+            LinearSolver::Direct(_) => None,
+            LinearSolver::Multigrid(k) => Some(k.work.residual()),
+            LinearSolver::LeadingBlock(l) => Some(&l.work.residual()[..l.lead]),
+        }
+    }
+
     /// The direct factor, when this is the direct path.
     pub fn factor(&self) -> Option<&Cholesky> {
         match self {

@@ -5,6 +5,7 @@
 pub mod damage;
 pub mod friction_isotropic;
 pub mod friction_reduced;
+pub mod galerkin_guess;
 pub mod invariants;
 pub mod reduced;
 pub mod semismooth_newton;

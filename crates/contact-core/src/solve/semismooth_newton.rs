@@ -85,6 +85,8 @@ pub struct SemismoothNewton {
     node_k: Vec<[f64; 4]>,
     cached: Option<Cached>,
     work: PcgWork,
+    /// K w − f at the last solution, computed afresh.
+    gradient: Vec<f64>,
 }
 
 /// A clone shares K and its hierarchy and builds its own preconditioner when first used.
@@ -100,6 +102,7 @@ impl Clone for SemismoothNewton {
             node_k: self.node_k.clone(),
             cached: None,
             work: PcgWork::default(),
+            gradient: Vec::new(),
         }
     }
 }
@@ -137,7 +140,14 @@ impl SemismoothNewton {
             node_k,
             cached: None,
             work: PcgWork::default(),
+            gradient: Vec::new(),
         }
+    }
+
+    /// K w − f at the solution of the last successful [`SemismoothNewton::solve`], computed
+    /// afresh (what its convergence was judged on).
+    pub fn gradient(&self) -> &[f64] {
+        &self.gradient
     }
 
     fn node(&self, v: &[f64], i: usize) -> [f64; 2] {
@@ -284,6 +294,8 @@ impl SemismoothNewton {
                 }
             }
         }
+        // The old preconditioner goes before the new one is built: never two at the peak.
+        self.cached = None;
         let fixed: Vec<usize> = stick
             .iter()
             .enumerate()
@@ -349,8 +361,9 @@ impl SemismoothNewton {
     ) -> Result<NewtonReport, SolveError> {
         let n = self.k.nrows;
         let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
-        let (mut g, mut r, mut d, mut kd) =
-            (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        let mut g = std::mem::take(&mut self.gradient);
+        g.resize(n, 0.0);
+        let (mut r, mut d, mut kd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
         let fresh_gradient = |k: &Csr, w: &[f64], g: &mut [f64]| {
             k.mul_vec(w, g);
             g.iter_mut().zip(f).for_each(|(g, f)| *g -= f);
@@ -378,6 +391,7 @@ impl SemismoothNewton {
                 report.slip_nodes = (0..self.weights.len())
                     .filter(|&i| self.node(w, i) != [0.0, 0.0])
                     .count();
+                self.gradient = g;
                 return Ok(report);
             }
             if it == settings.max_iterations || !residual.is_finite() {
