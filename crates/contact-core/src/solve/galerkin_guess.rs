@@ -14,8 +14,7 @@
 //!
 //! It starts from the coordinates of the newest solution in the span (the last step's
 //! velocity), and every accepted step lowers Ê, so the guess is never worse in energy than
-//! that velocity. Nodes whose tangential velocity in the guess is at rounding level are then
-//! set to rest (see [`zero_resting_nodes`]). The Newton method on all free DOFs still runs to the step's tolerance from
+//! that velocity. The Newton method on all free DOFs still runs to the step's tolerance from
 //! here: the guess decides only where it starts.
 
 use crate::linalg::projection::SolutionSpace;
@@ -81,29 +80,7 @@ pub fn minimise(
             .for_each(|(c, d)| *c += alpha * d);
     }
     space.combine(&c, w);
-    zero_resting_nodes(w, contact);
     Some(iterations)
-}
-
-/// A node's tangential velocity in the guess at or below this fraction of the largest one is
-/// set to zero.
-const AT_REST: f64 = 1e-10;
-
-/// Sets the tangential velocity of the nodes at rest in w to exactly zero. The span's vectors
-/// are combinations of earlier solutions and guesses, so at a node that has stopped slipping
-/// they hold rounding-sized values, not zeros; a guess with such a value counts as slipping,
-/// and the KKT residual of a slipping node (g_i = −ω_i μ ẑ_i, with ẑ_i rounding noise) is
-/// of order one: a whole Newton iteration a step went to undoing it.
-fn zero_resting_nodes(w: &mut [f64], contact: &Contact) {
-    let block = contact.block;
-    let nodes = &mut w[contact.n_interior..];
-    let norm = |x: &[f64]| x.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let largest = nodes.chunks(block).map(norm).fold(0.0f64, f64::max);
-    for x in nodes.chunks_mut(block) {
-        if norm(x) <= AT_REST * largest {
-            x.iter_mut().for_each(|v| *v = 0.0);
-        }
-    }
 }
 
 fn node_rows(basis: &[Vec<f64>], contact: &Contact) -> Vec<NodeRows> {

@@ -218,38 +218,3 @@ fn an_empty_space_leaves_the_start_alone() {
     assert_eq!(minimise(&mut space, &vec![1.0; N], &contact, &mut w), None);
     assert!(w.iter().all(|&v| v == 3.0));
 }
-
-#[test]
-fn a_node_at_rest_in_every_solution_rests_in_the_guess_despite_rounding() {
-    // Node 1 sticks at the minimiser; the span's vectors hold rounding-sized values there
-    // (as Gram–Schmidt against earlier guesses leaves them), which must not make the guess
-    // slip there.
-    let law = FrictionLaw::Tresca { g: 1.5 };
-    let weights = [0.4, 0.7, 0.2, 0.5];
-    let contact = Contact {
-        n_interior: N - 2 * weights.len(),
-        block: 2,
-        weights: &weights,
-        law: &law,
-    };
-    let stick = [1];
-    let (w_star, f) = manufactured(&contact, &stick);
-    let k = operator();
-    let mut vectors = perturbations(&w_star, &contact, &stick, 3);
-    vectors.insert(1, w_star.clone());
-    let resting = contact.n_interior + 2;
-    for (j, v) in vectors.iter_mut().enumerate() {
-        v[resting] = 1e-17 * (j as f64 + 1.0);
-        v[resting + 1] = -3e-18 * (j as f64 + 2.0);
-    }
-    let mut space = space_of(&k, &vectors);
-    let mut w = vec![0.0; N];
-    minimise(&mut space, &f, &contact, &mut w).unwrap();
-    assert_eq!(&w[resting..resting + 2], &[0.0, 0.0]);
-    let err: Vec<f64> = w.iter().zip(&w_star).map(|(a, b)| a - b).collect();
-    assert!(
-        max_abs(&err) < 1e-10 * max_abs(&w_star),
-        "{:e}",
-        max_abs(&err)
-    );
-}
