@@ -67,6 +67,19 @@ impl FrictionLaw {
         }
     }
 
+    /// j(|x + δ|) − j(|x|) for a node's tangential velocity x moved by δ (2D: second entries
+    /// zero), with |x + δ| − |x| = δ·(2x + δ) / (|x + δ| + |x|), formed without cancellation.
+    pub fn node_potential_change(&self, x: [f64; 2], delta: [f64; 2]) -> f64 {
+        let y = [x[0] + delta[0], x[1] + delta[1]];
+        let (r0, r1) = (x[0].hypot(x[1]), y[0].hypot(y[1]));
+        let dr = if r0 + r1 > 0.0 {
+            (delta[0] * (x[0] + y[0]) + delta[1] * (x[1] + y[1])) / (r0 + r1)
+        } else {
+            0.0
+        };
+        self.potential_change(r0, r1, dr)
+    }
+
     /// j(r1) − j(r0) = ∫_{r0}^{r1} μ, given dr = r1 − r0 computed without cancellation. Near the
     /// solution the steps' energy changes are far below the rounding of j itself, so the
     /// difference is integrated, not subtracted.

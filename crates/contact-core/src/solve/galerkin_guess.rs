@@ -195,15 +195,9 @@ fn line_search(
         let friction: f64 = moves
             .iter()
             .map(|(x, dx, om)| {
-                let step = [alpha * dx[0], alpha * dx[1]];
-                let y = [x[0] + step[0], x[1] + step[1]];
-                let (r0, r1) = (x[0].hypot(x[1]), y[0].hypot(y[1]));
-                let dr = if r0 + r1 > 0.0 {
-                    (step[0] * (x[0] + y[0]) + step[1] * (x[1] + y[1])) / (r0 + r1)
-                } else {
-                    0.0
-                };
-                om * contact.law.potential_change(r0, r1, dr)
+                om * contact
+                    .law
+                    .node_potential_change(*x, [alpha * dx[0], alpha * dx[1]])
             })
             .sum();
         if alpha * slope + 0.5 * alpha * alpha * dd + friction < 0.0 {

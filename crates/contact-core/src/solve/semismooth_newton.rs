@@ -347,16 +347,10 @@ impl SemismoothNewton {
                 if di == [0.0, 0.0] {
                     return 0.0;
                 }
-                let di = [alpha * di[0], alpha * di[1]];
-                let y = [x[0] + di[0], x[1] + di[1]];
-                let (r0, r1) = (x[0].hypot(x[1]), y[0].hypot(y[1]));
-                // |y| − |x| = (y − x)·(y + x) / (|y| + |x|), without cancellation.
-                let dr = if r0 + r1 > 0.0 {
-                    (di[0] * (x[0] + y[0]) + di[1] * (x[1] + y[1])) / (r0 + r1)
-                } else {
-                    0.0
-                };
-                self.weights[i] * self.law.potential_change(r0, r1, dr)
+                self.weights[i]
+                    * self
+                        .law
+                        .node_potential_change(x, [alpha * di[0], alpha * di[1]])
             })
             .sum();
         alpha * dg + 0.5 * alpha * alpha * dkd + friction
