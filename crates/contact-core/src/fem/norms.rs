@@ -13,12 +13,15 @@ pub fn strain_norm<const D: usize>(mesh: &Mesh<D>, geo: &Geometry<D>, v: &[f64])
 }
 
 /// (zᵀ M z)^½ with the consistent mass matrix M.
+/// NaN when z is not finite.
 pub fn mass_norm(m: &Csr, z: &[f64], scratch: &mut [f64]) -> f64 {
     m.mul_vec(z, scratch);
-    z.iter()
-        .zip(scratch.iter())
-        .map(|(a, b)| a * b)
-        .sum::<f64>()
-        .max(0.0)
-        .sqrt()
+    let squared: f64 = z.iter().zip(scratch.iter()).map(|(a, b)| a * b).sum();
+    // Rounding can make zᵀMz slightly negative; `f64::max(0.0)` would also turn NaN into 0
+    // and hide a broken ζ from the finiteness checks.
+    if squared < 0.0 {
+        0.0
+    } else {
+        squared.sqrt()
+    }
 }

@@ -485,6 +485,24 @@ fn formulas_bad_between_the_samples_are_refused_at_their_field() {
     assert_data_error(&doc, "/initial/u0/0", "evaluates to inf");
 }
 
+/// Regression (found by the property test below): a damage source that overflows (a =
+/// 1e308) made the damage QP's iterates NaN, and the step's |ζ|_Z0 hid them as 0 (f64::max
+/// turns NaN into 0), so the step was accepted with ζ = NaN everywhere. Each coefficient
+/// that overflows is now refused at its field.
+#[test]
+fn a_damage_source_that_overflows_is_refused_at_its_coefficient() {
+    let mut doc = template(1, 2, 1);
+    // a (1 − ζ*)/ζ* = 4e308 where ζ0 = 0.1 < ζ*.
+    doc["damage"]["source"]["a"] = json!(1e308);
+    doc["damage"]["zeta0"] = json!(0.1);
+    assert_data_error(&doc, "/damage/source/a", "a = 100000000");
+    let mut doc = template(1, 2, 1);
+    doc["damage"]["source"]["b"] = json!(1e308);
+    // b |ε(u0)|² = 1e310 with ε_xx = 10.
+    doc["initial"]["u0"] = json!(["10*x", 0]);
+    assert_data_error(&doc, "/damage/source/b", "not finite in step 1");
+}
+
 // -----------------------------------------------------------------------------------------
 // Arbitrary JSON and mutated presets: no panics, and whatever is accepted conforms to
 // api/scene.schema.json.

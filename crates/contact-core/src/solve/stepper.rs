@@ -223,13 +223,15 @@ impl DamagePart {
     /// The damage step (3.10): ζ_n minimises ½ ζᵀ (M/k + κK) ζ − gᵀζ subject to
     /// 0 ≤ ζ_i ≤ 1 at every node, g from [`DamagePart::assemble_rhs`].
     fn step<const D: usize>(&mut self, s: &StepInput<D>) -> Result<SolverReport, SolveError> {
-        self.assemble_rhs(s);
+        self.assemble_rhs(s)?;
         self.solver.solve(&self.g, &mut self.next, s.settings, s.n)
     }
 
     /// g = M ζ_{n−1}/k + F_{n−1} with (F_{n−1})_i = ∫_Ω φ(ε(u_{n−1}), ζ_{n−1}) ψ_i dx: the
-    /// backward difference (3.1) of ζ and the source of (3.10), both at step n−1.
-    fn assemble_rhs<const D: usize>(&mut self, s: &StepInput<D>) {
+    /// backward difference (3.1) of ζ and the source of (3.10), both at step n−1. A source
+    /// that overflows is reported at the coefficient responsible: the box QP of an infinite
+    /// g has no solution, and its iterates would be NaN.
+    fn assemble_rhs<const D: usize>(&mut self, s: &StepInput<D>) -> Result<(), SolveError> {
         let source = s
             .problem
             .damage
@@ -247,6 +249,24 @@ impl DamagePart {
         for (g, f) in self.g.iter_mut().zip(&self.f) {
             *g = *g / s.k + f;
         }
+        if self.g.iter().all(|g| g.is_finite()) {
+            return Ok(());
+        }
+        let z = source.zeta_star;
+        let pointer = if (source.a * (1.0 - z) / z).is_finite() {
+            "/damage/source/b"
+        } else {
+            "/damage/source/a"
+        };
+        Err(SolveError::Data {
+            pointer: pointer.into(),
+            message: format!(
+                "the damage source φ = a (1 − ζ)/ζ − b |ε(u)|² with a = {}, b = {}, ζ* = {} \
+                 is not finite in step {} (its integral overflows); the damage equation \
+                 (3.10) needs a finite source",
+                source.a, source.b, source.zeta_star, s.n
+            ),
+        })
     }
 }
 
