@@ -288,7 +288,15 @@ impl<const D: usize> Prepared<D> {
             _ => memory::predict(problem),
         };
         let (linear, predicted_bytes) = memory::choose_with(problem, memory_limit, first)?;
-        Self::on_path(problem, memory_limit, linear, predicted_bytes, start)
+        match Self::on_path(problem, memory_limit, linear, predicted_bytes, start)? {
+            Setup::Ready(p) => Ok(*p),
+            Setup::Multigrid(bytes) => {
+                match Self::on_path(problem, memory_limit, LinearPath::Multigrid, bytes, start)? {
+                    Setup::Ready(p) => Ok(*p),
+                    Setup::Multigrid(_) => unreachable!("only the direct path is refined"),
+                }
+            }
+        }
     }
 
     fn on_path(
@@ -297,7 +305,7 @@ impl<const D: usize> Prepared<D> {
         linear: LinearPath,
         mut predicted_bytes: u64,
         start: Instant,
-    ) -> Result<Prepared<D>, SolveError> {
+    ) -> Result<Setup<D>, SolveError> {
         let mesh = problem.mesh().map_err(|e| SolveError::Data {
             pointer: format!("/boundary/{}", e.part()),
             message: e.to_string(),
@@ -349,15 +357,7 @@ impl<const D: usize> Prepared<D> {
             let plans: Vec<_> = std::iter::once(&plan).chain(&damage_plan).collect();
             let refined = memory::refine(problem, &plans);
             match memory::choose_with(problem, memory_limit, refined)? {
-                (LinearPath::Multigrid, bytes) => {
-                    return Self::on_path(
-                        problem,
-                        memory_limit,
-                        LinearPath::Multigrid,
-                        bytes,
-                        start,
-                    )
-                }
+                (LinearPath::Multigrid, bytes) => return Ok(Setup::Multigrid(bytes)),
                 (_, bytes) => predicted_bytes = bytes,
             }
             let factor = Cholesky::from_plan(plan, lower.as_ref()).map_err(factor_error)?;
@@ -375,7 +375,7 @@ impl<const D: usize> Prepared<D> {
         }
         let smallness = smallness::check(problem, &mesh, &geo, &dofs, &mut velocity)?;
         let mass = mass.unwrap_or_else(|| assembly::mass_in_pattern(&mesh, &geo));
-        Ok(Prepared {
+        Ok(Setup::Ready(Box::new(Prepared {
             linear,
             predicted_bytes,
             damage_plan,
@@ -386,8 +386,15 @@ impl<const D: usize> Prepared<D> {
             smallness,
             mass,
             seconds: start.elapsed().as_secs_f64(),
-        })
+        })))
     }
+}
+
+/// A set-up's outcome: ready, or (`auto`) to be made on the multigrid path with that
+/// path's predicted bytes, what was built for the direct path dropped first.
+enum Setup<const D: usize> {
+    Ready(Box<Prepared<D>>),
+    Multigrid(u64),
 }
 
 /// One job's assembled operators, factorisations and current state, in dimension D.
