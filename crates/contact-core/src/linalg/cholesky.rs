@@ -189,8 +189,8 @@ impl CholeskyPlan {
 
     /// Bytes a [`Cholesky`] made from this plan holds: L's values (8 nnz(L)), faer's scratch
     /// of the numeric factorisation and of a one-column solve, and the analysis's own index
-    /// arrays (the supernodal row structure, which faer keeps twice, column- and row-major,
-    /// and the permutation).
+    /// arrays: the supernodes' row indices, as much again as a bound of faer's row-major
+    /// supernode structure, the supernode pointers and the permutation.
     pub fn factor_bytes(&self) -> u64 {
         let s = &self.symbolic;
         let scratch = s
