@@ -3,13 +3,14 @@
 use super::mesh_files::SceneDir;
 use super::{fail, preset, pretty, progress};
 use clap::Args;
+use contact_core::memory::MemoryError;
 use contact_core::mesh::AnyMesh;
 use contact_core::output::fields::MeshJson;
 use contact_core::output::Summary;
 use contact_core::problem::Problem;
 use contact_core::run::RunError;
 use contact_core::scene::{self, presets, Overrides};
-use contact_core::solve::SolverSettings;
+use contact_core::solve::{SolveError, SolverSettings};
 use serde_json::Value;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -102,13 +103,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         ..Default::default()
     };
     if let Err(e) = contact_core::memory::choose(&problem, settings.memory_limit) {
-        eprintln!(
-            "{}",
-            pretty(
-                &serde_json::json!({"title": "the run does not fit the memory limit", "errors": [{"pointer": e.pointer(), "message": e.to_string()}]})
-            )
-        );
-        return ExitCode::from(2);
+        return refused(&e);
     }
     let bar = progress::bar(problem.steps as u64, "steps");
     let (result, io_error) = match problem.dim() {
@@ -127,8 +122,21 @@ pub fn main(args: RunArgs) -> ExitCode {
             println!("{text}");
             ExitCode::SUCCESS
         }
+        Err(RunError::Solve(SolveError::Memory(e))) => refused(&e),
         Err(e) => fail(1, &io_error.unwrap_or_else(|| e.to_string())),
     }
+}
+
+/// A run over the memory limit, whether the cheap check or the set-up's exact one found it:
+/// the field and both figures on stderr, exit code 2.
+fn refused(e: &MemoryError) -> ExitCode {
+    eprintln!(
+        "{}",
+        pretty(
+            &serde_json::json!({"title": "the run does not fit the memory limit", "errors": [{"pointer": e.pointer(), "message": e.to_string()}]})
+        )
+    );
+    ExitCode::from(2)
 }
 
 /// Runs the problem (of dimension D), writing `mesh.json` and the stored steps' JSON into

@@ -1,14 +1,24 @@
 //! A job's peak memory, predicted before any numeric work, and the choice of the linear
 //! path that fits (the scene's `solver.linear`, [`LinearPath`]).
 //!
-//! The prediction counts what a run holds at its peak, from the mesh's node and cell counts
-//! alone (no mesh is built): the mesh and its geometry, the assembled operators (K on the
-//! free DOFs, M, L and H = M/k + κL), the per-cell and per-node state, the element triplets
-//! of the direct path's assembly (the multigrid path assembles every matrix into its
-//! pattern), and then
-//! - the direct path: the factors of K_II and of H, whose fill follows the measured growth
-//!   of the AMD-ordered supernodal factor (3D: nnz(L) ≈ 1.8 n^1.58; 2D: 5 n log₂ n, n the
-//!   unknowns);
+//! The prediction is made twice. [`choose`] is the cheap check at submission (the service,
+//! `contact-sim run`): it needs no mesh, only the mesh's node and cell counts. When a run is
+//! set up, the direct path is decided on the exact factor sizes instead
+//! ([`refine`]: the symbolic analyses' [`CholeskyPlan::factor_bytes`] in place of the count
+//! model's fill), made after assembly and before any numeric factorisation; [`choose_with`]
+//! decides on that figure. A demanded direct path is checked before the analyses only
+//! against [`without_factors`], since the count model over-estimates the factors where
+//! nested dissection wins (3D boxes from a few thousand unknowns on); `auto` picks its path
+//! on the count model, and a direct pick that the exact figure does not fit moves to the
+//! multigrid path when that fits. The multigrid path keeps the count prediction.
+//!
+//! What is counted: the mesh and its geometry, the assembled operators (K on the free DOFs,
+//! M, L and H = M/k + κL), the per-cell and per-node state, the element triplets of the
+//! direct path's assembly (the multigrid path assembles every matrix into its pattern), and
+//! then
+//! - the direct path: the factors of K_II and of H; the count model takes their fill from
+//!   the measured growth of the AMD-ordered supernodal factor (3D: nnz(L) ≈ 1.8 n^1.58; 2D:
+//!   5 n log₂ n, n the unknowns; docs/src/speed/speed.md compares it with the exact sizes);
 //! - the multigrid path: the hierarchies of K_II and H (coarse operators, prolongators and
 //!   their transposes, smoother blocks, a small coarse factor, and the set-up's products) as
 //!   multiples of the fine operators, fitted to measured peaks of box-exp3: geometric levels
@@ -23,7 +33,7 @@
 //! is tagged.
 
 use crate::linalg::projection::{SolutionSpace, CAPACITY};
-use crate::linalg::LinearPath;
+use crate::linalg::{CholeskyPlan, LinearPath};
 use crate::problem::Problem;
 
 /// Predicted peak bytes of one run on each path.
@@ -131,20 +141,50 @@ fn csr(nnz: f64, rows: f64) -> f64 {
     12.0 * nnz + 8.0 * rows
 }
 
-/// The prediction for a validated problem.
-pub fn predict(p: &Problem) -> Prediction {
-    let c = counts(p);
+/// The terms of a prediction that do not depend on how the direct factors are sized.
+struct Terms {
+    /// Unknowns of K (D per node).
+    n: f64,
+    nnz_k: f64,
+    /// Everything both paths hold (see the module doc).
+    base: f64,
+    /// The element triplets of the direct path's assembly.
+    assembly: f64,
+}
+
+fn terms(c: &Counts) -> Terms {
     let n = c.d * c.nodes;
     let nnz_k = c.d * c.d * c.nodes * c.stencil;
     let nnz_h = c.nodes * c.stencil;
     let per_cell = 8.0 * ((c.d + 1.0) + (c.d + 1.0) * c.d + 1.0 + 2.0 * c.d * c.d);
-    // Element matrices (D(D+1))² per cell as (row, col, value) triplets while assembling.
-    let assembly = 24.0 * c.cells * (c.d * (c.d + 1.0)).powi(2);
+    // Element matrices (D(D+1))² per cell as (row, col, value) triplets while assembling,
+    // 24 bytes each, beside their (col, value) copy bucketed by row in Csr::from_triplets.
+    let assembly = 40.0 * c.cells * (c.d * (c.d + 1.0)).powi(2);
     let vectors = 8.0 * (30.0 * n + 12.0 * c.nodes);
     let scalar = if c.damage { 3.0 } else { 1.0 };
     // K (full free operator) and its K_II and K_CI blocks; M, L and H.
     let operators = 2.0 * csr(nnz_k, n) + scalar * csr(nnz_h, c.nodes);
-    let base = 8.0 * c.d * c.nodes + per_cell * c.cells + vectors + operators;
+    Terms {
+        n,
+        nnz_k,
+        base: 8.0 * c.d * c.nodes + per_cell * c.cells + vectors + operators,
+        assembly,
+    }
+}
+
+/// The direct path's peak when its factors hold `factors` bytes: beside them, K_II's lower
+/// triangle handed to the factorisation (faer's CSC copy); or the assembly's triplets.
+fn direct_peak(t: &Terms, factors: f64) -> u64 {
+    let factoring = t.base + factors + 0.5 * csr(t.nnz_k, t.n);
+    factoring.max(t.assembly + t.base) as u64
+}
+
+/// The prediction for a validated problem, from counts alone.
+pub fn predict(p: &Problem) -> Prediction {
+    let c = counts(p);
+    let t = terms(&c);
+    let Terms { n, nnz_k, base, .. } = t;
+    let nnz_h = c.nodes * c.stencil;
     let direct_factors = 8.0
         * 1.25
         * (factor_entries(c.d, n)
@@ -153,8 +193,6 @@ pub fn predict(p: &Problem) -> Prediction {
             } else {
                 0.0
             });
-    // K_II's lower triangle handed to the factorisation (faer's CSC copy).
-    let direct = base + direct_factors + 0.5 * csr(nnz_k, n);
     // Smoothed aggregation: the set-up's transients dominate: D⁻¹A, A·T and the smoothed P,
     // then AP, PᵀAP and its transpose, beside the coarse operators kept (fitted: peak − base
     // = 7.8 and 8.6 × K's bytes at the 1/16 and 1/32 boxes). Geometric levels: P has ≤ 2
@@ -182,8 +220,27 @@ pub fn predict(p: &Problem) -> Prediction {
     let multigrid =
         PROCESS + base - shared_k_ii + hierarchy_k + hierarchy_h + full_space + solution_space;
     Prediction {
-        direct: (direct.max(assembly + base)) as u64,
+        direct: direct_peak(&t, direct_factors),
         multigrid: multigrid as u64,
+    }
+}
+
+/// [`predict`] with the direct path's factors left out: what is certain of the direct path's
+/// peak before its symbolic analyses (a lower bound).
+pub fn without_factors(p: &Problem) -> Prediction {
+    Prediction {
+        direct: direct_peak(&terms(&counts(p)), 0.0),
+        ..predict(p)
+    }
+}
+
+/// [`predict`] with the direct path's factors sized exactly: `factors` are the symbolic
+/// analyses of the direct path's factors (K_II's and, with damage, H's).
+pub fn refine(p: &Problem, factors: &[&CholeskyPlan]) -> Prediction {
+    let bytes: u64 = factors.iter().map(|f| f.factor_bytes()).sum();
+    Prediction {
+        direct: direct_peak(&terms(&counts(p)), bytes as f64),
+        ..predict(p)
     }
 }
 
@@ -232,7 +289,16 @@ const DIRECT_3D_UNKNOWNS: f64 = 60_000.0;
 /// prediction. `auto`: 2D and small 3D bodies take the direct path, larger 3D bodies
 /// multigrid; either falls back to the other when only the other fits.
 pub fn choose(p: &Problem, limit: Option<u64>) -> Result<(LinearPath, u64), MemoryError> {
-    let pred = predict(p);
+    choose_with(p, limit, predict(p))
+}
+
+/// [`choose`] on the prediction `pred` ([`predict`], or [`refine`] once the direct path's
+/// factors are analysed).
+pub fn choose_with(
+    p: &Problem,
+    limit: Option<u64>,
+    pred: Prediction,
+) -> Result<(LinearPath, u64), MemoryError> {
     let fits = |b: u64| limit.is_none_or(|l| b <= l);
     let allowed = limit.unwrap_or(u64::MAX);
     let c = counts(p);

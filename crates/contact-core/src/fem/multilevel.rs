@@ -20,8 +20,9 @@ use super::rigid_modes::{self, node_blocks, rigid_modes};
 use super::{DofMap, Slot};
 use crate::linalg::cholesky::FactorError;
 use crate::linalg::multigrid::{Blocks, Coarsening};
-use crate::linalg::{Csr, LinearPath, LinearSolver};
+use crate::linalg::{Cholesky, CholeskyPlan, Csr, LinearPath, LinearSolver};
 use crate::mesh::{Grid, Lattice, Mesh, MeshPattern};
+use faer::sparse::SparseColMatRef;
 use std::sync::Arc;
 
 /// A generated rectangle or box is halved while its finer level has more nodes than this;
@@ -44,14 +45,26 @@ pub fn velocity_solver<const D: usize>(
     LinearSolver::multigrid(Arc::new(a), blocks, coarsening)
 }
 
-/// The direct factor of an operator on a D-dimensional mesh: in 3D the ordering of less
-/// fill of AMD and nested dissection (nested dissection wins on the boxes from a few
-/// thousand unknowns on, docs/src/speed/speed.md); in 2D AMD.
+/// The direct factor of an operator on a D-dimensional mesh, analysed by [`direct_plan`].
 fn direct<const D: usize>(a: &Csr) -> Result<LinearSolver, FactorError> {
+    let lower = a.lower_csc();
+    let plan = direct_plan::<D>(lower.as_ref())?;
+    Ok(LinearSolver::Direct(Cholesky::from_plan(
+        plan,
+        lower.as_ref(),
+    )?))
+}
+
+/// The symbolic analysis of a run's operator on a D-dimensional mesh for the direct path: in
+/// 3D the ordering of less fill of AMD and nested dissection (nested dissection wins on the
+/// boxes from a few thousand unknowns on, docs/src/speed/speed.md); in 2D AMD.
+pub fn direct_plan<const D: usize>(
+    a_lower: SparseColMatRef<'_, usize, f64>,
+) -> Result<CholeskyPlan, FactorError> {
     if D == 3 {
-        LinearSolver::direct_least_fill(a)
+        CholeskyPlan::least_fill(a_lower)
     } else {
-        LinearSolver::direct(a)
+        CholeskyPlan::amd(a_lower)
     }
 }
 
@@ -379,5 +392,126 @@ mod tests {
             .refine()
             .refine();
         prolongators_reproduce_linear_fields(&refined, 2);
+    }
+
+    /// A P1-type operator on `mesh` with `b` DOFs per node: DOFs p ≠ q coupled when their
+    /// nodes are equal or share a cell, by −(½ + ¼ sin(p + 1.7 q)) for p < q (generic values,
+    /// so no fill entry of the factor cancels to zero), and 1 + the row's absolute sum on the
+    /// diagonal (diagonally dominant: SPD). The pattern of K_II (b = D) or of H (b = 1).
+    fn node_operator<const D: usize>(mesh: &Mesh<D>, b: usize) -> Csr {
+        let mut nodes = std::collections::BTreeSet::new();
+        for cell in mesh.cells() {
+            for &i in cell {
+                for &j in cell {
+                    nodes.insert((i, j));
+                }
+            }
+        }
+        let n = b * mesh.n_nodes();
+        let mut t = Vec::new();
+        let mut diagonal = vec![1.0; n];
+        for &(i, j) in &nodes {
+            for r in 0..b {
+                for c in 0..b {
+                    let (p, q) = (b * i + r, b * j + c);
+                    if p != q {
+                        let v = -(0.5 + 0.25 * (p.min(q) as f64 + 1.7 * p.max(q) as f64).sin());
+                        t.push((p, q, v));
+                        diagonal[p] -= v;
+                    }
+                }
+            }
+        }
+        t.extend(diagonal.iter().enumerate().map(|(p, &d)| (p, p, d)));
+        Csr::from_triplets(n, n, t)
+    }
+
+    /// Entries of the Cholesky factor of `a`'s pattern in the order `forward` (row i of the
+    /// factored matrix is row `forward[i]` of `a`), by graph elimination: column i of L holds
+    /// i, the later neighbours of i and the columns of its children in the elimination tree.
+    fn elimination_fill(a: &Csr, forward: &[usize]) -> usize {
+        let n = a.nrows;
+        let mut position = vec![0; n];
+        for (i, &f) in forward.iter().enumerate() {
+            position[f] = i;
+        }
+        let mut column: Vec<std::collections::BTreeSet<usize>> = vec![Default::default(); n];
+        for r in 0..n {
+            for &c in &a.indices[a.indptr[r]..a.indptr[r + 1]] {
+                let (i, j) = (position[r], position[c as usize]);
+                if i < j {
+                    column[i].insert(j);
+                }
+            }
+        }
+        let mut entries = 0;
+        for i in 0..n {
+            let below = std::mem::take(&mut column[i]);
+            entries += 1 + below.len();
+            if let Some(&parent) = below.iter().next() {
+                column[parent].extend(below.iter().skip(1));
+            }
+        }
+        entries
+    }
+
+    /// Nonzero values on and below the diagonal of a supernodal factor: supernode s holds
+    /// columns begin..end as a column-major block whose rows are those columns, then its row
+    /// pattern.
+    fn lower_nonzeros(factor: &Cholesky) -> usize {
+        let l = factor.supernodal();
+        let s = l.symbolic();
+        let (begin, end) = (s.supernode_begin(), s.supernode_end());
+        let val_ptr = s.col_ptr_for_val();
+        let mut count = 0;
+        for k in 0..s.n_supernodes() {
+            let cols = end[k] - begin[k];
+            let block = &l.values()[val_ptr[k]..val_ptr[k + 1]];
+            let rows = block.len() / cols;
+            for j in 0..cols {
+                count += block[j * rows + j..(j + 1) * rows]
+                    .iter()
+                    .filter(|v| **v != 0.0)
+                    .count();
+            }
+        }
+        count
+    }
+
+    /// The symbolic analysis sizes the factor before any numeric work: the factor made from a
+    /// plan stores the plan's nnz(L) entries, exactly as many of them nonzero as graph
+    /// elimination in the factor's order predicts (the rest are the explicit zeros of
+    /// faer's dense supernodal blocks), and the plan's bytes hold at least its values; the
+    /// least-fill plan is the smaller of AMD's and nested dissection's. 2D and 3D, vector
+    /// and scalar operators.
+    #[test]
+    fn a_plan_sizes_its_factor_before_the_numeric_work() {
+        use crate::linalg::cholesky::Ordering;
+        let square = Mesh::rectangle(1.0, 1.0, 12, 12, MeshPattern::Diagonal);
+        let cube = Mesh::cuboid(1.0, 1.0, 1.0, 4, 4, 4);
+        let operators = [
+            node_operator(&square, 2),
+            node_operator(&square, 1),
+            node_operator(&cube, 3),
+            node_operator(&cube, 1),
+        ];
+        for a in &operators {
+            let lower = a.lower_csc();
+            let nnz = |o| CholeskyPlan::by(lower.as_ref(), o).unwrap().nnz_l();
+            let least = CholeskyPlan::least_fill(lower.as_ref()).unwrap();
+            assert_eq!(
+                least.nnz_l(),
+                nnz(Ordering::Amd).min(nnz(Ordering::NestedDissection))
+            );
+            for plan in [CholeskyPlan::amd(lower.as_ref()).unwrap(), least] {
+                let (entries, bytes) = (plan.nnz_l(), plan.factor_bytes());
+                let factor = Cholesky::from_plan(plan, lower.as_ref()).unwrap();
+                assert_eq!(factor.nnz_l(), entries);
+                let nonzero = lower_nonzeros(&factor);
+                let fill = elimination_fill(a, &factor.forward());
+                assert_eq!(nonzero, fill, "n = {}", a.nrows);
+                assert!(fill <= entries && bytes >= 8 * entries as u64);
+            }
+        }
     }
 }

@@ -1,7 +1,12 @@
-//! Sparse Cholesky LLᵀ with faer's low-level API: the symbolic analysis (AMD ordering, or
-//! the lesser fill of AMD and nested dissection, [`super::nested_dissection`]; supernodal
-//! structure) is done once, the numeric factor lives in our own buffer and can be
-//! recomputed for new values on the same pattern, and solves reuse one scratch buffer.
+//! Sparse Cholesky LLᵀ with faer's low-level API, in two steps as faer makes it:
+//! - [`CholeskyPlan`], the symbolic analysis of a pattern (AMD ordering, or the lesser fill
+//!   of AMD and nested dissection, [`super::nested_dissection`]; supernodal structure): it
+//!   knows the factor's entries nnz(L) and the bytes the numeric factor will hold before any
+//!   numeric work, which is what the direct path's memory prediction needs
+//!   ([`crate::memory`]);
+//! - [`Cholesky`], the numeric factor of values on that pattern ([`Cholesky::from_plan`]),
+//!   in our own buffer, recomputed for new values on the same pattern; solves reuse one
+//!   scratch buffer.
 //!
 //! faer's automatic simplicial/supernodal switch picks the slower variant for P1 meshes of
 //! these sizes (measured here: 2–5× slower), so the supernodal path is forced. Parallelism is `Seq`:
@@ -40,6 +45,14 @@ pub struct Cholesky {
     factor_scratch: MemBuffer,
     /// Scratch for single right-hand-side solves.
     solve_scratch: MemBuffer,
+    ordering: Ordering,
+}
+
+/// The symbolic analysis of an SPD pattern: ordering P and the supernodal structure of L in
+/// P A Pᵀ = L Lᵀ, no values. Clones share the analysis.
+#[derive(Clone)]
+pub struct CholeskyPlan {
+    symbolic: Arc<SymbolicCholesky<usize>>,
     ordering: Ordering,
 }
 
@@ -104,15 +117,14 @@ impl std::fmt::Debug for Cholesky {
     }
 }
 
-impl Cholesky {
-    /// Symbolic analysis and first numeric factorisation of the lower triangle `a_lower`.
-    pub fn new(a_lower: SparseColMatRef<'_, usize, f64>) -> Result<Self, FactorError> {
+impl CholeskyPlan {
+    /// The analysis of the lower triangle `a_lower`'s pattern with AMD ordering.
+    pub fn amd(a_lower: SparseColMatRef<'_, usize, f64>) -> Result<Self, FactorError> {
         Self::with_ordering(a_lower, None)
     }
 
-    /// [`Cholesky::new`] with the ordering of smaller fill of AMD and nested dissection
-    /// (both symbolic analyses are made, a small cost next to the numeric factorisation;
-    /// AMD on a tie).
+    /// The analysis with the ordering of smaller fill of AMD and nested dissection (both
+    /// analyses are made, a small cost next to the numeric factorisation; AMD on a tie).
     pub fn least_fill(a_lower: SparseColMatRef<'_, usize, f64>) -> Result<Self, FactorError> {
         let amd = analyse(a_lower, None)?;
         let nd_order = nested_dissection::order(a_lower.symbolic());
@@ -122,27 +134,26 @@ impl Cholesky {
         } else {
             (amd, Ordering::Amd)
         };
-        Self::from_symbolic(symbolic, ordering, a_lower)
+        Ok(Self::new(symbolic, ordering))
     }
 
-    /// [`Cholesky::new`] with the given ordering method (for comparisons).
+    /// The analysis with the given ordering method (for comparisons).
     pub fn by(
         a_lower: SparseColMatRef<'_, usize, f64>,
         ordering: Ordering,
     ) -> Result<Self, FactorError> {
         match ordering {
-            Ordering::Amd | Ordering::Given => Self::new(a_lower),
+            Ordering::Amd | Ordering::Given => Self::amd(a_lower),
             Ordering::NestedDissection => {
                 let order = nested_dissection::order(a_lower.symbolic());
-                let symbolic = analyse(a_lower, Some(&order))?;
-                Self::from_symbolic(symbolic, ordering, a_lower)
+                Ok(Self::new(analyse(a_lower, Some(&order))?, ordering))
             }
         }
     }
 
-    /// [`Cholesky::new`] with the symmetric ordering `forward` (row i of the factored
-    /// P A Pᵀ is row `forward[i]` of A) instead of AMD; the analysis may still reorder within
-    /// it (postordering), which [`Cholesky::forward`] reports.
+    /// The analysis with the symmetric ordering `forward` (row i of the factored P A Pᵀ is
+    /// row `forward[i]` of A) instead of AMD; it may still reorder within it (postordering),
+    /// which [`Cholesky::forward`] reports.
     pub fn with_ordering(
         a_lower: SparseColMatRef<'_, usize, f64>,
         forward: Option<&[usize]>,
@@ -151,19 +162,101 @@ impl Cholesky {
             Some(_) => Ordering::Given,
             None => Ordering::Amd,
         };
-        Self::from_symbolic(analyse(a_lower, forward)?, ordering, a_lower)
+        Ok(Self::new(analyse(a_lower, forward)?, ordering))
     }
 
-    fn from_symbolic(
-        symbolic: SymbolicCholesky<usize>,
+    fn new(symbolic: SymbolicCholesky<usize>, ordering: Ordering) -> Self {
+        CholeskyPlan {
+            symbolic: Arc::new(symbolic),
+            ordering,
+        }
+    }
+
+    /// The ordering method of the analysis.
+    pub fn ordering(&self) -> Ordering {
+        self.ordering
+    }
+
+    pub fn n(&self) -> usize {
+        self.symbolic.nrows()
+    }
+
+    /// Number of stored entries of the factor L (supernodal: the dense blocks' entries,
+    /// explicit zeros included).
+    pub fn nnz_l(&self) -> usize {
+        self.symbolic.len_val()
+    }
+
+    /// Bytes a [`Cholesky`] made from this plan holds: L's values (8 nnz(L)), faer's scratch
+    /// of the numeric factorisation and of a one-column solve, and the analysis's own index
+    /// arrays: the supernodes' row indices, as much again as a bound of faer's row-major
+    /// supernode structure, the supernode pointers and the permutation.
+    pub fn factor_bytes(&self) -> u64 {
+        let s = &self.symbolic;
+        let scratch = s
+            .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default())
+            .size_bytes()
+            + s.solve_in_place_scratch::<f64>(1, Par::Seq).size_bytes();
+        let word = std::mem::size_of::<usize>();
+        let structure = match s.raw() {
+            SymbolicCholeskyRaw::Supernodal(sn) => {
+                word * (2 * sn.row_idx().len() + 4 * (sn.n_supernodes() + 1))
+            }
+            SymbolicCholeskyRaw::Simplicial(sm) => word * (sm.row_idx().len() + s.nrows() + 1),
+        };
+        let permutation = if s.perm().is_some() {
+            2 * word * s.nrows()
+        } else {
+            0
+        };
+        (8 * self.nnz_l() + scratch + structure + permutation) as u64
+    }
+}
+
+impl Cholesky {
+    /// Symbolic analysis (AMD) and first numeric factorisation of the lower triangle
+    /// `a_lower`.
+    pub fn new(a_lower: SparseColMatRef<'_, usize, f64>) -> Result<Self, FactorError> {
+        Self::from_plan(CholeskyPlan::amd(a_lower)?, a_lower)
+    }
+
+    /// [`Cholesky::new`] with [`CholeskyPlan::least_fill`].
+    pub fn least_fill(a_lower: SparseColMatRef<'_, usize, f64>) -> Result<Self, FactorError> {
+        Self::from_plan(CholeskyPlan::least_fill(a_lower)?, a_lower)
+    }
+
+    /// [`Cholesky::new`] with [`CholeskyPlan::by`] (for comparisons).
+    pub fn by(
+        a_lower: SparseColMatRef<'_, usize, f64>,
         ordering: Ordering,
+    ) -> Result<Self, FactorError> {
+        Self::from_plan(CholeskyPlan::by(a_lower, ordering)?, a_lower)
+    }
+
+    /// [`Cholesky::new`] with [`CholeskyPlan::with_ordering`].
+    pub fn with_ordering(
+        a_lower: SparseColMatRef<'_, usize, f64>,
+        forward: Option<&[usize]>,
+    ) -> Result<Self, FactorError> {
+        Self::from_plan(CholeskyPlan::with_ordering(a_lower, forward)?, a_lower)
+    }
+
+    /// The numeric factorisation of `a_lower`, whose pattern is the one `plan` analysed.
+    pub fn from_plan(
+        plan: CholeskyPlan,
         a_lower: SparseColMatRef<'_, usize, f64>,
     ) -> Result<Self, FactorError> {
+        let CholeskyPlan { symbolic, ordering } = plan;
+        assert_eq!(
+            a_lower.nrows(),
+            symbolic.nrows(),
+            "a pattern of another size"
+        );
         let solve_scratch = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
         let mut this = Cholesky {
             l_values: Arc::new(vec![0.0; symbolic.len_val()]),
             factor_scratch: factor_scratch(&symbolic),
-            symbolic: Arc::new(symbolic),
+            symbolic,
             solve_scratch,
             ordering,
         };

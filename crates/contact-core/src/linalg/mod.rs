@@ -19,7 +19,7 @@ pub mod schur;
 pub mod solver;
 
 pub use crate::problem::LinearPath;
-pub use cholesky::Cholesky;
+pub use cholesky::{Cholesky, CholeskyPlan};
 pub use csr::Csr;
 pub use operator::LinearOperator;
 pub use schur::{schur_complement, SchurPath};

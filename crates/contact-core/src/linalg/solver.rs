@@ -88,14 +88,6 @@ impl LinearSolver {
         Ok(LinearSolver::Direct(Cholesky::new(a.lower_csc().as_ref())?))
     }
 
-    /// The direct factor of A with the ordering of less fill, AMD or nested dissection
-    /// ([`Cholesky::least_fill`]).
-    pub fn direct_least_fill(a: &Csr) -> Result<LinearSolver, FactorError> {
-        Ok(LinearSolver::Direct(Cholesky::least_fill(
-            a.lower_csc().as_ref(),
-        )?))
-    }
-
     /// Multigrid-preconditioned CG for A with node `blocks` and the given coarsening.
     pub fn multigrid(
         a: Arc<Csr>,

@@ -21,7 +21,7 @@
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::linalg::multigrid::VCycle;
 use crate::linalg::pcg::{self, PcgWork, Preconditioner};
-use crate::linalg::{Cholesky, Csr, LinearOperator, LinearSolver};
+use crate::linalg::{Cholesky, CholeskyPlan, Csr, LinearOperator, LinearSolver};
 use faer::sparse::SparseColMat;
 use std::sync::Arc;
 
@@ -151,6 +151,22 @@ impl DamageStep {
 
     /// The direct path: H's factor, refactored for the masked systems.
     pub fn new(h: Csr) -> Result<Self, SolveError> {
+        let plan = Self::plan(&h)?;
+        Self::with_plan(h, plan)
+    }
+
+    /// The symbolic analysis of H's factor on the direct path, from any matrix with H's
+    /// pattern (the mass matrix M: H = M/k + κL is assembled into M's pattern). AMD: the
+    /// scalar operator's factor is small beside K_II's.
+    pub fn plan(pattern: &Csr) -> Result<CholeskyPlan, SolveError> {
+        CholeskyPlan::amd(pattern.lower_csc().as_ref()).map_err(|source| SolveError::Factor {
+            what: "damage",
+            source,
+        })
+    }
+
+    /// [`DamageStep::new`] on the analysis `plan` of H's pattern ([`DamageStep::plan`]).
+    pub fn with_plan(h: Csr, plan: CholeskyPlan) -> Result<Self, SolveError> {
         let n = h.nrows;
         let lower = h.lower_csc();
         let (sym, vals) = lower.as_ref().parts();
@@ -161,10 +177,11 @@ impl DamageStep {
             }
         }
         let lower_values = vals.to_vec();
-        let chol = Cholesky::new(lower.as_ref()).map_err(|source| SolveError::Factor {
-            what: "damage",
-            source,
-        })?;
+        let chol =
+            Cholesky::from_plan(plan, lower.as_ref()).map_err(|source| SolveError::Factor {
+                what: "damage",
+                source,
+            })?;
         Ok(DamageStep {
             diag: h.diagonal(),
             h: Arc::new(h),

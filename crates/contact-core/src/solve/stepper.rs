@@ -19,7 +19,7 @@ use crate::laws::constitutive::{elastic_stress, viscous_stress, von_mises};
 use crate::laws::damage_source::phi;
 use crate::laws::Tensor;
 use crate::linalg::multigrid::{Hierarchy, Params};
-use crate::linalg::{Csr, LinearPath, LinearSolver, SchurPath};
+use crate::linalg::{Cholesky, CholeskyPlan, Csr, LinearPath, LinearSolver, SchurPath};
 use crate::memory;
 use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::{Problem, SmallnessPolicy};
@@ -278,6 +278,8 @@ pub struct Prepared<const D: usize = 2> {
     /// The linear path taken and its predicted peak bytes.
     pub linear: LinearPath,
     pub predicted_bytes: u64,
+    /// The direct path's analysis of H's factor, made with K_II's for the prediction.
+    damage_plan: Option<CholeskyPlan>,
     mesh: Mesh<D>,
     geo: Geometry<D>,
     dofs: DofMap<D>,
@@ -296,10 +298,34 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// [`Prepared::new`] under a per-job memory limit: the linear path is chosen (or the run
-    /// refused) from the predicted peak before anything is assembled.
+    /// refused) from the predicted peak before anything is assembled, and on the direct path
+    /// from the exact factor sizes before anything is factorised ([`memory::refine`]).
     pub fn within(problem: &Problem, memory_limit: Option<u64>) -> Result<Prepared<D>, SolveError> {
         let start = Instant::now();
-        let (linear, predicted_bytes) = memory::choose(problem, memory_limit)?;
+        // A demanded direct path is decided on its exact factor sizes, once analysed.
+        let first = match problem.linear {
+            LinearPath::Direct => memory::without_factors(problem),
+            _ => memory::predict(problem),
+        };
+        let (linear, predicted_bytes) = memory::choose_with(problem, memory_limit, first)?;
+        match Self::on_path(problem, memory_limit, linear, predicted_bytes, start)? {
+            Setup::Ready(p) => Ok(*p),
+            Setup::Multigrid(bytes) => {
+                match Self::on_path(problem, memory_limit, LinearPath::Multigrid, bytes, start)? {
+                    Setup::Ready(p) => Ok(*p),
+                    Setup::Multigrid(_) => unreachable!("only the direct path is refined"),
+                }
+            }
+        }
+    }
+
+    fn on_path(
+        problem: &Problem,
+        memory_limit: Option<u64>,
+        linear: LinearPath,
+        mut predicted_bytes: u64,
+        start: Instant,
+    ) -> Result<Setup<D>, SolveError> {
         let mesh = problem.mesh().map_err(|e| SolveError::Data {
             pointer: format!("/boundary/{}", e.part()),
             message: e.to_string(),
@@ -321,6 +347,9 @@ impl<const D: usize> Prepared<D> {
             what: "velocity",
             source,
         };
+        // The direct path analyses H's pattern (M's) with K_II's before either is factorised.
+        let mut mass = None;
+        let mut damage_plan = None;
         // With a Γ3 the multigrid path builds one hierarchy, of K on all free DOFs: the slip
         // solver's, through which K_II is solved too (never copied).
         let full_space = linear == LinearPath::Multigrid && dofs.n_contact() > 0;
@@ -332,11 +361,27 @@ impl<const D: usize> Prepared<D> {
             let k_ii =
                 LinearSolver::leading_block(h.clone(), k.clone(), n_i).map_err(factor_error)?;
             (k_ii, Some(h))
-        } else {
+        } else if linear == LinearPath::Multigrid {
             let k_ii =
                 multilevel::velocity_solver(&mesh, &dofs, k.block(0..n_i, 0..n_i), n_i, linear)
                     .map_err(factor_error)?;
             (k_ii, None)
+        } else {
+            let lower = k.block(0..n_i, 0..n_i).lower_csc();
+            let plan = multilevel::direct_plan::<D>(lower.as_ref()).map_err(factor_error)?;
+            let m = assembly::mass(&mesh, &geo);
+            if problem.damage.is_some() {
+                damage_plan = Some(DamageStep::plan(&m)?);
+            }
+            mass = Some(m);
+            let plans: Vec<_> = std::iter::once(&plan).chain(&damage_plan).collect();
+            let refined = memory::refine(problem, &plans);
+            match memory::choose_with(problem, memory_limit, refined)? {
+                (LinearPath::Multigrid, bytes) => return Ok(Setup::Multigrid(bytes)),
+                (_, bytes) => predicted_bytes = bytes,
+            }
+            let factor = Cholesky::from_plan(plan, lower.as_ref()).map_err(factor_error)?;
+            (LinearSolver::Direct(factor), None)
         };
         let mut velocity = VelocityStep::with_solver(
             k,
@@ -349,13 +394,11 @@ impl<const D: usize> Prepared<D> {
             velocity = velocity.with_hierarchy(h);
         }
         let smallness = smallness::check(problem, &mesh, &geo, &dofs, &mut velocity)?;
-        let mass = match linear {
-            LinearPath::Multigrid => assembly::mass_in_pattern(&mesh, &geo),
-            _ => assembly::mass(&mesh, &geo),
-        };
-        Ok(Prepared {
+        let mass = mass.unwrap_or_else(|| assembly::mass_in_pattern(&mesh, &geo));
+        Ok(Setup::Ready(Box::new(Prepared {
             linear,
             predicted_bytes,
+            damage_plan,
             mesh,
             geo,
             dofs,
@@ -363,8 +406,15 @@ impl<const D: usize> Prepared<D> {
             smallness,
             mass,
             seconds: start.elapsed().as_secs_f64(),
-        })
+        })))
     }
+}
+
+/// A set-up's outcome: ready, or (`auto`) to be made on the multigrid path with that
+/// path's predicted bytes, what was built for the direct path dropped first.
+enum Setup<const D: usize> {
+    Ready(Box<Prepared<D>>),
+    Multigrid(u64),
 }
 
 /// One job's assembled operators, factorisations and current state, in dimension D.
@@ -409,6 +459,7 @@ impl<const D: usize> Simulation<D> {
         let Prepared {
             linear,
             predicted_bytes,
+            damage_plan,
             mesh,
             geo,
             dofs,
@@ -455,7 +506,10 @@ impl<const D: usize> Simulation<D> {
                         })?;
                         DamageStep::multigrid(mg)?
                     }
-                    _ => DamageStep::new(h)?,
+                    _ => match damage_plan {
+                        Some(plan) => DamageStep::with_plan(h, plan)?,
+                        None => DamageStep::new(h)?,
+                    },
                 };
                 solver.set_active_from(&zeta);
                 Some(DamagePart {
