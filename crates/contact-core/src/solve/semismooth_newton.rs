@@ -18,7 +18,8 @@
 //!    ω_i μ′(ρ)), solved by conjugate gradients preconditioned with the truncated V-cycle of
 //!    K's hierarchy ([`crate::linalg::multigrid::truncated`]: truncated prolongator, E⁺ in
 //!    the smoother and the first coarse operator). The inexact-Newton tolerance is
-//!    min(0.1, KKT residual)·‖r‖∞, never below the velocity step's Krylov floor. With a
+//!    min(0.1, KKT residual after step 1)·‖r‖∞, never below the velocity step's Krylov
+//!    floor. When step 1 alone meets the tolerance, no Newton step is taken. With a
 //!    slip-weakening law (μ′ < 0) M may be indefinite away from the solution: CG stops at
 //!    the first direction of non-positive curvature and the step is its last iterate (a
 //!    descent direction of the quadratic model), or −B r if that is the first direction.
@@ -52,6 +53,7 @@ const REBUILD_FRACTION: f64 = 1.0;
 /// How a solve went.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NewtonReport {
+    /// Newton steps taken (linearised solves; a sweep that alone converges is not one).
     pub newton_iterations: usize,
     pub krylov_iterations: usize,
     /// Relative KKT residual of the full problem.
@@ -394,7 +396,6 @@ impl SemismoothNewton {
                 residual = self.kkt(&g, w) / scale;
             }
             report.residual = residual;
-            report.newton_iterations = it;
             if residual <= settings.tolerance {
                 report.slip_nodes = (0..self.weights.len())
                     .filter(|&i| self.node(w, i) != [0.0, 0.0])
@@ -406,13 +407,22 @@ impl SemismoothNewton {
                 return Err(SolveError::NotConverged {
                     what: "velocity step (semismooth Newton, multigrid)",
                     step,
-                    iterations: it,
+                    iterations: report.newton_iterations,
                     residual,
                     tolerance: settings.tolerance,
                 });
             }
             fresh = false;
             self.smooth_contact(w, &mut g);
+            // The residual that sets the forcing term is the one after the sweep: a guess
+            // whose resting nodes hold rounding-sized slip has a KKT residual of order one
+            // that the sweep alone removes (it sets them to rest), and a forcing term taken
+            // before it would ask CG for one digit only.
+            let swept = self.kkt(&g, w) / scale;
+            if swept <= settings.tolerance {
+                continue;
+            }
+            report.newton_iterations += 1;
             let (stick, blocks) = self.linearise(w, &g, &mut r);
             if self.prepare(stick, &blocks)? {
                 report.preconditioners += 1;
@@ -421,7 +431,7 @@ impl SemismoothNewton {
             if r_norm == 0.0 {
                 continue;
             }
-            let eta = residual.min(0.1);
+            let eta = swept.min(0.1);
             let atol = (eta * r_norm).max(krylov_floor * scale);
             r.iter_mut().for_each(|v| *v = -*v);
             d.iter_mut().for_each(|v| *v = 0.0);
@@ -472,7 +482,7 @@ impl SemismoothNewton {
                     return Err(SolveError::NotConverged {
                         what: "velocity step (semismooth Newton, multigrid): no descent",
                         step,
-                        iterations: it + 1,
+                        iterations: report.newton_iterations,
                         residual: self.kkt(&g, w) / scale,
                         tolerance: settings.tolerance,
                     });
