@@ -15,7 +15,8 @@
 //! 3. **Newton step** on the smooth problem that remains (stick DOFs held at zero): with
 //!    ρ = |x_i|, ẑ = x_i/ρ at a slip node, the gradient r = K w − f + ω_i μ(ρ) ẑ and the
 //!    Hessian M = K + E on the other DOFs, E_i = ω_i [μ′(ρ) ẑẑᵀ + μ(ρ)/ρ (I − ẑẑᵀ)] (2D:
-//!    ω_i μ′(ρ)), solved by conjugate gradients preconditioned with the truncated V-cycle of
+//!    ω_i μ′(ρ); the term μ(ρ)/ρ capped at [`CURVATURE_CAP`] × the node's stiffness / ω_i),
+//!    solved by conjugate gradients preconditioned with the truncated V-cycle of
 //!    K's hierarchy ([`crate::linalg::multigrid::truncated`]: truncated prolongator, E⁺ in
 //!    the smoother and the first coarse operator). The inexact-Newton tolerance is
 //!    min(0.1, KKT residual after step 1)·‖r‖∞, never below the velocity step's Krylov
@@ -46,6 +47,14 @@ use std::sync::Arc;
 const LOCAL_SWEEPS: usize = 3;
 /// Most halvings of the line search.
 const HALVINGS: usize = 40;
+/// The turning curvature ω_i μ/ρ of a 3D slip block is capped at this multiple of its node's
+/// stiffness. A node the sweep has just set slipping, at the edge of the friction cone,
+/// has a tiny ρ and so a huge curvature, and M is as ill-conditioned. Uncapped, Newton
+/// steps solved to more than one digit stopped descending (box-exp3, g = 2, 1/64: step 30
+/// failed after 28 Newton iterations once the forcing term followed the swept residual).
+/// M stays SPD with the cap and the line search is on the exact E, so only the Newton
+/// step's quality near such a node changes.
+const CURVATURE_CAP: f64 = 1e4;
 /// A block of E⁺ that moved by more than this fraction of its node's stiffness triggers a
 /// new preconditioner.
 const REBUILD_FRACTION: f64 = 1.0;
@@ -261,7 +270,8 @@ impl SemismoothNewton {
             } else {
                 r[c] += om * mu * z[0];
                 r[c + 1] += om * mu * z[1];
-                let t = mu / rho;
+                let stiffness = self.node_k[i].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let t = (mu / rho).min(CURVATURE_CAP * stiffness / om);
                 for a in 0..2 {
                     for b in 0..2 {
                         let zz = z[a] * z[b];
