@@ -115,17 +115,31 @@ impl Case {
         rhs
     }
 
-    /// Solves with Newton from `w0`, checks the KKT conditions directly and the agreement
-    /// with the dense reduced solution; returns the report.
-    fn check(&mut self, f: &[f64], weights: &[f64], law: FrictionLaw, w0: &[f64]) -> NewtonReport {
-        let mut newton = SemismoothNewton::new(
+    /// The full-space solver of this case with weights ω and `law`.
+    fn newton(&self, weights: &[f64], law: FrictionLaw) -> SemismoothNewton {
+        SemismoothNewton::new(
             self.k.clone(),
             self.hierarchy.clone(),
             self.n_i,
             self.block,
             weights.to_vec(),
-            law.clone(),
-        );
+            law,
+        )
+    }
+
+    /// Tangential loads turning around the Γ3 plane, alternating in size between 0.5 and 2.
+    fn turning_load(&self) -> Vec<f64> {
+        self.load(|i| {
+            let a = 0.7 * i as f64;
+            let s = if i % 2 == 0 { 0.5 } else { 2.0 };
+            [s * a.cos(), s * a.sin()]
+        })
+    }
+
+    /// Solves with Newton from `w0`, checks the KKT conditions directly and the agreement
+    /// with the dense reduced solution; returns the report.
+    fn check(&mut self, f: &[f64], weights: &[f64], law: FrictionLaw, w0: &[f64]) -> NewtonReport {
+        let mut newton = self.newton(weights, law.clone());
         let mut w = w0.to_vec();
         let rep = newton
             .solve(f, &mut w, &SolverSettings::default(), 1e-12, 0)
@@ -238,12 +252,7 @@ fn three_dimensional_isotropic_friction() {
     let mut c = case::<3>("box-exp3", json!({"h": "1/6"}));
     let zero = vec![0.0; c.n()];
     let weights = c.weights.clone();
-    // Tangential loads turning around the Γ3 plane, alternating in size.
-    let f = c.load(|i| {
-        let a = 0.7 * i as f64;
-        let s = if i % 2 == 0 { 0.5 } else { 2.0 };
-        [s * a.cos(), s * a.sin()]
-    });
+    let f = c.turning_load();
     assert_eq!(
         c.check(&f, &weights, tresca(0.0), &zero).slip_nodes,
         weights.len()
@@ -303,20 +312,9 @@ fn rounding_sized_slip_at_stick_nodes_is_removed_without_a_newton_step() {
         (case::<3>("box-exp3", json!({"h": "1/6"})), 1.0),
     ] {
         let weights = c.weights.clone();
-        let f = c.load(|i| {
-            let a = 0.7 * i as f64;
-            let s = if i % 2 == 0 { 0.5 } else { 2.0 };
-            [s * a.cos(), s * a.sin()]
-        });
+        let f = c.turning_load();
         let mut solution = vec![0.0; c.n()];
-        let mut newton = SemismoothNewton::new(
-            c.k.clone(),
-            c.hierarchy.clone(),
-            c.n_i,
-            c.block,
-            weights.clone(),
-            tresca(g),
-        );
+        let mut newton = c.newton(&weights, tresca(g));
         newton
             .solve(&f, &mut solution, &SolverSettings::default(), 1e-12, 0)
             .unwrap();
@@ -355,20 +353,9 @@ fn nodes_that_stop_slipping_come_to_rest_exactly() {
         case::<3>("box-exp3", json!({"h": "1/6"})),
     ] {
         let weights = c.weights.clone();
-        let f = c.load(|i| {
-            let a = 0.7 * i as f64;
-            let s = if i % 2 == 0 { 0.5 } else { 2.0 };
-            [s * a.cos(), s * a.sin()]
-        });
+        let f = c.turning_load();
         let mut start = vec![0.0; c.n()];
-        let mut all_slip = SemismoothNewton::new(
-            c.k.clone(),
-            c.hierarchy.clone(),
-            c.n_i,
-            c.block,
-            weights.clone(),
-            tresca(0.2),
-        );
+        let mut all_slip = c.newton(&weights, tresca(0.2));
         let slipping = all_slip
             .solve(&f, &mut start, &SolverSettings::default(), 1e-12, 0)
             .unwrap();
