@@ -510,14 +510,10 @@ impl SemismoothNewton {
             }
             // Line search on E along d (r now holds −∇, d_stick = 0).
             self.k.mul_vec(&d, &mut kd);
-            let mut dg: f64 = d.iter().zip(&g).map(|(d, g)| d * g).sum();
-            let mut dkd: f64 = d.iter().zip(&kd).map(|(d, k)| d * k).sum();
             let mut alpha = 1.0;
             let mut accepted = self.try_landing(w, &g, &mut d, &mut kd);
-            if !accepted {
-                dg = d.iter().zip(&g).map(|(d, g)| d * g).sum();
-                dkd = d.iter().zip(&kd).map(|(d, k)| d * k).sum();
-            }
+            let dg: f64 = d.iter().zip(&g).map(|(d, g)| d * g).sum();
+            let dkd: f64 = d.iter().zip(&kd).map(|(d, k)| d * k).sum();
             for _ in 0..HALVINGS {
                 if accepted {
                     break;
