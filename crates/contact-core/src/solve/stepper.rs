@@ -831,17 +831,23 @@ impl<const D: usize> Simulation<D> {
         start.elapsed().as_secs_f64()
     }
 
-    /// One product with the free-DOF velocity operator K on a copy of the current load (the
-    /// unit of the benchmark's matvec-equivalents).
-    pub fn time_one_product(&self) -> f64 {
+    /// `count` products with the free-DOF velocity operator K on the current load, each timed
+    /// alone into one output buffer written once before (so no page faults are timed): the
+    /// unit of the benchmark's matvec-equivalents.
+    pub fn time_products(&self, count: usize) -> Vec<f64> {
         let (k, _) = self.velocity.solver.operator();
         let x = &self.velocity.load_free;
         let mut y = vec![0.0; k.nrows];
-        let start = Instant::now();
         k.mul_vec(x, &mut y);
-        let secs = start.elapsed().as_secs_f64();
-        std::hint::black_box(&y);
-        secs
+        (0..count)
+            .map(|_| {
+                let start = Instant::now();
+                k.mul_vec(x, &mut y);
+                let secs = start.elapsed().as_secs_f64();
+                std::hint::black_box(&y);
+                secs
+            })
+            .collect()
     }
 
     /// Damage refactorisations so far (0 without damage).

@@ -70,13 +70,17 @@ impl ContactSolver {
 /// Most rounds of iterative refinement of the interior velocity per step.
 const REFINEMENTS: usize = 3;
 
-/// The multigrid path solves K_II y = f_I, and the Newton iterations of a slipping step their
-/// Jacobian systems (at least), to this fraction of the step's tolerance (max norm, relative
-/// to ‖f‖∞): the full KKT residual then stays a decade below the tolerance, and the norms
-/// agree with the direct path to about 1e-13 (box-exp3 at 1/16: 8e-14 in w_V with g = 20, as
-/// with 0.01, which costs one more iteration a step; 2e-14 with g = 2, where 0.01 cost 25 %
-/// more iterations).
-const KRYLOV_FRACTION: f64 = 0.1;
+/// The multigrid path solves K_II y = f_I to this fraction of the step's tolerance (max norm,
+/// relative to ‖f‖∞). When Γ3 sticks, that residual and the stick test's force are the whole
+/// KKT residual (no product follows), so the margin only has to absorb the difference between
+/// CG's recursive residual, on which it stops, and the true one it reports.
+const INTERIOR_FRACTION: f64 = 0.5;
+
+/// The Newton iterations of a slipping step solve their Jacobian systems (at least) to this
+/// fraction of the step's tolerance: the full KKT residual then stays a decade below the
+/// tolerance, and the norms agree with the direct path to about 1e-13 (box-exp3 at 1/16: 2e-14
+/// with g = 2, where 0.01 cost 25 % more iterations).
+const JACOBIAN_FRACTION: f64 = 0.1;
 
 /// Cloning shares the factor of K_II (see [`Cholesky`]); the clone has its own warm start.
 #[derive(Clone)]
@@ -439,7 +443,7 @@ impl VelocityStep {
             ..*settings
         };
         let newton = self.newton.as_mut().expect("the multigrid path's");
-        let rep = newton.solve(f, w, &inner, KRYLOV_FRACTION * settings.tolerance, step)?;
+        let rep = newton.solve(f, w, &inner, JACOBIAN_FRACTION * settings.tolerance, step)?;
         self.krylov += rep.krylov_iterations;
         self.r.copy_from_slice(newton.gradient());
         self.r_fresh = true;
@@ -451,7 +455,7 @@ impl VelocityStep {
         Ok(rep.newton_iterations)
     }
 
-    /// K_II y = b on the solver's path, from the guess in `y`, to KRYLOV_FRACTION of the
+    /// K_II y = b on the solver's path, from the guess in `y`, to INTERIOR_FRACTION of the
     /// tolerance relative to `scale`.
     fn solve_interior(
         &mut self,
@@ -461,7 +465,7 @@ impl VelocityStep {
         settings: &SolverSettings,
         step: usize,
     ) -> Result<(), SolveError> {
-        let atol = KRYLOV_FRACTION * settings.tolerance * scale;
+        let atol = INTERIOR_FRACTION * settings.tolerance * scale;
         match self.k_ii.solve(b, y, atol) {
             Ok(it) => {
                 self.krylov += it;
@@ -472,7 +476,7 @@ impl VelocityStep {
                 step,
                 iterations: e.iterations,
                 residual: e.residual / scale,
-                tolerance: KRYLOV_FRACTION * settings.tolerance,
+                tolerance: INTERIOR_FRACTION * settings.tolerance,
             }),
         }
     }

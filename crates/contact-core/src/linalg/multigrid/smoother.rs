@@ -89,18 +89,28 @@ impl BlockJacobi {
         }
     }
 
-    /// y ← keep·y + M x with M the blocks in `values`.
+    /// y ← keep·y + sign·M x with M the blocks in `values`. Node blocks of 3 and 1 DOFs (3D
+    /// velocity, scalar damage) are spelled out: the generic loop over a block's index list
+    /// cost about a tenth of the products with A it sits beside.
     fn apply_blocks(&self, values: &[f64], x: &[f64], y: &mut [f64], sign: f64, keep: f64) {
-        for b in 0..self.blocks.len() {
-            let dofs = self.blocks.dofs(b);
-            let s = dofs.len();
-            let m = &values[self.offset[b]..self.offset[b] + s * s];
-            for i in 0..s {
-                let mut v = 0.0;
-                for j in 0..s {
-                    v += m[i * s + j] * x[dofs[j]];
+        let Blocks { ptr, dofs } = &self.blocks;
+        for (b, range) in ptr.windows(2).enumerate() {
+            let m = &values[self.offset[b]..self.offset[b + 1]];
+            match (&dofs[range[0]..range[1]], m) {
+                (&[i], &[m]) => y[i] = keep * y[i] + sign * m * x[i],
+                (&[i, j, k], &[m00, m01, m02, m10, m11, m12, m20, m21, m22]) => {
+                    let (a, c, e) = (x[i], x[j], x[k]);
+                    y[i] = keep * y[i] + sign * (m00 * a + m01 * c + m02 * e);
+                    y[j] = keep * y[j] + sign * (m10 * a + m11 * c + m12 * e);
+                    y[k] = keep * y[k] + sign * (m20 * a + m21 * c + m22 * e);
                 }
-                y[dofs[i]] = keep * y[dofs[i]] + sign * v;
+                (block, m) => {
+                    let s = block.len();
+                    for (row, &i) in m.chunks_exact(s).zip(block) {
+                        let v: f64 = row.iter().zip(block).map(|(m, &j)| m * x[j]).sum();
+                        y[i] = keep * y[i] + sign * v;
+                    }
+                }
             }
         }
     }
@@ -259,6 +269,58 @@ impl Chebyshev {
                 .zip(r.iter())
                 .for_each(|(d, r)| *d = c1 * *d + c2 * r);
             rho = rho_next;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An SPD matrix on 10 DOFs whose node blocks have 1, 2, 3 and 4 DOFs, scattered (not
+    /// contiguous): every branch of the block kernel.
+    fn scattered() -> (Csr, Blocks) {
+        let block_of = [2u32, 0, 3, 2, 1, 3, 2, 1, 3, 3];
+        let n = block_of.len();
+        let mut t = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                let v = if i == j {
+                    10.0 + i as f64
+                } else {
+                    1.0 / (1.0 + (i as f64 - j as f64).abs())
+                        * if (i + j) % 3 == 0 { -1.0 } else { 0.5 }
+                };
+                t.push((i, j, v));
+            }
+        }
+        (
+            Csr::from_triplets(n, n, t),
+            Blocks::from_block_of(&block_of, 4),
+        )
+    }
+
+    #[test]
+    fn block_jacobi_applies_the_inverse_of_each_diagonal_block() {
+        let (a, blocks) = scattered();
+        let jacobi = BlockJacobi::new(&a, &blocks);
+        let x: Vec<f64> = (0..10).map(|i| (i as f64 * 0.7).sin() + 0.1).collect();
+        let mut dx = vec![0.0; 10];
+        jacobi.mul(&x, &mut dx);
+        let mut back = vec![0.0; 10];
+        jacobi.solve(&dx, &mut back);
+        let mut sub = x.clone();
+        jacobi.solve_sub(&dx, &mut sub);
+        for b in 0..blocks.len() {
+            let dofs = blocks.dofs(b);
+            for &i in dofs {
+                let expected: f64 = dofs.iter().map(|&j| a.get(i, j) * x[j]).sum();
+                assert!((dx[i] - expected).abs() < 1e-13, "D x at {i}");
+            }
+        }
+        for i in 0..10 {
+            assert!((back[i] - x[i]).abs() < 1e-13, "D⁻¹ D x at {i}");
+            assert!(sub[i].abs() < 1e-13, "x − D⁻¹ D x at {i}");
         }
     }
 }
