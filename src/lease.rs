@@ -80,6 +80,7 @@ mod tests {
                 idempotency_key: None,
                 request_hash: None,
                 mesh: None,
+                memory: None,
             })
             .unwrap()
         else {

@@ -1289,3 +1289,55 @@ fn a_job_over_the_memory_limit_is_refused_at_submission() {
     s.stop();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The job resource shows the memory predicted at submission: for a simulation, the bytes
+/// `contact_core::memory::choose` predicts for the validated scene under the server's
+/// per-job limit, that limit, and the path; for a study (whose levels differ), null.
+#[test]
+fn the_job_resource_shows_the_predicted_memory() {
+    let limit = 1 << 30;
+    let mut scene = contact_core::scene::presets::get("paper-convergence").unwrap();
+    contact_core::scene::apply_overrides(
+        &mut scene,
+        &contact_core::scene::Overrides {
+            h: Some(json!("1/8")),
+            k: Some(json!("1/8")),
+            ..Default::default()
+        },
+    );
+    let problem = contact_core::scene::validate(&scene).unwrap();
+    let (_, predicted) = contact_core::memory::choose(&problem, Some(limit)).unwrap();
+    let dir = temp_dir("predicted-memory");
+    let s = Server::start_with(Config {
+        data_dir: dir.clone(),
+        workers: 0,
+        max_job_memory: Some(limit),
+        ..Config::default()
+    });
+    let a = s.addr;
+    let r = post_json(
+        a,
+        "/jobs",
+        &json!({"preset": "paper-convergence", "overrides": {"h": "1/8", "k": "1/8"}}),
+    );
+    assert_eq!(r.status, 202, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let job = get(a, &format!("/jobs/{id}")).json();
+    assert_eq!(
+        job["memory"],
+        json!({"predicted_bytes": predicted, "limit_bytes": limit, "linear_path": "direct"}),
+        "{job}"
+    );
+    assert!(predicted > 0 && predicted <= limit);
+    let listed = get(a, "/jobs").json();
+    assert_eq!(listed["jobs"][0]["memory"], job["memory"], "{listed}");
+
+    let r = post_json(a, "/jobs", &json!({"preset": "paper-table-1"}));
+    assert_eq!(r.status, 202, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let study = get(a, &format!("/jobs/{id}")).json();
+    assert_eq!(study["kind"], "study");
+    assert!(study["memory"].is_null(), "{study}");
+    s.stop();
+    let _ = std::fs::remove_dir_all(&dir);
+}

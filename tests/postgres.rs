@@ -5,6 +5,8 @@
 //!   one tests/store.rs runs against SQLite), each case on a fresh database of one server.
 //! * `pg_store_migrations_and_reconnection`: migrations applied once and a newer schema
 //!   refused; reconnection after the server stops and starts again.
+//! * `pg_store_migrates_a_version_3_database`: a database of the previous schema upgrades
+//!   at connect and keeps its jobs.
 //! * `three_workers_one_api`: one API-only node and three worker processes on one database:
 //!   50 jobs, each finished exactly once, spread over the workers.
 //! * `kill_9_worker_mid_job`: the worker running a long job is killed; another worker
@@ -18,9 +20,10 @@
 
 mod service_support;
 
+use contact_core::linalg::LinearPath;
 use contact_core::output::stored::decode_step;
 use contact_sim::store::postgres::PgStore;
-use contact_sim::store::{Enqueued, JobStatus, NewJob, Store, StoreError};
+use contact_sim::store::{Enqueued, JobStatus, MemoryPrediction, NewJob, Store, StoreError};
 use serde_json::{json, Value};
 use service_support::postgres::*;
 use service_support::store_contract::{self, Fixture};
@@ -54,10 +57,14 @@ fn pg_store_migrations_and_reconnection() {
     let store = PgStore::connect(&pg.url()).unwrap();
 
     // Migrations: applied once, idempotent at the next connect.
-    assert_eq!(store.schema_version().unwrap(), 3);
+    assert_eq!(store.schema_version().unwrap(), 4);
     let again = PgStore::connect(&pg.url()).unwrap();
-    assert_eq!(again.schema_version().unwrap(), 3);
+    assert_eq!(again.schema_version().unwrap(), 4);
 
+    let memory = MemoryPrediction {
+        linear_path: LinearPath::Multigrid,
+        predicted_bytes: 5_000_000_000,
+    };
     let job = NewJob {
         scene: json!({"name": "job"}),
         scene_hash: "hash".into(),
@@ -65,10 +72,13 @@ fn pg_store_migrations_and_reconnection() {
         idempotency_key: None,
         request_hash: None,
         mesh: None,
+        memory: Some(memory),
     };
     let Enqueued::New(done) = store.enqueue(job).unwrap() else {
         panic!("not a new job");
     };
+    assert_eq!(done.memory, Some(memory));
+    assert_eq!(again.get(done.id).unwrap().unwrap().memory, Some(memory));
     assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, done.id);
     store.finish(done.id, JobStatus::Succeeded, None).unwrap();
 
@@ -91,6 +101,54 @@ fn pg_store_migrations_and_reconnection() {
         .unwrap();
     let err = PgStore::connect(&pg.url()).unwrap_err();
     assert!(err.to_string().contains("newer"), "{err}");
+}
+
+/// A database at schema version 3 (made by taking version 4's columns away again) upgrades
+/// at connect: its jobs read back without a memory prediction, new jobs store theirs.
+#[test]
+fn pg_store_migrates_a_version_3_database() {
+    let Some(pg) = Postgres::start("migrate-v3") else {
+        return;
+    };
+    let url = pg.create_database("v3");
+    drop(PgStore::connect(&url).unwrap());
+    let mut raw = ::postgres::Client::connect(&url, ::postgres::NoTls).unwrap();
+    raw.batch_execute(
+        "ALTER TABLE jobs DROP COLUMN linear_path, DROP COLUMN predicted_bytes;
+         DELETE FROM contact_sim_schema WHERE version = 4;
+         INSERT INTO jobs (id, status, scene, scene_hash, created_at, steps, owner)
+             VALUES ('00000000-0000-4000-8000-000000000001', 'queued', '{\"name\": \"old\"}',
+                     'h', 1.0, 9, 'alice');",
+    )
+    .unwrap();
+    let store = PgStore::connect(&url).unwrap();
+    assert_eq!(store.schema_version().unwrap(), 4);
+    let old = store
+        .get("00000000-0000-4000-8000-000000000001".parse().unwrap())
+        .unwrap()
+        .unwrap();
+    assert_eq!(old.memory, None);
+    assert_eq!(
+        (old.scene["name"].as_str(), old.owner.as_str()),
+        (Some("old"), "alice")
+    );
+    let memory = MemoryPrediction {
+        linear_path: LinearPath::Direct,
+        predicted_bytes: 42,
+    };
+    let job = NewJob {
+        scene: json!({"name": "new"}),
+        scene_hash: "hash".into(),
+        steps: 1,
+        idempotency_key: None,
+        request_hash: None,
+        mesh: None,
+        memory: Some(memory),
+    };
+    let Enqueued::New(new) = store.enqueue(job).unwrap() else {
+        panic!("not a new job");
+    };
+    assert_eq!(store.get(new.id).unwrap().unwrap().memory, Some(memory));
 }
 
 /// `sha-256=:<base64>:` of `bytes` (RFC 9530), computed independently of the server.

@@ -366,7 +366,7 @@ fn postgres_over_tls() {
     let require = format!("{by_ip}?sslmode=require");
     assert_eq!(session_is_encrypted(&require), Ok(true));
     let store = PgStore::connect(&require).unwrap();
-    assert_eq!(store.schema_version().unwrap(), 3);
+    assert_eq!(store.schema_version().unwrap(), 4);
     let job = NewJob {
         scene: json!({"name": "over TLS"}),
         scene_hash: "hash".into(),
@@ -374,6 +374,7 @@ fn postgres_over_tls() {
         idempotency_key: None,
         request_hash: None,
         mesh: None,
+        memory: None,
     };
     let Enqueued::New(rec) = store.enqueue(job).unwrap() else {
         panic!("not a new job");
@@ -390,7 +391,7 @@ fn postgres_over_tls() {
     assert_eq!(session_is_encrypted(&full), Ok(true));
     assert_eq!(
         PgStore::connect(&full).unwrap().schema_version().unwrap(),
-        3
+        4
     );
     // The same in libpq's key=value form.
     let keywords = format!(
@@ -415,7 +416,7 @@ fn postgres_over_tls() {
     assert_eq!(session_is_encrypted(&scram), Ok(true));
     assert_eq!(
         PgStore::connect(&scram).unwrap().schema_version().unwrap(),
-        3
+        4
     );
     let e = session_is_encrypted(&scram.replace(":pw@", ":wrong@")).unwrap_err();
     assert!(e.contains("password authentication failed"), "{e}");

@@ -7,7 +7,7 @@ use crate::auth::Caller;
 use crate::jobs::{is_study, JobEvent};
 use crate::problem::Problem;
 use crate::state::AppState;
-use crate::store::{Enqueued, JobRecord, JobStatus, NewJob};
+use crate::store::{Enqueued, JobRecord, JobStatus, MemoryPrediction, NewJob};
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
@@ -84,6 +84,11 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
         "worker": rec.worker,
         "last_checkpoint_step": rec.last_checkpoint_step,
         "scene_hash": rec.scene_hash,
+        "memory": rec.memory.map(|m| json!({
+            "predicted_bytes": m.predicted_bytes,
+            "limit_bytes": state.rt.config.max_job_memory,
+            "linear_path": m.linear_path,
+        })),
         "resolution": (!study).then(|| {
             let (mesh, time) = (&rec.scene["mesh"], &rec.scene["time"]);
             json!({
@@ -223,14 +228,15 @@ fn map_override_pointers(mut p: Problem, t_key: &str) -> Problem {
     p
 }
 
-/// Per-job limits (nodes, steps, stored bytes), reported at the field that sets them; the
-/// estimated stored bytes (what the owner's quota counts).
+/// Per-job limits (nodes, memory, steps, stored bytes), reported at the field that sets
+/// them; the estimated stored bytes (what the owner's quota counts) and the predicted
+/// memory on the path the run takes.
 fn check_limits(
     p: &contact_core::problem::Problem,
     state: &AppState,
     is_preset: bool,
     doc: &Value,
-) -> Result<u64, Problem> {
+) -> Result<(u64, MemoryPrediction), Problem> {
     let cfg = &state.rt.config;
     let nodes = p.n_nodes();
     let (mut hptr, kptr) = if is_preset {
@@ -255,13 +261,18 @@ fn check_limits(
             ),
         ));
     }
-    if let Err(e) = contact_core::memory::choose(p, cfg.max_job_memory) {
-        let ptr = match e.pointer() {
-            "/mesh" => hptr,
-            other => other,
-        };
-        return Err(Problem::invalid_field(ptr, e.to_string()));
-    }
+    let (linear_path, predicted_bytes) = contact_core::memory::choose(p, cfg.max_job_memory)
+        .map_err(|e| {
+            let ptr = match e.pointer() {
+                "/mesh" => hptr,
+                other => other,
+            };
+            Problem::invalid_field(ptr, e.to_string())
+        })?;
+    let memory = MemoryPrediction {
+        linear_path,
+        predicted_bytes,
+    };
     if p.steps > cfg.max_steps {
         return Err(Problem::invalid_field(
             kptr,
@@ -298,7 +309,7 @@ fn check_limits(
             format!("the selected output stores about {} MB, more than this server's limit of {} MB; store fewer steps (output.every) or fields", (per_step * stored) >> 20, cfg.max_stored_bytes >> 20),
         ));
     }
-    Ok(per_step * stored)
+    Ok((per_step * stored, memory))
 }
 
 /// A study's runs against the per-job limits: the reference (its largest run) must fit the
@@ -332,10 +343,20 @@ fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), Proble
     Ok(())
 }
 
-/// The document to store, its number of time steps and its estimated stored bytes (a
-/// study's summary counts as nothing), or why it is refused (422 at the offending field).
-/// Blocking.
-fn validated(doc: Value, state: &AppState) -> Result<(Value, usize, u64), Problem> {
+/// A submission as validated: what is stored and counted.
+struct Validated {
+    /// The document to store.
+    doc: Value,
+    /// Its number of time steps (a study's: its progress scale).
+    steps: usize,
+    /// Estimated stored bytes; a study's summary counts as nothing.
+    stored_bytes: u64,
+    /// A simulation's predicted memory; None for a study, whose levels differ.
+    memory: Option<MemoryPrediction>,
+}
+
+/// The submission to store, or why it is refused (422 at the offending field). Blocking.
+fn validated(doc: Value, state: &AppState) -> Result<Validated, Problem> {
     let doc = match expand(&doc)? {
         PresetRequest::Study(name) => json!({"study": {"preset": name}}),
         PresetRequest::Scene(scene_doc, t_key) => {
@@ -362,7 +383,12 @@ fn validated(doc: Value, state: &AppState) -> Result<(Value, usize, u64), Proble
                     crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))
                 })?;
             check_study_limits(&plan, state)?;
-            Ok((json!({ "study": expanded }), study::total_steps(&plan), 0))
+            Ok(Validated {
+                doc: json!({ "study": expanded }),
+                steps: study::total_steps(&plan),
+                stored_bytes: 0,
+                memory: None,
+            })
         }
         None => validated_scene(doc, None, state),
     }
@@ -372,7 +398,7 @@ fn validated(doc: Value, state: &AppState) -> Result<(Value, usize, u64), Proble
 /// limits is known only once its pilot runs have measured the errors and times, so an
 /// unreachable target fails the job (422 problem at `/study/target/error` in its error)
 /// before the expensive run. Its progress scale starts at the first pilots' steps.
-fn validated_target(study: &Value, state: &AppState) -> Result<(Value, usize, u64), Problem> {
+fn validated_target(study: &Value, state: &AppState) -> Result<Validated, Problem> {
     let (spec, expanded) =
         study::target::parse_with(study, "/study", &*state.rt.meshes).map_err(|e| {
             crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))
@@ -390,17 +416,21 @@ fn validated_target(study: &Value, state: &AppState) -> Result<(Value, usize, u6
         ));
     }
     let steps = study::target::PILOT_STEPS * ((1 << study::target::FIRST_PILOT_LEVELS) - 1) * 2;
-    Ok((json!({ "study": expanded }), steps, 0))
+    Ok(Validated {
+        doc: json!({ "study": expanded }),
+        steps,
+        stored_bytes: 0,
+        memory: None,
+    })
 }
 
 /// A scene document (`preset`: the key of the final time when it was expanded from a preset
-/// request, whose errors then point into `overrides`): the document, its steps and stored
-/// bytes, or why it is refused.
+/// request, whose errors then point into `overrides`) as validated, or why it is refused.
 fn validated_scene(
     scene_doc: Value,
     preset: Option<&str>,
     state: &AppState,
-) -> Result<(Value, usize, u64), Problem> {
+) -> Result<Validated, Problem> {
     let problem = match scene::validate_with(&scene_doc, &*state.rt.meshes) {
         Ok(p) => p,
         Err(errors) => {
@@ -414,9 +444,13 @@ fn validated_scene(
             });
         }
     };
-    let bytes = check_limits(&problem, state, preset.is_some(), &scene_doc)?;
-    let steps = problem.steps;
-    Ok((scene_doc, steps, bytes))
+    let (stored_bytes, memory) = check_limits(&problem, state, preset.is_some(), &scene_doc)?;
+    Ok(Validated {
+        doc: scene_doc,
+        steps: problem.steps,
+        stored_bytes,
+        memory: Some(memory),
+    })
 }
 
 pub async fn submit(
@@ -443,7 +477,12 @@ pub async fn submit(
     // owner's mesh is unknown before it is read (nothing about it may leak).
     let st = state.clone();
     let who = caller.clone();
-    let (scene_doc, steps, stored_bytes) = blocking(move || {
+    let Validated {
+        doc: scene_doc,
+        steps,
+        stored_bytes,
+        memory,
+    } = blocking(move || {
         crate::meshes::check_owner(&doc, st.store().as_ref(), &who)?;
         validated(doc, &st)
     })
@@ -502,6 +541,7 @@ pub async fn submit(
             idempotency_key: key,
             request_hash,
             mesh,
+            memory,
         };
         Ok(store.enqueue_for(owner, stored_bytes, job)?)
     })

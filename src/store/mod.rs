@@ -111,6 +111,20 @@ pub struct JobRecord {
     /// (authentication off). See [`owners`].
     #[serde(default)]
     pub owner: String,
+    /// A simulation's peak memory as predicted at submission; None for a study (its levels
+    /// differ) and for jobs stored before predictions were kept.
+    #[serde(default)]
+    pub memory: Option<MemoryPrediction>,
+}
+
+/// The linear path a simulation takes and its peak memory, as predicted at submission from
+/// the count model before any numeric work (`contact_core::memory::choose`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MemoryPrediction {
+    /// Direct or multigrid, never `auto`: the path `auto` resolved to.
+    pub linear_path: contact_core::linalg::LinearPath,
+    /// Peak bytes of the run on that path.
+    pub predicted_bytes: u64,
 }
 
 /// What `enqueue` needs.
@@ -125,6 +139,8 @@ pub struct NewJob {
     /// enqueued if that mesh is stored, and the mesh cannot be deleted while the job is
     /// queued or running.
     pub mesh: Option<String>,
+    /// See [`JobRecord::memory`].
+    pub memory: Option<MemoryPrediction>,
 }
 
 /// Outcome of `enqueue` with an idempotency key.

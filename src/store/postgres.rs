@@ -42,8 +42,8 @@ use uuid::Uuid;
 
 use super::claim::{verdict, Candidate, Verdict};
 use super::row::{
-    check_lease, into_mesh_page, into_page, json_text, page_bounds, status_counts, to_i64,
-    to_usize, RawJob, RawMesh, FINISHED, UNFINISHED,
+    check_lease, into_mesh_page, into_page, json_text, memory_columns, page_bounds, status_counts,
+    to_i64, to_usize, RawJob, RawMesh, FINISHED, UNFINISHED,
 };
 use super::{
     Enqueued, JobRecord, JobStatus, MeshDeletion, MeshFileStep, MeshPage, MeshRecord, NewJob, Page,
@@ -146,6 +146,15 @@ const MIGRATIONS: &[&str] = &[
     );
     INSERT INTO mesh_owners (owner, id, created_at) SELECT '', id, created_at FROM meshes;
     ",
+    // Version 4: a simulation's linear path and peak memory as predicted at submission
+    // (both null for studies and for jobs stored before).
+    "
+    ALTER TABLE jobs ADD COLUMN linear_path text
+        CHECK (linear_path IN ('direct', 'multigrid'));
+    ALTER TABLE jobs ADD COLUMN predicted_bytes bigint CHECK (predicted_bytes >= 0);
+    ALTER TABLE jobs ADD CONSTRAINT jobs_memory_prediction
+        CHECK ((linear_path IS NULL) = (predicted_bytes IS NULL));
+    ",
 ];
 
 /// Columns of a [`MeshRecord`] (plus `seq`), in the order [`raw_mesh`] reads them.
@@ -163,7 +172,7 @@ const CHANNEL: &str = "contact_sim_jobs";
 /// Columns of a [`JobRecord`] (plus `seq`), in the order [`raw_job`] reads them.
 const COLS: &str = "id, status, scene, scene_hash, idempotency_key, request_hash, created_at, \
      started_at, finished_at, step, steps, last_residual, error, cancel_requested, attempt, \
-     worker_id, lease_until, last_checkpoint_step, seq, owner";
+     worker_id, lease_until, last_checkpoint_step, seq, owner, linear_path, predicted_bytes";
 
 /// The database server's time in Unix seconds.
 pub(super) const NOW_S: &str = "extract(epoch from clock_timestamp())::float8";
@@ -197,6 +206,8 @@ fn raw_job(r: &Row) -> Result<RawJob, postgres::Error> {
         checkpoint_step: r.try_get(17)?,
         seq: r.try_get(18)?,
         owner: r.try_get(19)?,
+        linear_path: r.try_get(20)?,
+        predicted_bytes: r.try_get(21)?,
     })
 }
 
@@ -610,6 +621,7 @@ impl Store for PgStore {
         let scene = json_text(&job.scene)?;
         let steps = to_i64(job.steps, "steps")?;
         let stored_bytes = i64::try_from(stored_bytes).unwrap_or(i64::MAX);
+        let (linear_path, predicted_bytes) = memory_columns(job.memory)?;
         let raw = self.run(|c| {
             let mut tx = c.transaction().map_err(classify)?;
             if let Some(key) = &job.idempotency_key {
@@ -640,8 +652,9 @@ impl Store for PgStore {
                     format!(
                         "INSERT INTO jobs (id, status, scene, scene_hash, idempotency_key,
                                            request_hash, created_at, steps, mesh, owner,
-                                           stored_bytes)
-                         VALUES ($1, 'queued', $2, $3, $4, $5, {NOW_S}, $6, $7, $8, $9)
+                                           stored_bytes, linear_path, predicted_bytes)
+                         VALUES ($1, 'queued', $2, $3, $4, $5, {NOW_S}, $6, $7, $8, $9, $10,
+                                 $11)
                          ON CONFLICT (owner, idempotency_key) DO NOTHING
                          RETURNING {COLS}"
                     )
@@ -656,6 +669,8 @@ impl Store for PgStore {
                         &job.mesh,
                         &owner,
                         &stored_bytes,
+                        &linear_path,
+                        &predicted_bytes,
                     ],
                 )
                 .map_err(classify)?;

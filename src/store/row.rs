@@ -1,7 +1,10 @@
 //! What both job-store backends share: the row as read before validation, its conversion
 //! into a [`JobRecord`], and list cursors.
 
-use super::{JobRecord, JobStatus, MeshPage, MeshRecord, Page, Progress, StoreError};
+use super::{
+    JobRecord, JobStatus, MemoryPrediction, MeshPage, MeshRecord, Page, Progress, StoreError,
+};
+use contact_core::linalg::LinearPath;
 use uuid::Uuid;
 
 /// Parses a list cursor produced by [`Store::list`] (`"s<seq>"`, seq > 0).
@@ -39,6 +42,24 @@ pub(super) fn check_lease(lease_s: f64) -> Result<(), StoreError> {
     }
 }
 
+/// A [`MemoryPrediction`] as the `linear_path` and `predicted_bytes` columns.
+pub(super) fn memory_columns(
+    m: Option<MemoryPrediction>,
+) -> Result<(Option<&'static str>, Option<i64>), StoreError> {
+    match m {
+        Some(m) => Ok((
+            Some(m.linear_path.name()),
+            Some(i64::try_from(m.predicted_bytes).map_err(|_| {
+                StoreError::Db(format!(
+                    "predicted_bytes {} out of range",
+                    m.predicted_bytes
+                ))
+            })?),
+        )),
+        None => Ok((None, None)),
+    }
+}
+
 pub(super) fn json_text(v: &serde_json::Value) -> Result<String, StoreError> {
     serde_json::to_string(v).map_err(|e| StoreError::Db(format!("cannot serialise JSON: {e}")))
 }
@@ -65,6 +86,8 @@ pub(super) struct RawJob {
     pub(super) checkpoint_step: Option<i64>,
     pub(super) seq: i64,
     pub(super) owner: String,
+    pub(super) linear_path: Option<String>,
+    pub(super) predicted_bytes: Option<i64>,
 }
 
 impl RawJob {
@@ -89,6 +112,24 @@ impl RawJob {
             Some(s) => Some(to_usize(s, "checkpoint_step")?),
             None => None,
         };
+        let memory = match (self.linear_path, self.predicted_bytes) {
+            (Some(path), Some(bytes)) => Some(MemoryPrediction {
+                linear_path: LinearPath::parse(&path)
+                    .filter(|p| *p != LinearPath::Auto)
+                    .ok_or_else(|| {
+                        StoreError::Corrupt(format!("job {id}: linear_path {path:?}"))
+                    })?,
+                predicted_bytes: u64::try_from(bytes).map_err(|_| {
+                    StoreError::Corrupt(format!("job {id}: predicted_bytes = {bytes}"))
+                })?,
+            }),
+            (None, None) => None,
+            (path, bytes) => {
+                return Err(StoreError::Corrupt(format!(
+                    "job {id}: linear_path {path:?} and predicted_bytes {bytes:?}, one without the other"
+                )))
+            }
+        };
         Ok(JobRecord {
             id,
             status,
@@ -111,6 +152,7 @@ impl RawJob {
             lease_until: self.lease_until,
             last_checkpoint_step,
             owner: self.owner,
+            memory,
         })
     }
 }

@@ -127,6 +127,7 @@ fn new_job(n: usize) -> NewJob {
         idempotency_key: None,
         request_hash: None,
         mesh: None,
+        memory: None,
     }
 }
 

@@ -45,8 +45,8 @@ use uuid::Uuid;
 
 use super::claim::{verdict, Candidate, Verdict};
 use super::row::{
-    check_lease, into_mesh_page, into_page, json_text, page_bounds, status_counts, to_i64,
-    to_usize, RawJob, RawMesh, FINISHED, UNFINISHED,
+    check_lease, into_mesh_page, into_page, json_text, memory_columns, page_bounds, status_counts,
+    to_i64, to_usize, RawJob, RawMesh, FINISHED, UNFINISHED,
 };
 use super::{
     now, Enqueued, JobRecord, JobStatus, MeshDeletion, MeshFileStep, MeshPage, MeshRecord, NewJob,
@@ -191,6 +191,58 @@ const MIGRATIONS: &[&str] = &[
     );
     INSERT INTO mesh_owners (owner, id, created_at) SELECT '', id, created_at FROM meshes;
     ",
+    // Version 5: a simulation's linear path and peak memory as predicted at submission
+    // (both null for studies and for jobs stored before). Rebuilt rather than altered so
+    // that the checkpoint blob stays the row's last column.
+    "
+    CREATE TABLE jobs_v5 (
+        id               TEXT PRIMARY KEY NOT NULL,
+        seq              INTEGER NOT NULL UNIQUE,
+        status           TEXT NOT NULL
+                         CHECK (status IN ('queued', 'running', 'succeeded', 'failed', 'cancelled')),
+        scene            TEXT NOT NULL,
+        scene_hash       TEXT NOT NULL,
+        owner            TEXT NOT NULL DEFAULT '',
+        idempotency_key  TEXT,
+        request_hash     TEXT,
+        created_at       REAL NOT NULL,
+        started_at       REAL,
+        finished_at      REAL,
+        step             INTEGER NOT NULL DEFAULT 0,
+        steps            INTEGER NOT NULL DEFAULT 0,
+        last_residual    REAL,
+        error            TEXT,
+        cancel_requested INTEGER NOT NULL DEFAULT 0,
+        attempt          INTEGER NOT NULL DEFAULT 0,
+        worker           TEXT,
+        lease_until      REAL,
+        checkpoint_step  INTEGER,
+        claim_step       INTEGER,
+        stalls           INTEGER NOT NULL DEFAULT 0,
+        mesh             TEXT,
+        stored_bytes     INTEGER NOT NULL DEFAULT 0,
+        linear_path      TEXT CHECK (linear_path IN ('direct', 'multigrid')),
+        predicted_bytes  INTEGER CHECK (predicted_bytes >= 0),
+        checkpoint       BLOB,
+        UNIQUE (owner, idempotency_key),
+        CHECK ((linear_path IS NULL) = (predicted_bytes IS NULL))
+    );
+    INSERT INTO jobs_v5 (id, seq, status, scene, scene_hash, owner, idempotency_key,
+                         request_hash, created_at, started_at, finished_at, step, steps,
+                         last_residual, error, cancel_requested, attempt, worker, lease_until,
+                         checkpoint_step, claim_step, stalls, mesh, stored_bytes, checkpoint)
+        SELECT id, seq, status, scene, scene_hash, owner, idempotency_key,
+               request_hash, created_at, started_at, finished_at, step, steps,
+               last_residual, error, cancel_requested, attempt, worker, lease_until,
+               checkpoint_step, claim_step, stalls, mesh, stored_bytes, checkpoint
+        FROM jobs;
+    DROP TABLE jobs;
+    ALTER TABLE jobs_v5 RENAME TO jobs;
+    CREATE INDEX jobs_status_seq ON jobs (status, seq);
+    CREATE INDEX jobs_scene_hash ON jobs (scene_hash);
+    CREATE INDEX jobs_mesh ON jobs (mesh) WHERE mesh IS NOT NULL;
+    CREATE INDEX jobs_owner_status ON jobs (owner, status, seq);
+    ",
 ];
 
 /// Columns of a [`MeshRecord`] (plus `seq`), in the order [`RawMesh::from_row`] reads them.
@@ -200,7 +252,7 @@ const MESH_COLS: &str = "id, bytes, created_at, summary, seq";
 /// The checkpoint blob is deliberately absent.
 const COLS: &str = "id, status, scene, scene_hash, idempotency_key, request_hash, created_at, \
      started_at, finished_at, step, steps, last_residual, error, cancel_requested, attempt, \
-     worker, lease_until, checkpoint_step, seq, owner";
+     worker, lease_until, checkpoint_step, seq, owner, linear_path, predicted_bytes";
 
 impl From<rusqlite::Error> for StoreError {
     fn from(e: rusqlite::Error) -> StoreError {
@@ -260,6 +312,8 @@ impl RawJob {
             checkpoint_step: r.get(17)?,
             seq: r.get(18)?,
             owner: r.get(19)?,
+            linear_path: r.get(20)?,
+            predicted_bytes: r.get(21)?,
         })
     }
 }
@@ -553,6 +607,7 @@ impl Store for SqliteStore {
         let scene = json_text(&job.scene)?;
         let steps = to_i64(job.steps, "steps")?;
         let stored_bytes = i64::try_from(stored_bytes).unwrap_or(i64::MAX);
+        let (linear_path, predicted_bytes) = memory_columns(job.memory)?;
         let mut conn = self.lock();
         let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
         if let Some(key) = &job.idempotency_key {
@@ -584,8 +639,8 @@ impl Store for SqliteStore {
         tx.execute(
             "INSERT INTO jobs (id, seq, status, scene, scene_hash, idempotency_key, request_hash,
                                created_at, step, steps, cancel_requested, attempt, mesh, owner,
-                               stored_bytes)
-             VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6, ?7, 0, ?8, 0, 0, ?9, ?10, ?11)",
+                               stored_bytes, linear_path, predicted_bytes)
+             VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6, ?7, 0, ?8, 0, 0, ?9, ?10, ?11, ?12, ?13)",
             params![
                 id.to_string(),
                 seq,
@@ -597,7 +652,9 @@ impl Store for SqliteStore {
                 steps,
                 job.mesh,
                 owner,
-                stored_bytes
+                stored_bytes,
+                linear_path,
+                predicted_bytes
             ],
         )?;
         let record = select_by_id(&tx, id)?

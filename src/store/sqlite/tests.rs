@@ -4,6 +4,8 @@
 //! Store contract, tests/service_support/store_contract.rs (run by tests/store.rs).
 
 use super::*;
+use crate::store::MemoryPrediction;
+use contact_core::linalg::LinearPath;
 use std::path::PathBuf;
 
 /// A directory under the system temp dir, removed on drop.
@@ -31,6 +33,7 @@ fn new_job(n: usize) -> NewJob {
         idempotency_key: None,
         request_hash: None,
         mesh: None,
+        memory: None,
     }
 }
 
@@ -185,6 +188,101 @@ fn newer_schema_is_refused() {
         SqliteStore::open(&path),
         Err(StoreError::Corrupt(_))
     ));
+}
+
+/// A simulation's memory prediction reads back as enqueued, across a reopen, and keeps the
+/// checkpoint blob readable.
+#[test]
+fn memory_prediction_round_trips() {
+    let dir = TempDir::new();
+    let path = dir.0.join("jobs.sqlite");
+    let memory = MemoryPrediction {
+        linear_path: LinearPath::Multigrid,
+        predicted_bytes: 5_000_000_000,
+    };
+    let id = {
+        let store = SqliteStore::open(&path).unwrap();
+        let Enqueued::New(job) = store
+            .enqueue(NewJob {
+                memory: Some(memory),
+                ..new_job(0)
+            })
+            .unwrap()
+        else {
+            panic!("expected a new job");
+        };
+        assert_eq!(job.memory, Some(memory));
+        assert_eq!(enqueue(&store, 1).memory, None);
+        store.claim("w", 60.0, 3).unwrap();
+        store.checkpoint(job.id, 3, b"state").unwrap();
+        job.id
+    };
+    let store = SqliteStore::open(&path).unwrap();
+    assert_eq!(store.get(id).unwrap().unwrap().memory, Some(memory));
+    let listed = store.list(None, None, 10).unwrap().jobs;
+    let memories: Vec<_> = listed.iter().map(|j| j.memory).collect();
+    assert_eq!(memories, [None, Some(memory)]);
+    assert_eq!(
+        store.load_checkpoint(id).unwrap(),
+        Some((3, b"state".to_vec()))
+    );
+}
+
+/// A database at the previous schema version (4) upgrades on open: its jobs keep every
+/// field and their checkpoints, and read back without a memory prediction; new jobs store
+/// theirs.
+#[test]
+fn version_4_database_migrates() {
+    let dir = TempDir::new();
+    let path = dir.0.join("jobs.sqlite");
+    let id = Uuid::new_v4();
+    {
+        let conn = Connection::open(&path).unwrap();
+        for sql in &MIGRATIONS[..4] {
+            conn.execute_batch(sql).unwrap();
+        }
+        conn.pragma_update(None, "user_version", 4).unwrap();
+        conn.execute(
+            "INSERT INTO jobs (id, seq, status, scene, scene_hash, owner, created_at, started_at,
+                               step, steps, attempt, worker, lease_until, checkpoint_step,
+                               stored_bytes, checkpoint)
+             VALUES (?1, 7, 'running', '{\"name\": \"old\"}', 'h', 'alice', 10.0, 11.0,
+                     2, 9, 1, 'n-w0', 99.0, 2, 123, x'0102')",
+            params![id.to_string()],
+        )
+        .unwrap();
+    }
+    let store = SqliteStore::open(&path).unwrap();
+    let version: i64 = store
+        .lock()
+        .pragma_query_value(None, "user_version", |r| r.get(0))
+        .unwrap();
+    assert_eq!(version, i64::try_from(MIGRATIONS.len()).unwrap());
+    let old = store.get(id).unwrap().unwrap();
+    assert_eq!(old.memory, None);
+    assert_eq!(old.scene["name"], "old");
+    assert_eq!(
+        (old.status, old.owner.as_str()),
+        (JobStatus::Running, "alice")
+    );
+    assert_eq!((old.progress.step, old.progress.steps), (2, 9));
+    assert_eq!(old.worker.as_deref(), Some("n-w0"));
+    assert_eq!(old.last_checkpoint_step, Some(2));
+    assert_eq!(store.load_checkpoint(id).unwrap(), Some((2, vec![1, 2])));
+    let memory = MemoryPrediction {
+        linear_path: LinearPath::Direct,
+        predicted_bytes: 42,
+    };
+    let Enqueued::New(new) = store
+        .enqueue(NewJob {
+            memory: Some(memory),
+            ..new_job(1)
+        })
+        .unwrap()
+    else {
+        panic!("expected a new job");
+    };
+    assert_eq!(store.get(new.id).unwrap().unwrap().memory, Some(memory));
 }
 
 #[test]
