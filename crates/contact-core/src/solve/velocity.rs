@@ -7,8 +7,8 @@
 //! [`super::friction_reduced`] with S = K_CC − K_CI K_II⁻¹ K_IC and b = f_C − K_CI K_II⁻¹ f_I.
 //!
 //! K_II is factored once per job, or (the multigrid path) gets a multigrid hierarchy once and
-//! is solved by preconditioned conjugate gradients to a residual well below the step's
-//! tolerance ([`LinearSolver`]). Per step: one solve for y = K_II⁻¹ f_I (on the multigrid path
+//! is solved by preconditioned conjugate gradients to half the step's tolerance
+//! ([`LinearSolver`], `INTERIOR_FRACTION`). Per step: one solve for y = K_II⁻¹ f_I (on the multigrid path
 //! from the K_II-projection of y onto the earlier steps' solutions,
 //! [`crate::linalg::projection`]); if every contact node
 //! sticks (|b_i| ≤ ω_i μ(0), checked exactly) then x = 0 and w_I = y: done. Otherwise S is
