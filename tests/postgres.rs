@@ -23,7 +23,7 @@ mod service_support;
 use contact_core::linalg::LinearPath;
 use contact_core::output::stored::decode_step;
 use contact_sim::store::postgres::PgStore;
-use contact_sim::store::{Enqueued, JobStatus, MemoryPrediction, NewJob, Store, StoreError};
+use contact_sim::store::{JobStatus, MemoryPrediction, NewJob, Store, StoreError};
 use serde_json::{json, Value};
 use service_support::postgres::*;
 use service_support::store_contract::{self, Fixture};
@@ -65,18 +65,13 @@ fn pg_store_migrations_and_reconnection() {
         linear_path: LinearPath::Multigrid,
         predicted_bytes: 5_000_000_000,
     };
-    let job = NewJob {
-        scene: json!({"name": "job"}),
-        scene_hash: "hash".into(),
-        steps: 10,
-        idempotency_key: None,
-        request_hash: None,
-        mesh: None,
-        memory: Some(memory),
-    };
-    let Enqueued::New(done) = store.enqueue(job).unwrap() else {
-        panic!("not a new job");
-    };
+    let done = store_contract::enqueued(
+        &store,
+        NewJob {
+            memory: Some(memory),
+            ..store_contract::new_job(0)
+        },
+    );
     assert_eq!(done.memory, Some(memory));
     assert_eq!(again.get(done.id).unwrap().unwrap().memory, Some(memory));
     assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, done.id);
@@ -136,18 +131,13 @@ fn pg_store_migrates_a_version_3_database() {
         linear_path: LinearPath::Direct,
         predicted_bytes: 42,
     };
-    let job = NewJob {
-        scene: json!({"name": "new"}),
-        scene_hash: "hash".into(),
-        steps: 1,
-        idempotency_key: None,
-        request_hash: None,
-        mesh: None,
-        memory: Some(memory),
-    };
-    let Enqueued::New(new) = store.enqueue(job).unwrap() else {
-        panic!("not a new job");
-    };
+    let new = store_contract::enqueued(
+        &store,
+        NewJob {
+            memory: Some(memory),
+            ..store_contract::new_job(1)
+        },
+    );
     assert_eq!(store.get(new.id).unwrap().unwrap().memory, Some(memory));
 }
 

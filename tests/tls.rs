@@ -19,7 +19,7 @@ mod service_support;
 
 use contact_sim::store::postgres::{describe, PgStore};
 use contact_sim::store::postgres_tls::PgTls;
-use contact_sim::store::{Enqueued, NewJob, Store};
+use contact_sim::store::{NewJob, Store};
 use rcgen::{
     BasicConstraints, CertificateParams, CertifiedIssuer, DnType, IsCa, KeyPair, KeyUsagePurpose,
 };
@@ -367,18 +367,13 @@ fn postgres_over_tls() {
     assert_eq!(session_is_encrypted(&require), Ok(true));
     let store = PgStore::connect(&require).unwrap();
     assert_eq!(store.schema_version().unwrap(), 4);
-    let job = NewJob {
-        scene: json!({"name": "over TLS"}),
-        scene_hash: "hash".into(),
-        steps: 1,
-        idempotency_key: None,
-        request_hash: None,
-        mesh: None,
-        memory: None,
-    };
-    let Enqueued::New(rec) = store.enqueue(job).unwrap() else {
-        panic!("not a new job");
-    };
+    let rec = service_support::store_contract::enqueued(
+        &store,
+        NewJob {
+            scene: json!({"name": "over TLS"}),
+            ..service_support::store_contract::new_job(0)
+        },
+    );
     assert_eq!(
         store.get(rec.id).unwrap().unwrap().scene["name"],
         "over TLS"

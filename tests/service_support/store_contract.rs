@@ -119,7 +119,8 @@ pub fn run(backend: &str, fresh: impl Fn(&str) -> Fixture) -> usize {
     CASES.len()
 }
 
-fn new_job(n: usize) -> NewJob {
+/// The n-th test job: a scene with nested JSON, its hash and 10 + n steps.
+pub fn new_job(n: usize) -> NewJob {
     NewJob {
         scene: json!({"name": format!("scene {n}"), "n": n, "nested": {"a": [1, 2.5]}}),
         scene_hash: format!("hash{n}"),
@@ -132,7 +133,12 @@ fn new_job(n: usize) -> NewJob {
 }
 
 fn enqueue(store: &dyn Store, n: usize) -> JobRecord {
-    match store.enqueue(new_job(n)).unwrap() {
+    enqueued(store, new_job(n))
+}
+
+/// Enqueues `job`, which must be new.
+pub fn enqueued(store: &dyn Store, job: NewJob) -> JobRecord {
+    match store.enqueue(job).unwrap() {
         Enqueued::New(j) => j,
         other => panic!("expected New, got {other:?}"),
     }

@@ -38,7 +38,12 @@ fn new_job(n: usize) -> NewJob {
 }
 
 fn enqueue(store: &SqliteStore, n: usize) -> JobRecord {
-    match store.enqueue(new_job(n)).unwrap() {
+    enqueued(store, new_job(n))
+}
+
+/// Enqueues `job`, which must be new.
+fn enqueued(store: &SqliteStore, job: NewJob) -> JobRecord {
+    match store.enqueue(job).unwrap() {
         Enqueued::New(j) => j,
         other => panic!("expected New, got {other:?}"),
     }
@@ -202,15 +207,13 @@ fn memory_prediction_round_trips() {
     };
     let id = {
         let store = SqliteStore::open(&path).unwrap();
-        let Enqueued::New(job) = store
-            .enqueue(NewJob {
+        let job = enqueued(
+            &store,
+            NewJob {
                 memory: Some(memory),
                 ..new_job(0)
-            })
-            .unwrap()
-        else {
-            panic!("expected a new job");
-        };
+            },
+        );
         assert_eq!(job.memory, Some(memory));
         assert_eq!(enqueue(&store, 1).memory, None);
         store.claim("w", 60.0, 3).unwrap();
@@ -273,15 +276,13 @@ fn version_4_database_migrates() {
         linear_path: LinearPath::Direct,
         predicted_bytes: 42,
     };
-    let Enqueued::New(new) = store
-        .enqueue(NewJob {
+    let new = enqueued(
+        &store,
+        NewJob {
             memory: Some(memory),
             ..new_job(1)
-        })
-        .unwrap()
-    else {
-        panic!("expected a new job");
-    };
+        },
+    );
     assert_eq!(store.get(new.id).unwrap().unwrap().memory, Some(memory));
 }
 
