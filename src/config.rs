@@ -24,7 +24,7 @@ pub struct Config {
     pub node: String,
     /// Maximum number of queued jobs; beyond it POST /jobs answers 503.
     pub queue_capacity: usize,
-    /// Per-job limits, enforced at validation.
+    /// Per-job limits, enforced at submission ([`Config::job_limits`]).
     pub max_nodes: usize,
     pub max_steps: usize,
     pub max_stored_bytes: u64,
@@ -56,6 +56,19 @@ pub struct Config {
     /// Free space of the data directory below which the node takes no new work
     /// (`--min-free-disk`, see `crate::disk`).
     pub min_free_disk: crate::disk::MinFreeDisk,
+}
+
+impl Config {
+    /// The per-job limits every job is admitted under at submission and run under by a
+    /// worker ([`contact_core::admission`]).
+    pub fn job_limits(&self) -> contact_core::admission::Limits {
+        contact_core::admission::Limits {
+            max_nodes: Some(self.max_nodes),
+            max_steps: Some(self.max_steps),
+            max_stored_bytes: Some(self.max_stored_bytes),
+            max_memory: self.max_job_memory,
+        }
+    }
 }
 
 impl Default for Config {

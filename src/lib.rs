@@ -18,6 +18,7 @@ pub mod server;
 pub mod state;
 pub mod store;
 pub mod stream;
+pub mod submission;
 pub mod tls;
 
 pub use config::Config;

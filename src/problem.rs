@@ -22,6 +22,10 @@ pub struct Problem {
     /// `crate::auth::quota`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub quota: Option<Box<serde_json::Value>>,
+    /// The per-job limit a request went over: its name, the member that sets the size, what
+    /// the request needs and what the node allows (see `crate::submission::over_limit`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub limit: Option<Box<serde_json::Value>>,
     /// Seconds after which a retry may succeed (the `Retry-After` header, not a member).
     #[serde(skip)]
     pub retry_after: Option<u32>,
@@ -44,6 +48,7 @@ impl Problem {
             detail: detail.into(),
             errors: None,
             quota: None,
+            limit: None,
             retry_after: None,
         }
     }

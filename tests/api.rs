@@ -1290,9 +1290,99 @@ fn a_job_over_the_memory_limit_is_refused_at_submission() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A study meets the per-job memory limit a job meets, at submission: box-exp3 with the
+/// direct solver demanded, refused as a job at h = 1/24, is refused as the reference of a
+/// ladder study (at `/study/reference/h`) and as a target study whose pilots need that much
+/// (at `/study/scene`), with the predicted and allowed bytes in the problem's `limit`; a larger
+/// limit admits it, and the job resource shows the largest run's prediction.
+#[test]
+fn a_study_over_the_memory_limit_is_refused_at_submission_like_a_job() {
+    let mut scene = contact_core::scene::presets::get("box-exp3").unwrap();
+    scene["solver"] = json!({"linear": "direct"});
+    let mut reference = scene.clone();
+    reference["mesh"]["h"] = json!("1/24");
+    reference["time"] = json!({"t_end": 1, "k": "1/8"});
+    let predicted =
+        contact_core::memory::predict(&contact_core::scene::validate(&reference).unwrap()).direct;
+    let ladder = json!({"study": {"scene": scene, "h": ["1/4", "1/8"], "k": "1/8",
+                                  "reference": {"h": "1/24", "k": "1/8"}}});
+    for (limit, admitted) in [(predicted - 1, false), (predicted, true)] {
+        let dir = temp_dir("study-memory");
+        let s = Server::start_with(Config {
+            data_dir: dir.clone(),
+            workers: 0,
+            max_job_memory: Some(limit),
+            ..Config::default()
+        });
+        let a = s.addr;
+        // The job alone.
+        let r = post_json(a, "/jobs", &reference);
+        assert_eq!(r.status == 202, admitted, "{}", r.text());
+        let r = post_json(a, "/jobs", &ladder);
+        if admitted {
+            assert_eq!(r.status, 202, "{}", r.text());
+            let id = r.json()["id"].as_str().unwrap().to_string();
+            let job = get(a, &format!("/jobs/{id}")).json();
+            assert_eq!(
+                job["memory"],
+                json!({"predicted_bytes": predicted, "limit_bytes": limit, "linear_path": "direct"}),
+                "{job}"
+            );
+        } else {
+            let p = assert_problem(&r, 422);
+            assert_eq!(p["errors"][0]["pointer"], "/study/reference/h", "{p}");
+            assert_eq!(
+                p["limit"],
+                json!({"name": "memory", "pointer": "/study/reference/h",
+                       "needed": predicted, "allowed": limit}),
+                "{p}"
+            );
+            let msg = p["detail"].as_str().unwrap();
+            assert!(
+                msg.starts_with("the reference (h = 1/24, k = 1/8): the direct solver needs"),
+                "{msg}"
+            );
+        }
+        s.stop();
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    // A target study: its finest first pilot (h = 1/8 at the coarsest n0 = 2, 16 steps).
+    let Ok((contact_core::study::request::Request::Target { spec, .. }, _)) =
+        contact_core::study::request::parse(
+            &json!({"scene": scene, "target": {"error": 0.1}}),
+            "/study",
+            &contact_core::scene::Bundled,
+        )
+    else {
+        panic!("a target study")
+    };
+    let finest = *spec.first_pilots().iter().max().unwrap();
+    let pilot = contact_core::study::with_resolution(&spec.base, finest);
+    let predicted = contact_core::memory::predict(&pilot).direct;
+    let dir = temp_dir("target-memory");
+    let s = Server::start_with(Config {
+        data_dir: dir.clone(),
+        workers: 0,
+        max_job_memory: Some(predicted - 1),
+        ..Config::default()
+    });
+    let p = assert_problem(
+        &post_json(
+            s.addr,
+            "/jobs",
+            &json!({"study": {"scene": scene, "target": {"error": 0.1}}}),
+        ),
+        422,
+    );
+    assert_eq!(p["errors"][0]["pointer"], "/study/scene", "{p}");
+    assert_eq!(p["limit"]["needed"], json!(predicted), "{p}");
+    s.stop();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// The job resource shows the memory predicted at submission: for a simulation, the bytes
 /// `contact_core::memory::choose` predicts for the validated scene under the server's
-/// per-job limit, that limit, and the path; for a study (whose levels differ), null.
+/// per-job limit, that limit, and the path; for a study, its reference's (its largest run).
 #[test]
 fn the_job_resource_shows_the_predicted_memory() {
     let limit = 1 << 30;
@@ -1337,7 +1427,13 @@ fn the_job_resource_shows_the_predicted_memory() {
     let id = r.json()["id"].as_str().unwrap().to_string();
     let study = get(a, &format!("/jobs/{id}")).json();
     assert_eq!(study["kind"], "study");
-    assert!(study["memory"].is_null(), "{study}");
+    let (plan, _) = contact_core::study::parse(&json!({"preset": "paper-table-1"}), "").unwrap();
+    let (path, reference) = contact_core::memory::choose(&plan.base, Some(limit)).unwrap();
+    assert_eq!(
+        study["memory"],
+        json!({"predicted_bytes": reference, "limit_bytes": limit, "linear_path": path}),
+        "{study}"
+    );
     s.stop();
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -264,7 +264,7 @@ fn a_target_out_of_reach_of_the_limits_is_refused_before_the_expensive_run() {
     let (code, err) = study(&["--max-nodes", "50"]);
     assert_eq!(code, Some(2), "{err}");
     assert!(
-        err.contains("even the pilot levels need 81 nodes, more than the limit of 50"),
+        err.contains("even the pilot runs of this scene do not fit: the mesh has 81 nodes, more than the per-job limit of 50 (--max-nodes)"),
         "{err}"
     );
     // A ladder study whose reference (h = 1/16: 289 nodes) is beyond the limits.
@@ -277,13 +277,13 @@ fn a_target_out_of_reach_of_the_limits_is_refused_before_the_expensive_run() {
     let (code, err) = study(&["--max-nodes", "288"]);
     assert_eq!(code, Some(2), "{err}");
     assert!(
-        err.contains("ladder: the reference mesh has 289 nodes, more than the limit of 288"),
+        err.contains("ladder: the reference (h = 1/16, k = 1/4): the mesh has 289 nodes, more than the per-job limit of 288 (--max-nodes)"),
         "{err}"
     );
     let (code, err) = study(&["--max-job-memory", "10K"]);
     assert_eq!(code, Some(2), "{err}");
     assert!(
-        err.contains("ladder: the reference run: this run needs about")
+        err.contains("ladder: the reference (h = 1/16, k = 1/4): this run needs about")
             && err.contains(
                 "of memory (predicted, on the multigrid path), more than this node's per-job limit"
             ),

@@ -2,7 +2,8 @@
 
 use super::{fail, pretty};
 use clap::Args;
-use contact_core::{bench, study};
+use contact_core::harness::bench;
+use contact_core::study;
 use std::process::ExitCode;
 
 #[derive(Args)]

@@ -22,7 +22,7 @@ pub enum StressFormat {
 
 pub fn main(args: StressArgs) -> ExitCode {
     let bar = progress::bar(0, "cases");
-    let report = contact_core::stress::run_with(args.quick, |i, n, case| {
+    let report = contact_core::harness::stress::run_with(args.quick, |i, n, case| {
         bar.set_length(n as u64);
         bar.set_position(i as u64);
         bar.set_message(case.name);

@@ -1,4 +1,4 @@
-//! /jobs: submit (validate, limit, deduplicate, enqueue), list, get (ETag, Retry-After),
+//! /jobs: submit (validated by [`crate::submission`], deduplicated, enqueued), list, get (ETag, Retry-After),
 //! cancel, delete, and the Server-Sent Events progress stream.
 
 use super::query::{Cursor, Limit, Params};
@@ -7,17 +7,15 @@ use crate::auth::Caller;
 use crate::jobs::{is_study, JobEvent};
 use crate::problem::Problem;
 use crate::state::AppState;
-use crate::store::{Enqueued, JobRecord, JobStatus, MemoryPrediction, NewJob};
+use crate::store::{Enqueued, JobRecord, JobStatus, NewJob};
+use crate::submission::Validated;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::Extension;
-use contact_core::scene::{self, canonical, hex_sha256, presets, Overrides};
-use contact_core::solve::SolverSettings;
-use contact_core::study;
-use contact_core::study::presets as study_presets;
+use contact_core::scene::hex_sha256;
 use serde_json::{json, Value};
 use std::convert::Infallible;
 use std::time::Duration;
@@ -116,343 +114,6 @@ fn json_response(status: StatusCode, body: &Value) -> Response {
     r
 }
 
-/// Content hash of a result: scene (canonical JSON), crate version, solver settings.
-pub fn scene_hash(scene: &Value) -> String {
-    let key = json!({
-        "scene": canonical(scene),
-        "version": env!("CARGO_PKG_VERSION"),
-        "solver": SolverSettings::default(),
-    });
-    hex_sha256(key.to_string().as_bytes())
-}
-
-/// A preset request: `{"preset": NAME, "overrides": {...}}`.
-enum PresetRequest {
-    /// Not a preset request: the document is a scene or a study.
-    None,
-    /// A scene preset expanded with its overrides, and the key the final time was given by
-    /// (`t_end` or its alias `T`), for the pointers of errors.
-    Scene(Value, &'static str),
-    /// A study preset's name (the paper's tables): runs as `{"study": {"preset": NAME}}`.
-    Study(String),
-}
-
-/// Reads a preset request; any other document is a scene or a study.
-fn expand(doc: &Value) -> Result<PresetRequest, Problem> {
-    let Some(obj) = doc.as_object().filter(|o| o.contains_key("preset")) else {
-        return Ok(PresetRequest::None);
-    };
-    for k in obj.keys() {
-        if k != "preset" && k != "overrides" {
-            return Err(Problem::invalid_field(
-                &format!("/{k}"),
-                format!("unknown field {k:?} in a preset request (allowed: preset, overrides)"),
-            ));
-        }
-    }
-    let name = obj["preset"]
-        .as_str()
-        .ok_or_else(|| Problem::invalid_field("/preset", "preset must be a string"))?;
-    if study_presets::get(name).is_some() {
-        if obj.contains_key("overrides") {
-            return Err(Problem::invalid_field(
-                "/overrides",
-                format!(
-                    "{name:?} is a study preset, which takes no overrides; \
-                     edit its study document (GET /presets/{name}) and submit that"
-                ),
-            ));
-        }
-        return Ok(PresetRequest::Study(name.to_string()));
-    }
-    let mut scene = presets::get(name).ok_or_else(|| {
-        Problem::invalid_field(
-            "/preset",
-            format!(
-                "unknown preset {name:?}; known: {}",
-                presets::names()
-                    .iter()
-                    .chain(study_presets::names())
-                    .copied()
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-        )
-    })?;
-    let mut o = Overrides::default();
-    let mut t_key = "t_end";
-    if let Some(ov) = obj.get("overrides") {
-        let ov = ov
-            .as_object()
-            .ok_or_else(|| Problem::invalid_field("/overrides", "overrides must be an object"))?;
-        if ov.contains_key("t_end") && ov.contains_key("T") {
-            return Err(Problem::invalid_field(
-                "/overrides/T",
-                "give the final time once: t_end or its alias T, not both",
-            ));
-        }
-        for (k, v) in ov {
-            match k.as_str() {
-                "h" => o.h = Some(v.clone()),
-                "k" => o.k = Some(v.clone()),
-                "t_end" => o.t_end = Some(v.clone()),
-                "T" => {
-                    o.t_end = Some(v.clone());
-                    t_key = "T";
-                }
-                _ => {
-                    return Err(Problem::invalid_field(
-                        &format!("/overrides/{k}"),
-                        format!("unknown override {k:?} (allowed: h, k, T or its alias t_end)"),
-                    ))
-                }
-            }
-        }
-    }
-    scene::apply_overrides(&mut scene, &o);
-    Ok(PresetRequest::Scene(scene, t_key))
-}
-
-/// Maps pointers of an expanded preset back to the request's `overrides` (`t_key`: the key
-/// the request gave the final time by).
-fn map_override_pointers(mut p: Problem, t_key: &str) -> Problem {
-    for err in p.errors.iter_mut().flatten() {
-        let mapped = match err.pointer.as_str() {
-            "/mesh/h" => "/overrides/h".to_string(),
-            "/time/k" | "/time/N" => "/overrides/k".to_string(),
-            "/time/t_end" => format!("/overrides/{t_key}"),
-            _ => continue,
-        };
-        err.pointer = mapped;
-    }
-    p
-}
-
-/// Per-job limits (nodes, memory, steps, stored bytes), reported at the field that sets
-/// them; the estimated stored bytes (what the owner's quota counts) and the predicted
-/// memory on the path the run takes.
-fn check_limits(
-    p: &contact_core::problem::Problem,
-    state: &AppState,
-    is_preset: bool,
-    doc: &Value,
-) -> Result<(u64, MemoryPrediction), Problem> {
-    let cfg = &state.rt.config;
-    let nodes = p.n_nodes();
-    let (mut hptr, kptr) = if is_preset {
-        ("/overrides/h", "/overrides/k")
-    } else {
-        ("/mesh/h", "/time/k")
-    };
-    // An imported mesh's size is the file's and its refinements'.
-    if !is_preset && doc["domain"].get("mesh").is_some() {
-        hptr = if doc["mesh"].get("refine").is_some() {
-            "/mesh/refine"
-        } else {
-            "/domain/mesh"
-        };
-    }
-    if nodes > cfg.max_nodes {
-        return Err(Problem::invalid_field(
-            hptr,
-            format!(
-                "the mesh has {nodes} nodes, more than this server's limit of {}",
-                cfg.max_nodes
-            ),
-        ));
-    }
-    let (linear_path, predicted_bytes) = contact_core::memory::choose(p, cfg.max_job_memory)
-        .map_err(|e| {
-            let ptr = match e.pointer() {
-                "/mesh" => hptr,
-                other => other,
-            };
-            Problem::invalid_field(ptr, e.to_string())
-        })?;
-    let memory = MemoryPrediction {
-        linear_path,
-        predicted_bytes,
-    };
-    if p.steps > cfg.max_steps {
-        return Err(Problem::invalid_field(
-            kptr,
-            format!(
-                "{} time steps, more than this server's limit of {}",
-                p.steps, cfg.max_steps
-            ),
-        ));
-    }
-    let f = p.output.fields;
-    let d = p.dim();
-    let per_node = d * f.u as usize + d * f.w as usize + f.zeta as usize;
-    let per_cell = 3 * (d - 1) * f.sigma as usize + f.von_mises as usize;
-    // Cells: at most 4 per rectangle cell (the cross pattern), 6 per box cell; ≈ 2 per node on
-    // any triangulation, ≈ 6 per node on a tetrahedral mesh.
-    let cells = match (&p.body, p.depth_cells()) {
-        (None, Some(nz)) => {
-            let (nx, ny) = p.cells();
-            6 * nx * ny * nz
-        }
-        (None, None) => {
-            let (nx, ny) = p.cells();
-            4 * nx * ny
-        }
-        (Some(_), _) => 2 * (d - 1) * (d - 1) * nodes,
-    };
-    let per_step = 8 * (per_node * nodes + per_cell * cells) as u64 + 64;
-    let stored = (1..=p.steps)
-        .filter(|&n| p.output.stores(n, p.steps))
-        .count() as u64;
-    if per_step * stored > cfg.max_stored_bytes {
-        return Err(Problem::invalid_field(
-            "/output",
-            format!("the selected output stores about {} MB, more than this server's limit of {} MB; store fewer steps (output.every) or fields", (per_step * stored) >> 20, cfg.max_stored_bytes >> 20),
-        ));
-    }
-    Ok((per_step * stored, memory))
-}
-
-/// A study's runs against the per-job limits: the reference (its largest run) must fit the
-/// node limit, all runs together the step limit.
-fn check_study_limits(plan: &study::Plan, state: &AppState) -> Result<(), Problem> {
-    let cfg = &state.rt.config;
-    let nodes = plan.base.n_nodes();
-    if nodes > cfg.max_nodes {
-        return Err(Problem::invalid_field(
-            if plan.base.body.is_some() {
-                "/study/reference/refine"
-            } else {
-                "/study/reference/h"
-            },
-            format!(
-                "the reference mesh has {nodes} nodes, more than this server's limit of {}",
-                cfg.max_nodes
-            ),
-        ));
-    }
-    let steps = study::total_steps(plan);
-    if steps > cfg.max_steps {
-        return Err(Problem::invalid_field(
-            "/study/reference/k",
-            format!(
-                "the study's runs take {steps} time steps in all, more than this server's limit of {}",
-                cfg.max_steps
-            ),
-        ));
-    }
-    Ok(())
-}
-
-/// A submission as validated: what is stored and counted.
-struct Validated {
-    /// The document to store.
-    doc: Value,
-    /// Its number of time steps (a study's: its progress scale).
-    steps: usize,
-    /// Estimated stored bytes; a study's summary counts as nothing.
-    stored_bytes: u64,
-    /// A simulation's predicted memory; None for a study, whose levels differ.
-    memory: Option<MemoryPrediction>,
-}
-
-/// The submission to store, or why it is refused (422 at the offending field). Blocking.
-fn validated(doc: Value, state: &AppState) -> Result<Validated, Problem> {
-    let doc = match expand(&doc)? {
-        PresetRequest::Study(name) => json!({"study": {"preset": name}}),
-        PresetRequest::Scene(scene_doc, t_key) => {
-            return validated_scene(scene_doc, Some(t_key), state)
-        }
-        PresetRequest::None => doc,
-    };
-    match doc.get("study") {
-        Some(study) => {
-            if let Some(k) = doc
-                .as_object()
-                .and_then(|o| o.keys().find(|k| *k != "study"))
-            {
-                return Err(Problem::invalid_field(
-                    &format!("/{k}"),
-                    format!("unknown field {k:?} next to a study (a study request is {{\"study\": {{...}}}})"),
-                ));
-            }
-            if study::is_target(study) {
-                return validated_target(study, state);
-            }
-            let (plan, expanded) =
-                study::parse_with(study, "/study", &*state.rt.meshes).map_err(|e| {
-                    crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))
-                })?;
-            check_study_limits(&plan, state)?;
-            Ok(Validated {
-                doc: json!({ "study": expanded }),
-                steps: study::total_steps(&plan),
-                stored_bytes: 0,
-                memory: None,
-            })
-        }
-        None => validated_scene(doc, None, state),
-    }
-}
-
-/// A target study: validated as a document here; whether the target is within reach of the
-/// limits is known only once its pilot runs have measured the errors and times, so an
-/// unreachable target fails the job (422 problem at `/study/target/error` in its error)
-/// before the expensive run. Its progress scale starts at the first pilots' steps.
-fn validated_target(study: &Value, state: &AppState) -> Result<Validated, Problem> {
-    let (spec, expanded) =
-        study::target::parse_with(study, "/study", &*state.rt.meshes).map_err(|e| {
-            crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))
-        })?;
-    let cfg = &state.rt.config;
-    // The finest pilot of the h-ladder must fit the node limit, or nothing can be planned.
-    let pilot_nodes = spec.pilot_nodes();
-    if pilot_nodes > cfg.max_nodes {
-        return Err(Problem::invalid_field(
-            "/study/scene",
-            format!(
-                "even the pilot levels of this scene need {pilot_nodes} nodes, more than this server's limit of {}",
-                cfg.max_nodes
-            ),
-        ));
-    }
-    let steps = study::target::PILOT_STEPS * ((1 << study::target::FIRST_PILOT_LEVELS) - 1) * 2;
-    Ok(Validated {
-        doc: json!({ "study": expanded }),
-        steps,
-        stored_bytes: 0,
-        memory: None,
-    })
-}
-
-/// A scene document (`preset`: the key of the final time when it was expanded from a preset
-/// request, whose errors then point into `overrides`) as validated, or why it is refused.
-fn validated_scene(
-    scene_doc: Value,
-    preset: Option<&str>,
-    state: &AppState,
-) -> Result<Validated, Problem> {
-    let problem = match scene::validate_with(&scene_doc, &*state.rt.meshes) {
-        Ok(p) => p,
-        Err(errors) => {
-            if let Some(outage) = crate::meshes::store_outage(&errors) {
-                return Err(outage);
-            }
-            let e = Problem::invalid_scene(&errors);
-            return Err(match preset {
-                Some(t_key) => map_override_pointers(e, t_key),
-                None => e,
-            });
-        }
-    };
-    let (stored_bytes, memory) = check_limits(&problem, state, preset.is_some(), &scene_doc)?;
-    Ok(Validated {
-        doc: scene_doc,
-        steps: problem.steps,
-        stored_bytes,
-        memory: Some(memory),
-    })
-}
-
 pub async fn submit(
     State(state): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -484,10 +145,10 @@ pub async fn submit(
         memory,
     } = blocking(move || {
         crate::meshes::check_owner(&doc, st.store().as_ref(), &who)?;
-        validated(doc, &st)
+        crate::submission::validated(doc, &st)
     })
     .await?;
-    let hash = scene_hash(&scene_doc);
+    let hash = crate::submission::scene_hash(&scene_doc);
     let mesh = crate::meshes::mesh_ref(&scene_doc);
     let key = match headers.get("idempotency-key") {
         Some(v) => Some(

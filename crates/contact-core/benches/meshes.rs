@@ -10,12 +10,13 @@
 //!
 //! Figures are the best of 3; set CONTACT_SIM_BENCH_QUICK=1 for a smaller import mesh.
 
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 use contact_core::mesh::{import, polygon, Mesh, MeshPattern};
 use contact_core::msh;
+use contact_core::run::{Run, ToEnd};
 use contact_core::scene::{self, presets};
-use contact_core::solve::stepper::Simulation;
 use contact_core::solve::SolverSettings;
 use serde_json::json;
 
@@ -109,12 +110,11 @@ fn step_time(mut doc: serde_json::Value, steps: usize) -> (f64, usize, usize) {
     let mut t = f64::INFINITY;
     let mut sizes = (0, 0);
     for _ in 0..3 {
-        let mut sim = Simulation::<2>::new(p.clone(), SolverSettings::default()).expect("set-up");
+        let mut run = Run::<2>::new(p.clone(), SolverSettings::default()).expect("set-up");
         let s = Instant::now();
-        while !sim.finished() {
-            sim.step().expect("step");
-        }
+        let ControlFlow::Continue(()) = run.drive(&mut ToEnd).expect("step");
         t = t.min(s.elapsed().as_secs_f64());
+        let sim = run.sim();
         sizes = (sim.dofs.n_free(), sim.mesh.n_nodes());
     }
     (t / steps as f64, sizes.0, sizes.1)

@@ -9,13 +9,18 @@ fn main() {
         .split(',')
         .filter_map(|s| s.trim().parse().ok())
         .collect();
-    let report =
-        contact_core::bench::run(contact_core::bench::DEFAULT_PRESET, &levels, 3, None, &[])
-            .expect("benchmark run");
+    let report = contact_core::harness::bench::run(
+        contact_core::harness::bench::DEFAULT_PRESET,
+        &levels,
+        3,
+        None,
+        &[],
+    )
+    .expect("benchmark run");
     println!("{}", report.table());
     println!("{}", serde_json::to_string_pretty(&report).expect("JSON"));
     // Tables 1 and 2 together, one shared reference (target: under 4 s on 2 cores).
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(4));
-    let tables = contact_core::bench::tables(3, threads).expect("tables benchmark");
+    let tables = contact_core::harness::bench::tables(3, threads).expect("tables benchmark");
     println!("{}", serde_json::to_string_pretty(&tables).expect("JSON"));
 }

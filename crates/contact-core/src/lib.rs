@@ -5,17 +5,20 @@
 //! "Numerical analysis of a contact problem with damage", J. Comput. Appl. Math. 377 (2020)
 //! 112886, with the discrete choices written down in `docs/src/explanation/numerics.md`. Data flows one way:
 //! scene JSON → [`scene::validate`] → [`problem::Problem`] → [`mesh`] and [`fem`] matrices →
-//! [`solve::stepper`] time steps → [`output`] summary and fields; [`run`] drives one
-//! simulation, [`estimate`] its error bar, [`study`] convergence studies.
+//! [`solve::stepper`] time steps → [`output`] summary and fields. [`run`] drives every run
+//! (the only time loop, with hooks), [`admission`] checks a run against a host's per-job
+//! limits before any numeric work, [`estimate`] gives a run its error bar, [`study`] runs
+//! convergence and target studies, [`harness`] the stress table and the bench.
 //!
 //! This crate knows nothing about HTTP, storage or command lines (a CI step checks its
 //! dependency tree).
 #![forbid(unsafe_code)]
 
-pub mod bench;
+pub mod admission;
 pub mod estimate;
 pub mod expr;
 pub mod fem;
+pub mod harness;
 pub mod laws;
 pub mod linalg;
 pub mod memory;
@@ -26,5 +29,4 @@ pub mod problem;
 pub mod run;
 pub mod scene;
 pub mod solve;
-pub mod stress;
 pub mod study;

@@ -198,6 +198,17 @@ impl OutputSpec {
     pub fn stores(&self, n: usize, steps: usize) -> bool {
         (self.every > 0 && n.is_multiple_of(self.every)) || (self.last && n == steps)
     }
+
+    /// How many of the steps 1..=steps are stored ([`OutputSpec::stores`]), in O(1).
+    pub fn stored_steps(&self, steps: usize) -> usize {
+        let every = steps.checked_div(self.every).unwrap_or(0);
+        every + usize::from(self.last && steps > 0 && !self.stores_every(steps))
+    }
+
+    /// Step n is a multiple of `every`.
+    fn stores_every(&self, n: usize) -> bool {
+        self.every > 0 && n.is_multiple_of(self.every)
+    }
 }
 
 /// A fully validated problem (Problem 3.1 of the paper plus discretisation choices).

@@ -3,7 +3,7 @@
 //! is refused up front with the expected reason. Scenes beyond the smallness condition (2.31)
 //! must be refused, never silently solved.
 
-use contact_core::stress::{self, Expect, Outcome};
+use contact_core::harness::stress::{self, Expect, Outcome};
 
 #[test]
 fn quick_suite_completes_or_refuses_as_required() {

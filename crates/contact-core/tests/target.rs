@@ -173,6 +173,7 @@ fn brute_force_comparison(targets: &[f64], bound: f64, checked: bool) {
             Limits {
                 max_nodes: Some(33 * 33),
                 max_steps: Some(32),
+                ..Limits::default()
             },
         )
         .unwrap();
@@ -235,7 +236,7 @@ fn an_unreachable_target_is_refused_with_the_reason() {
         paper(0.02),
         Limits {
             max_nodes: Some(1100),
-            max_steps: None,
+            ..Limits::default()
         },
     )
     .unwrap_err();

@@ -6,7 +6,7 @@
 //!   σ_τ = μ(|w_τ|) w_τ/|w_τ| (the friction force on the body opposing the slip; in 3D with
 //!   the tangential 2-vectors and the Euclidean norm).
 //!
-//! Used by the whole-run tests and by the stability suite ([`crate::stress`]).
+//! Used by the whole-run tests and by the stability suite ([`crate::harness::stress`]).
 
 use super::stepper::{Simulation, StepReport};
 

@@ -280,7 +280,7 @@ impl StudyResult {
             Vary::K => "k",
             Vary::H | Vary::Both => "h",
         };
-        let frac = crate::study::report_svg::fraction;
+        let frac = crate::study::format::fraction;
         let opt = |o: Option<f64>| o.map_or("      -".to_string(), |v| format!("{v:7.4}"));
         let r = &self.reference;
         let mut s = format!(

@@ -3,8 +3,8 @@
 
 use crate::mesh::Mesh;
 use crate::problem::Problem;
-use crate::run::RunError;
-use crate::solve::stepper::{Prepared, Simulation};
+use crate::run::{Hooks, Run, RunError};
+use crate::solve::stepper::{Prepared, StepReport};
 use crate::solve::SolverSettings;
 use serde::Serialize;
 use std::collections::BTreeSet;
@@ -105,45 +105,68 @@ pub fn run_level<const D: usize>(
                     p.clone()
                 }
                 None => {
-                    let p = Prepared::<D>::new(&work.problem).map_err(RunError::from)?;
+                    let p = Prepared::<D>::within(&work.problem, settings.memory_limit)
+                        .map_err(RunError::from)?;
                     *slot = Some(p.clone());
                     p
                 }
             }
         }
-        None => Prepared::<D>::new(&work.problem).map_err(RunError::from)?,
+        None => {
+            Prepared::<D>::within(&work.problem, settings.memory_limit).map_err(RunError::from)?
+        }
     };
-    let mut sim = Simulation::from_prepared(work.problem.clone(), settings, prepared)
-        .map_err(RunError::from)?;
-    let mut acc = StatsAccumulator::new(settings);
-    let mut snapshots = Vec::with_capacity(work.keep.len());
-    while !sim.finished() {
-        let r = sim.step().map_err(RunError::from)?;
-        acc.add(&r);
-        if work.keep.contains(&r.n) {
-            snapshots.push(Snapshot {
+    let mut run =
+        Run::from_prepared(work.problem.clone(), settings, prepared).map_err(RunError::from)?;
+    let mut keep = Keep {
+        work,
+        tick,
+        stats: StatsAccumulator::new(settings),
+        snapshots: Vec::with_capacity(work.keep.len()),
+    };
+    if run.drive(&mut keep).map_err(RunError::from)?.is_break() {
+        return Err(super::StudyError::Cancelled);
+    }
+    let sim = run.into_simulation();
+    Ok(LevelRun {
+        unknowns: sim.dofs.n_free(),
+        steps: work.problem.steps,
+        seconds: start.elapsed().as_secs_f64() + reused_seconds,
+        stats: keep.stats.finish(),
+        snapshots: keep.snapshots,
+        mesh: sim.mesh,
+    })
+}
+
+/// A level's hooks: its solver figures, w and ζ (and u when asked) at the kept steps, and
+/// the study's tick after every step (`Break`: cancelled).
+struct Keep<'a> {
+    work: &'a Work,
+    tick: &'a (dyn Fn() -> ControlFlow<()> + Sync),
+    stats: StatsAccumulator,
+    snapshots: Vec<Snapshot>,
+}
+
+impl<const D: usize> Hooks<D> for Keep<'_> {
+    type Stop = ();
+
+    fn after_step(&mut self, run: &Run<D>, r: &StepReport) -> ControlFlow<()> {
+        self.stats.add(r);
+        if self.work.keep.contains(&r.n) {
+            let sim = run.sim();
+            self.snapshots.push(Snapshot {
                 step: r.n,
                 w: sim.w.clone(),
                 zeta: sim.state.zeta.clone(),
-                u: if work.keep_u {
+                u: if self.work.keep_u {
                     sim.state.u.clone()
                 } else {
                     Vec::new()
                 },
             });
         }
-        if tick().is_break() {
-            return Err(super::StudyError::Cancelled);
-        }
+        (self.tick)()
     }
-    Ok(LevelRun {
-        unknowns: sim.dofs.n_free(),
-        steps: work.problem.steps,
-        seconds: start.elapsed().as_secs_f64() + reused_seconds,
-        stats: acc.finish(),
-        snapshots,
-        mesh: sim.mesh,
-    })
 }
 
 /// Folds per-step solver reports into [`RunStats`].
@@ -174,7 +197,7 @@ impl StatsAccumulator {
         }
     }
 
-    pub fn add(&mut self, r: &crate::solve::stepper::StepReport) {
+    pub fn add(&mut self, r: &StepReport) {
         self.steps += 1;
         self.velocity_sum += r.velocity.iterations;
         self.velocity_max = self.velocity_max.max(r.velocity.iterations);

@@ -15,11 +15,14 @@
 //!   [`plan`] (error and cost models, the cheapest (h, k)), the chosen run and its check.
 
 pub mod compare;
+pub mod format;
 pub mod levels;
 pub mod plan;
 pub mod presets;
 pub mod reference;
 pub mod report_svg;
+pub mod request;
+mod schedule;
 pub mod spec;
 pub mod target;
 
@@ -30,15 +33,14 @@ pub use target::{is_target, TargetResult, TargetSpec};
 
 use crate::problem::Problem;
 use crate::run::RunError;
-use crate::solve::stepper::Prepared;
 use crate::solve::SolverSettings;
 use levels::{LevelRun, Work};
 use reference::Reference;
+pub(crate) use schedule::{run_all, Done};
 use std::collections::BTreeSet;
-use std::collections::HashMap;
 use std::ops::ControlFlow;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Snapshots of the reference kept for the time-maximum of the errors are capped at this
@@ -376,86 +378,6 @@ fn compared_steps(plan: &Plan) -> BTreeSet<usize> {
     thinned
 }
 
-/// A finished run.
-pub(super) enum Done<const D: usize> {
-    Level(LevelRun<D>),
-    Reference(Reference<D>),
-}
-
-/// Runs the jobs on `exec.threads` threads, largest first, and returns them in input order.
-pub(super) fn run_all<const D: usize>(
-    jobs: Vec<Work>,
-    exec: Execution,
-    total: usize,
-    progress: &(dyn Fn(usize, usize) -> ControlFlow<()> + Sync),
-) -> Result<Vec<Done<D>>, StudyError> {
-    let mut order: Vec<usize> = (0..jobs.len()).collect();
-    order.sort_by_key(|&i| std::cmp::Reverse(jobs[i].cost()));
-    let next = AtomicUsize::new(0);
-    let done = AtomicUsize::new(0);
-    let stop = AtomicBool::new(false);
-    let results: Vec<Mutex<Option<Result<Done<D>, StudyError>>>> =
-        jobs.iter().map(|_| Mutex::new(None)).collect();
-    let mut setups: HashMap<&(String, usize), Mutex<Option<Prepared<D>>>> = HashMap::new();
-    for key in jobs.iter().filter_map(|j| j.share.as_ref()) {
-        setups.entry(key).or_insert_with(|| Mutex::new(None));
-    }
-    let tick = || {
-        let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-        if stop.load(Ordering::Relaxed) || progress(d, total).is_break() {
-            stop.store(true, Ordering::Relaxed);
-            return ControlFlow::Break(());
-        }
-        ControlFlow::Continue(())
-    };
-    let worker = || loop {
-        let i = next.fetch_add(1, Ordering::SeqCst);
-        let Some(&j) = order.get(i) else { break };
-        if stop.load(Ordering::Relaxed) {
-            break;
-        }
-        // A reference's norms are computed here, on the computing thread, while the other
-        // threads may still be running levels.
-        let slot = jobs[j].share.as_ref().and_then(|k| setups.get(k));
-        let r = levels::run_level(&jobs[j], exec.settings, &tick, slot).map(|run| {
-            if jobs[j].is_reference {
-                Done::Reference(Reference::new(run))
-            } else {
-                Done::Level(run)
-            }
-        });
-        if r.is_err() {
-            stop.store(true, Ordering::Relaxed);
-        }
-        *results[j].lock().unwrap() = Some(r);
-    };
-    let threads = exec.threads.clamp(1, jobs.len().max(1));
-    std::thread::scope(|s| {
-        for _ in 1..threads {
-            s.spawn(worker);
-        }
-        worker();
-    });
-    let mut out = Vec::with_capacity(jobs.len());
-    let mut first_error = None;
-    for r in results {
-        match r.into_inner().unwrap() {
-            Some(Ok(run)) => out.push(run),
-            Some(Err(e)) => {
-                // A solver failure explains the others' cancellation better than "cancelled".
-                if first_error.is_none() || matches!(first_error, Some(StudyError::Cancelled)) {
-                    first_error = Some(e);
-                }
-            }
-            None => first_error = first_error.or(Some(StudyError::Cancelled)),
-        }
-    }
-    match first_error {
-        Some(e) => Err(e),
-        None => Ok(out),
-    }
-}
-
 /// Runs every `(cells_per_unit, steps)` level of `base` and the reference, without a shared
 /// cache or progress reporting (library callers and tests).
 pub fn run_ladder(
@@ -477,6 +399,10 @@ pub fn run_ladder(
         reference,
         vary,
         reference_key: String::new(),
+        level_pointers: (0..levels.len())
+            .map(|i| [format!("/h/{i}"), format!("/k/{i}")])
+            .collect(),
+        reference_pointers: ["/reference/h".into(), "/reference/k".into()],
     };
     run(
         &plan,

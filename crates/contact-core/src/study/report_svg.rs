@@ -2,6 +2,7 @@
 //! slope-1 and slope-2 guides, and the work–precision diagram (error against wall time).
 //! Plain SVG 1.1 text, no fonts or scripts, so it renders the same in browsers and viewers.
 
+use super::format::fraction;
 use crate::study::{StudyResult, TargetResult, Vary};
 use std::fmt::Write;
 
@@ -163,16 +164,6 @@ impl Panel {
             label.0,
             label.1,
         );
-    }
-}
-
-/// 1/n when the value is one, else a decimal.
-pub fn fraction(v: f64) -> String {
-    let inv = 1.0 / v;
-    if (inv - inv.round()).abs() < 1e-9 * inv.abs().max(1.0) {
-        format!("1/{:.0}", inv)
-    } else {
-        format!("{v:.4}")
     }
 }
 

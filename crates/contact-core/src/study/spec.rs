@@ -44,6 +44,11 @@ pub struct Plan {
     /// Content hash of what determines the reference run (scene physics, resolution, solver,
     /// version); "" for an unshared reference.
     pub reference_key: String,
+    /// Where each level's (h or refine, k) is set in the request, for errors about one run
+    /// (the limits of [`super::request`]) ...
+    pub level_pointers: Vec<[String; 2]>,
+    /// ... and the reference's.
+    pub reference_pointers: [String; 2],
 }
 
 const FIELDS: &[&str] = &["name", "scene", "h", "refine", "k", "reference", "preset"];
@@ -215,11 +220,15 @@ pub fn parse_with(
             }
         }
     };
+    let reference_pointers = [
+        format!("{at}/reference/{hkey}"),
+        format!("{at}/reference/k"),
+    ];
     let base = resolve(
         ref_h,
         ref_k,
-        format!("{at}/reference/h"),
-        format!("{at}/reference/k"),
+        reference_pointers[0].clone(),
+        reference_pointers[1].clone(),
     );
     let n_levels = hs.len().max(ks.len());
     let ptr = |key: &str, is_list: bool, i: usize| {
@@ -311,7 +320,9 @@ pub fn parse_with(
     let plan = Plan {
         name: name.unwrap_or_else(|| format!("study of {}", base.name)),
         levels: levels.iter().map(|l| (l.0, l.1)).collect(),
+        level_pointers: levels.into_iter().map(|l| [l.2, l.3]).collect(),
         reference: (ref_n, ref_steps),
+        reference_pointers,
         vary,
         reference_key,
         base,

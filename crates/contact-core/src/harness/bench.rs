@@ -5,10 +5,12 @@
 //! iterations and the predicted and measured peak memory of each run.
 
 use crate::linalg::LinearPath;
+use crate::run::{Hooks, Run};
 use crate::scene::{self, presets, Overrides};
 use crate::solve::stepper::Simulation;
 use crate::solve::SolverSettings;
 use serde::Serialize;
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 /// Products with K timed before each step (the matvec figure is the median of all of them
@@ -181,34 +183,73 @@ fn leveled(
     Ok(scene::validate(&doc)?)
 }
 
+/// A measured run's figures, gathered by its hooks: products with K timed before every
+/// step, under the load the steps ran under, not only after the run (the machines are
+/// shared and one product's time drifts by ±30 % over a run); the steps' times and solver
+/// figures.
+#[derive(Default)]
+struct Tally {
+    products: Vec<f64>,
+    solve_s: f64,
+    last: Option<crate::solve::stepper::StepReport>,
+    its_v: usize,
+    its_d: usize,
+    its_v_sum: usize,
+    slip_steps: usize,
+    slip_max: usize,
+    newton: usize,
+}
+
+impl<const D: usize> Hooks<D> for Tally {
+    type Stop = std::convert::Infallible;
+
+    fn before_step(&mut self, run: &Run<D>) -> ControlFlow<Self::Stop> {
+        self.products
+            .extend(run.sim().time_products(PRODUCTS_PER_STEP));
+        ControlFlow::Continue(())
+    }
+
+    fn after_step(
+        &mut self,
+        run: &Run<D>,
+        record: &crate::solve::stepper::StepReport,
+    ) -> ControlFlow<Self::Stop> {
+        self.solve_s += run.last_step_seconds();
+        self.slip_steps += usize::from(record.slip_nodes > 0);
+        self.slip_max = self.slip_max.max(record.slip_nodes);
+        self.newton = self.newton.max(record.velocity.iterations);
+        self.its_v = self.its_v.max(record.velocity.krylov_iterations);
+        self.its_v_sum += record.velocity.krylov_iterations;
+        self.its_d = self
+            .its_d
+            .max(record.damage.map_or(0, |d| d.krylov_iterations));
+        self.last = Some(record.clone());
+        ControlFlow::Continue(())
+    }
+}
+
 /// Runs a validated problem to the end and measures it (the clock started at `start`).
 fn measure<const D: usize>(
     problem: crate::problem::Problem,
     level: usize,
     start: Instant,
 ) -> Result<BenchLevel, Box<dyn std::error::Error>> {
-    let mut sim = Simulation::<D>::new(problem, SolverSettings::default())?;
+    let mut run = Run::<D>::new(problem, SolverSettings::default())?;
     let setup_s = start.elapsed().as_secs_f64();
-    let mut solve_s = 0.0;
-    // Products are timed between the steps, under the load the steps ran under, not only
-    // after the run: the machines are shared and one product's time drifts by ±30 % over a run.
-    let mut products = Vec::new();
-    let mut last = None;
-    let (mut its_v, mut its_d, mut its_v_sum) = (0, 0, 0);
-    let (mut slip_steps, mut slip_max, mut newton) = (0, 0, 0);
-    while !sim.finished() {
-        products.extend(sim.time_products(PRODUCTS_PER_STEP));
-        let t0 = Instant::now();
-        let record = sim.step()?;
-        solve_s += t0.elapsed().as_secs_f64();
-        slip_steps += usize::from(record.slip_nodes > 0);
-        slip_max = slip_max.max(record.slip_nodes);
-        newton = newton.max(record.velocity.iterations);
-        its_v = its_v.max(record.velocity.krylov_iterations);
-        its_v_sum += record.velocity.krylov_iterations;
-        its_d = its_d.max(record.damage.map_or(0, |d| d.krylov_iterations));
-        last = Some(record);
-    }
+    let mut tally = Tally::default();
+    let ControlFlow::Continue(()) = run.drive(&mut tally)?;
+    let Tally {
+        mut products,
+        solve_s,
+        last,
+        its_v,
+        its_d,
+        its_v_sum,
+        slip_steps,
+        slip_max,
+        newton,
+    } = tally;
+    let sim = run.sim_mut();
     let total_s = setup_s + solve_s;
     let mut subs: Vec<f64> = (0..21).map(|_| sim.time_one_substitution()).collect();
     subs.sort_by(f64::total_cmp);

@@ -6,12 +6,14 @@
 //! prints the table; tests/stability.rs runs the quick subset.
 
 use crate::problem::Problem;
+use crate::run::{Hooks, Run};
 use crate::scene::{self, presets, Overrides};
 use crate::solve::invariants;
-use crate::solve::stepper::Simulation;
+use crate::solve::stepper::StepReport;
 use crate::solve::{SolveError, SolverSettings};
 use serde::Serialize;
 use serde_json::{json, Value};
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 /// What a case must do.
@@ -712,46 +714,79 @@ fn simulate(problem: Problem, report: &mut CaseReport) -> Result<(), Stop> {
 fn simulate_in<const D: usize>(problem: Problem, report: &mut CaseReport) -> Result<(), Stop> {
     report.nodes = problem.n_nodes();
     report.steps = problem.steps;
-    let mut sim = match Simulation::<D>::new(problem, SolverSettings::default()) {
-        Ok(sim) => sim,
+    let mut run = match Run::<D>::new(problem, SolverSettings::default()) {
+        Ok(run) => run,
         Err(e @ SolveError::Smallness(_)) => return Err(Stop::Refused(e.to_string())),
         Err(e) => return Err(Stop::Failed(format!("set-up failed: {e}"))),
     };
+    let sim = run.sim();
     report.nodes = sim.mesh.n_nodes();
     if sim.smallness.c2 > 0.0 {
         report.smallness_ratio = Some(sim.smallness.lhs / sim.smallness.m_a);
         report.discrete_margin = sim.smallness.discrete_margin;
     }
-    let contact_nodes = sim.dofs.n_contact() / (D - 1);
-    let (mut vel_it, mut dam_it) = (Vec::new(), Vec::new());
-    let (mut vel_res, mut dam_res) = (0.0f64, None::<f64>);
-    let mut slip = [f64::INFINITY, 0.0f64];
-    let mut zeta_min = f64::INFINITY;
-    while !sim.finished() {
-        let r = sim.step().map_err(|e| Stop::Failed(e.to_string()))?;
-        invariants::check_step(&sim, &r)
-            .map_err(|e| Stop::Failed(format!("invariant violated: {e}")))?;
-        vel_it.push(r.velocity.iterations as f64);
-        vel_res = vel_res.max(r.velocity.residual);
-        if let Some(d) = r.damage {
-            dam_it.push(d.iterations as f64);
-            dam_res = Some(dam_res.unwrap_or(0.0).max(d.residual));
-        }
-        if contact_nodes > 0 {
-            let f = r.slip_nodes as f64 / contact_nodes as f64;
-            slip = [slip[0].min(f), slip[1].max(f)];
-        }
-        zeta_min = zeta_min.min(r.zeta_min);
-        report.velocity_iterations = MaxMean::of(&vel_it);
-        report.damage_iterations = MaxMean::of(&dam_it);
-        report.velocity_residual_max = Some(vel_res);
-        report.damage_residual_max = dam_res;
-        report.slip_fraction = (contact_nodes > 0).then_some(slip);
-        report.zeta_min = Some(zeta_min);
+    let mut watch = Watch {
+        report,
+        contact_nodes: sim.dofs.n_contact() / (D - 1),
+        vel_it: Vec::new(),
+        dam_it: Vec::new(),
+        vel_res: 0.0,
+        dam_res: None,
+        slip: [f64::INFINITY, 0.0],
+        zeta_min: f64::INFINITY,
+    };
+    match run.drive(&mut watch) {
+        Err(e) => return Err(Stop::Failed(e.to_string())),
+        Ok(ControlFlow::Break(stop)) => return Err(stop),
+        Ok(ControlFlow::Continue(())) => {}
     }
-    let zeros = sim.state.zeta.iter().filter(|z| **z == 0.0).count();
-    report.zeta_zero_fraction = Some(zeros as f64 / sim.state.zeta.len() as f64);
+    let zeta = &run.sim().state.zeta;
+    let zeros = zeta.iter().filter(|z| **z == 0.0).count();
+    watch.report.zeta_zero_fraction = Some(zeros as f64 / zeta.len() as f64);
     Ok(())
+}
+
+/// A case's hooks: the invariants of every step ([`invariants::check_step`]) and the
+/// figures of its report, kept up to date after every step (a failing case reports the
+/// steps it made).
+struct Watch<'a> {
+    report: &'a mut CaseReport,
+    contact_nodes: usize,
+    vel_it: Vec<f64>,
+    dam_it: Vec<f64>,
+    vel_res: f64,
+    dam_res: Option<f64>,
+    slip: [f64; 2],
+    zeta_min: f64,
+}
+
+impl<const D: usize> Hooks<D> for Watch<'_> {
+    type Stop = Stop;
+
+    fn after_step(&mut self, run: &Run<D>, r: &StepReport) -> ControlFlow<Stop> {
+        if let Err(e) = invariants::check_step(run.sim(), r) {
+            return ControlFlow::Break(Stop::Failed(format!("invariant violated: {e}")));
+        }
+        self.vel_it.push(r.velocity.iterations as f64);
+        self.vel_res = self.vel_res.max(r.velocity.residual);
+        if let Some(d) = r.damage {
+            self.dam_it.push(d.iterations as f64);
+            self.dam_res = Some(self.dam_res.unwrap_or(0.0).max(d.residual));
+        }
+        if self.contact_nodes > 0 {
+            let f = r.slip_nodes as f64 / self.contact_nodes as f64;
+            self.slip = [self.slip[0].min(f), self.slip[1].max(f)];
+        }
+        self.zeta_min = self.zeta_min.min(r.zeta_min);
+        let report = &mut *self.report;
+        report.velocity_iterations = MaxMean::of(&self.vel_it);
+        report.damage_iterations = MaxMean::of(&self.dam_it);
+        report.velocity_residual_max = Some(self.vel_res);
+        report.damage_residual_max = self.dam_res;
+        report.slip_fraction = (self.contact_nodes > 0).then_some(self.slip);
+        report.zeta_min = Some(self.zeta_min);
+        ControlFlow::Continue(())
+    }
 }
 
 /// Is the report what the case requires? With the reason when it is not.
