@@ -4,6 +4,7 @@
 
 pub mod damage;
 pub mod friction_isotropic;
+pub mod friction_node;
 pub mod friction_reduced;
 pub mod galerkin_guess;
 pub mod invariants;

@@ -35,7 +35,7 @@
 //! Convergence is declared on the KKT residual of the full problem (as the direct path's),
 //! from a freshly computed K w − f.
 
-use super::{friction_isotropic, friction_reduced};
+use super::friction_node;
 use super::{SolveError, SolverSettings};
 use crate::linalg::multigrid::truncated::{Jacobian, NodeBlock, Truncated};
 use crate::linalg::multigrid::Hierarchy;
@@ -181,10 +181,13 @@ impl SemismoothNewton {
     fn kkt(&self, g: &[f64], w: &[f64]) -> f64 {
         let n_i = self.n_i;
         let interior = g[..n_i].iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let contact = match self.block {
-            1 => friction_reduced::kkt_violation(&g[n_i..], &w[n_i..], &self.weights, &self.law),
-            _ => friction_isotropic::kkt_violation(&g[n_i..], &w[n_i..], &self.weights, &self.law),
-        };
+        let contact = friction_node::kkt_violation(
+            self.block,
+            &g[n_i..],
+            &w[n_i..],
+            &self.weights,
+            &self.law,
+        );
         if contact.is_nan() {
             f64::NAN
         } else {
@@ -214,7 +217,7 @@ impl SemismoothNewton {
             let x = self.node(w, i);
             let y = if self.block == 1 {
                 [
-                    friction_reduced::prox(&self.law, om / kb[0], x[0] - g[c] / kb[0]),
+                    friction_node::prox_line(&self.law, om / kb[0], x[0] - g[c] / kb[0]),
                     0.0,
                 ]
             } else {
@@ -226,7 +229,7 @@ impl SemismoothNewton {
                 let mut gy = [g[c], g[c + 1]];
                 for _ in 0..LOCAL_SWEEPS {
                     let z = [y[0] - step * gy[0], y[1] - step * gy[1]];
-                    let next = friction_isotropic::prox(&self.law, step * om, z);
+                    let next = friction_node::prox_plane(&self.law, step * om, z);
                     let dv = [next[0] - y[0], next[1] - y[1]];
                     if dv == [0.0, 0.0] {
                         break;

@@ -27,7 +27,7 @@
 //! [`super::friction_isotropic`], with the Euclidean norm of the node's 2-vector).
 
 use super::semismooth_newton::SemismoothNewton;
-use super::{friction_isotropic, friction_reduced, galerkin_guess};
+use super::{friction_isotropic, friction_node, friction_reduced, galerkin_guess};
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::fem::DofMap;
 use crate::linalg::multigrid::Hierarchy;
@@ -320,15 +320,7 @@ impl VelocityStep {
             let mut kci_y = vec![0.0; m];
             self.k_ci.mul_vec(&self.y, &mut kci_y);
             b.iter_mut().zip(&kci_y).for_each(|(b, v)| *b -= v);
-            let mu0 = self.law.mu(0.0);
-            let all_stick = match self.block {
-                1 => b.iter().zip(&self.weights).all(|(b, w)| b.abs() <= w * mu0),
-                _ => b
-                    .chunks(self.block)
-                    .zip(self.weights.chunks(self.block))
-                    .all(|(b, w)| b.iter().map(|v| v * v).sum::<f64>().sqrt() <= w[0] * mu0),
-            };
-            if all_stick {
+            if friction_node::all_stick(self.block, &b, &self.node_weights, &self.law) {
                 self.x.iter_mut().for_each(|v| *v = 0.0);
                 w[..n_i].copy_from_slice(&self.y);
                 // K w − f of w = (y, 0) is (−(f_I − K_II y), −b): the solve's true residual
@@ -592,15 +584,13 @@ impl VelocityStep {
     fn kkt_of_residual(&mut self) -> f64 {
         let n_i = self.n_i;
         let interior = self.r[..n_i].iter().fold(0.0f64, |s, v| s.max(v.abs()));
-        let contact = match self.block {
-            1 => friction_reduced::kkt_violation(&self.r[n_i..], &self.x, &self.weights, &self.law),
-            _ => friction_isotropic::kkt_violation(
-                &self.r[n_i..],
-                &self.x,
-                &self.node_weights,
-                &self.law,
-            ),
-        };
+        let contact = friction_node::kkt_violation(
+            self.block,
+            &self.r[n_i..],
+            &self.x,
+            &self.node_weights,
+            &self.law,
+        );
         for (q, r) in self.reaction.iter_mut().zip(&self.r[n_i..]) {
             *q = -r;
         }
