@@ -379,7 +379,6 @@ impl<const D: usize> Simulation<D> {
         }
         Ok(report)
     }
-
 }
 
 /// ε(u)|_T and B(ε(u), ζ̄)|_T on every element, ζ̄ the mean of ζ at the element's vertices

@@ -239,7 +239,7 @@ impl<const D: usize> Simulation<D> {
     pub fn damage_refactorizations(&self) -> usize {
         self.damage
             .as_ref()
-            .map_or(0, |d| d.solver.refactorizations)
+            .map_or(0, |d| d.solver.refactorizations())
     }
 }
 

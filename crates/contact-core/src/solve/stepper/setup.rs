@@ -4,15 +4,12 @@
 //! reads it.
 
 use super::{DamagePart, Simulation, State, VelocityPart};
-use crate::fem::multilevel;
 use crate::fem::{assembly, DofMap, Geometry};
 use crate::laws::Tensor;
-use crate::linalg::multigrid::{Hierarchy, Params};
-use crate::linalg::{Cholesky, CholeskyPlan, Csr, LinearPath, LinearSolver, SchurPath};
-use crate::memory;
+use crate::linalg::{Csr, LinearPath};
 use crate::mesh::Mesh;
 use crate::problem::{Problem, SmallnessPolicy};
-use crate::solve::damage::DamageStep;
+use crate::solve::backend::{self, Backend};
 use crate::solve::smallness::{self, SmallnessReport};
 use crate::solve::velocity::VelocityStep;
 use crate::solve::{SolveError, SolverSettings};
@@ -20,15 +17,15 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// The set-up that depends only on the mesh, the boundary, the viscosity and the friction law,
-/// not on the time step: mesh, geometry, DOF numbering, the factored velocity operator, the
-/// smallness estimate and the mass matrix. Cloning shares the velocity factor.
+/// not on the time step: mesh, geometry, DOF numbering, the run's solver backend with the
+/// velocity step built on it (K_II factored or its hierarchy made), the smallness estimate
+/// and the mass matrix. Cloning shares the velocity factor.
 #[derive(Clone)]
 pub struct Prepared<const D: usize = 2> {
     /// The linear path taken and its predicted peak bytes.
     pub linear: LinearPath,
     pub predicted_bytes: u64,
-    /// The direct path's analysis of H's factor, made with K_II's for the prediction.
-    damage_plan: Option<CholeskyPlan>,
+    backend: Arc<dyn Backend<D>>,
     mesh: Mesh<D>,
     geo: Geometry<D>,
     dofs: DofMap<D>,
@@ -46,108 +43,29 @@ impl<const D: usize> Prepared<D> {
         Self::within(problem, None)
     }
 
-    /// [`Prepared::new`] under a per-job memory limit: the linear path is chosen (or the run
-    /// refused) from the predicted peak before anything is assembled, and on the direct path
-    /// from the exact factor sizes before anything is factorised ([`memory::refine`]).
+    /// [`Prepared::new`] under a per-job memory limit: the backend is chosen (or the run
+    /// refused) from the predicted peak before anything is meshed, and a direct pick is
+    /// confirmed on the exact factor sizes before anything is assembled ([`backend`]).
     pub fn within(problem: &Problem, memory_limit: Option<u64>) -> Result<Prepared<D>, SolveError> {
         let start = Instant::now();
-        // A demanded direct path is decided on its exact factor sizes, once analysed.
-        let first = match problem.linear {
-            LinearPath::Direct => memory::without_factors(problem),
-            _ => memory::predict(problem),
-        };
-        let (linear, predicted_bytes) = memory::choose_with(problem, memory_limit, first)?;
-        match Self::on_path(problem, memory_limit, linear, predicted_bytes, start)? {
-            Setup::Ready(p) => Ok(*p),
-            Setup::Multigrid(bytes) => {
-                match Self::on_path(problem, memory_limit, LinearPath::Multigrid, bytes, start)? {
-                    Setup::Ready(p) => Ok(*p),
-                    Setup::Multigrid(_) => unreachable!("only the direct path is refined"),
-                }
-            }
-        }
-    }
-
-    fn on_path(
-        problem: &Problem,
-        memory_limit: Option<u64>,
-        linear: LinearPath,
-        mut predicted_bytes: u64,
-        start: Instant,
-    ) -> Result<Setup<D>, SolveError> {
+        let pick = backend::pick(problem, memory_limit)?;
         let mesh = problem.mesh().map_err(|e| SolveError::Data {
             pointer: format!("/boundary/{}", e.part()),
             message: e.to_string(),
         })?;
         let geo = Geometry::new(&mesh);
         let dofs = DofMap::new(&mesh, &problem.boundary);
+        let backend = backend::confirm(pick, problem, &mesh, &dofs, memory_limit)?;
         let visc = problem.material.viscosity;
-        // The multigrid path is the one for large meshes: it assembles into the pattern and
-        // never holds the element triplets; the direct path keeps its summation order.
-        let k = match linear {
-            LinearPath::Multigrid => {
-                assembly::viscous_stiffness_in_pattern(&mesh, &geo, &dofs, visc.eta, visc.xi)
-            }
-            _ => assembly::viscous_stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi),
-        };
-        let n_i = dofs.n_interior;
-        let k = Arc::new(k);
-        let factor_error = |source| SolveError::Factor {
-            what: "velocity",
-            source,
-        };
-        // The direct path analyses H's pattern (M's) with K_II's before either is factorised.
-        let mut mass = None;
-        let mut damage_plan = None;
-        // With a Γ3 the multigrid path builds one hierarchy, of K on all free DOFs: the slip
-        // solver's, through which K_II is solved too (never copied).
-        let full_space = linear == LinearPath::Multigrid && dofs.n_contact() > 0;
-        let (k_ii, hierarchy) = if full_space {
-            let (blocks, levels) = multilevel::velocity_levels(&mesh, &dofs, dofs.n_free());
-            let h = Hierarchy::new(k.clone(), blocks, levels, Params::default())
-                .map(Arc::new)
-                .map_err(factor_error)?;
-            let k_ii =
-                LinearSolver::leading_block(h.clone(), k.clone(), n_i).map_err(factor_error)?;
-            (k_ii, Some(h))
-        } else if linear == LinearPath::Multigrid {
-            let k_ii =
-                multilevel::velocity_solver(&mesh, &dofs, k.block(0..n_i, 0..n_i), n_i, linear)
-                    .map_err(factor_error)?;
-            (k_ii, None)
-        } else {
-            let lower = k.block(0..n_i, 0..n_i).lower_csc();
-            let plan = multilevel::direct_plan::<D>(lower.as_ref()).map_err(factor_error)?;
-            let m = assembly::mass(&mesh, &geo);
-            if problem.damage.is_some() {
-                damage_plan = Some(DamageStep::plan(&m)?);
-            }
-            mass = Some(m);
-            let plans: Vec<_> = std::iter::once(&plan).chain(&damage_plan).collect();
-            let refined = memory::refine(problem, &plans);
-            match memory::choose_with(problem, memory_limit, refined)? {
-                (LinearPath::Multigrid, bytes) => return Ok(Setup::Multigrid(bytes)),
-                (_, bytes) => predicted_bytes = bytes,
-            }
-            let factor = Cholesky::from_plan(plan, lower.as_ref()).map_err(factor_error)?;
-            (LinearSolver::Direct(factor), None)
-        };
-        let mut velocity = VelocityStep::with_solver(
-            k,
-            &dofs,
-            problem.friction.clone(),
-            SchurPath::default(),
-            k_ii,
-        );
-        if let Some(h) = hierarchy {
-            velocity = velocity.with_hierarchy(h);
-        }
-        let smallness = smallness::check(problem, &mesh, &geo, &dofs, &mut velocity)?;
-        let mass = mass.unwrap_or_else(|| assembly::mass_in_pattern(&mesh, &geo));
-        Ok(Setup::Ready(Box::new(Prepared {
-            linear,
-            predicted_bytes,
-            damage_plan,
+        let k = backend.stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi);
+        let mut velocity = backend.velocity(Arc::new(k), &mesh, &dofs, problem.friction.clone())?;
+        let smallness =
+            smallness::check(problem, &mesh, &geo, &dofs, &mut velocity, backend.as_ref())?;
+        let mass = backend.mass(&mesh, &geo);
+        Ok(Prepared {
+            linear: backend.path(),
+            predicted_bytes: backend.predicted_bytes(),
+            backend,
             mesh,
             geo,
             dofs,
@@ -155,15 +73,8 @@ impl<const D: usize> Prepared<D> {
             smallness,
             mass,
             seconds: start.elapsed().as_secs_f64(),
-        })))
+        })
     }
-}
-
-/// A set-up's outcome: ready, or (`auto`) to be made on the multigrid path with that
-/// path's predicted bytes, what was built for the direct path dropped first.
-enum Setup<const D: usize> {
-    Ready(Box<Prepared<D>>),
-    Multigrid(u64),
 }
 
 impl<const D: usize> Simulation<D> {
@@ -179,7 +90,7 @@ impl<const D: usize> Simulation<D> {
         let Prepared {
             linear,
             predicted_bytes,
-            damage_plan,
+            backend,
             mesh,
             geo,
             dofs,
@@ -210,27 +121,10 @@ impl<const D: usize> Simulation<D> {
         let (u, zeta) = initial_values(&problem, &mesh);
         let damage = match &problem.damage {
             Some(d) => {
-                let laplacian = match linear {
-                    LinearPath::Multigrid => assembly::laplacian_in_pattern_of(&mesh, &geo, &mass),
-                    _ => assembly::laplacian(&mesh, &geo),
-                };
+                let laplacian = backend.laplacian(&mesh, &geo, &mass);
                 let h = assembly::combine(1.0 / problem.k(), &mass, d.kappa, &laplacian);
                 drop(laplacian);
-                let mut solver = match linear {
-                    LinearPath::Multigrid => {
-                        let mg = multilevel::scalar_solver(&mesh, h, linear).map_err(|source| {
-                            SolveError::Factor {
-                                what: "damage",
-                                source,
-                            }
-                        })?;
-                        DamageStep::multigrid(mg)?
-                    }
-                    _ => match damage_plan {
-                        Some(plan) => DamageStep::with_plan(h, plan)?,
-                        None => DamageStep::new(h)?,
-                    },
-                };
+                let mut solver = backend.damage(&mesh, h)?;
                 solver.set_active_from(&zeta);
                 Some(DamagePart {
                     solver,
@@ -277,7 +171,10 @@ impl<const D: usize> Simulation<D> {
 
 /// u_0 (interleaved per node) and ζ_0 (per node; ≡ 1 without damage): the nodal
 /// interpolants of the scene's `initial.u0` and `damage.zeta0` at t = 0, (3.11).
-pub(super) fn initial_values<const D: usize>(problem: &Problem, mesh: &Mesh<D>) -> (Vec<f64>, Vec<f64>) {
+pub(super) fn initial_values<const D: usize>(
+    problem: &Problem,
+    mesh: &Mesh<D>,
+) -> (Vec<f64>, Vec<f64>) {
     let zeta: Vec<f64> = match &problem.damage {
         Some(d) => mesh.nodes.iter().map(|p| d.zeta0.at(p, 0.0)).collect(),
         None => vec![1.0; mesh.n_nodes()],
