@@ -85,3 +85,65 @@ pub fn check<const D: usize>(
         c2, m_a, lambda_g, lambda_a,
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::fem::assembly;
+    use crate::scene::{self, presets};
+    use crate::solve::stepper::Simulation;
+    use crate::solve::SolverSettings;
+    use nalgebra::DMatrix;
+    use serde_json::json;
+
+    /// λ_min(W^{-½} S W^{-½}), S the Schur complement of `a` onto its DOFs from `n_i` on,
+    /// formed densely (the reference the backends are checked against).
+    fn dense_lambda(a: &crate::linalg::Csr, n_i: usize, w: &[f64]) -> f64 {
+        let n = a.nrows;
+        let dense = DMatrix::from_fn(n, n, |i, j| a.get(i, j));
+        let m = n - n_i;
+        let a_ii = dense.view((0, 0), (n_i, n_i)).into_owned();
+        let a_ic = dense.view((0, n_i), (n_i, m)).into_owned();
+        let a_cc = dense.view((n_i, n_i), (m, m)).into_owned();
+        let x = a_ii.cholesky().unwrap().solve(&a_ic);
+        let s = a_cc - a_ic.transpose() * x;
+        let scaled = DMatrix::from_fn(m, m, |i, j| s[(i, j)] / (w[i] * w[j]).sqrt());
+        scaled.symmetric_eigen().eigenvalues.min()
+    }
+
+    /// Both backends' estimates agree with the dense eigenvalues of the Schur complements of
+    /// the Gram matrix (cτ² = 1/λ_G) and of K (the discrete margin λ_A − c2τ), for a
+    /// slip-weakening law (c2τ = (μ0 − μ1) α = 1.6).
+    #[test]
+    fn both_backends_match_the_dense_schur_eigenvalues() {
+        for linear in ["direct", "multigrid"] {
+            let mut doc = presets::get("paper-exp3").unwrap();
+            doc["mesh"]["h"] = json!("1/8");
+            doc["time"] = json!({"T": 1, "N": 1});
+            doc["friction"] = json!({"law": "slip_weakening", "mu0": 1.2, "mu1": 0.4, "alpha": 2});
+            doc["solver"] = json!({"linear": linear});
+            let p = scene::validate(&doc).unwrap();
+            let sim = Simulation::<2>::new(p, SolverSettings::default()).unwrap();
+            let (mesh, geo, dofs) = (&sim.mesh, &sim.geo, &sim.dofs);
+            let w: Vec<f64> = dofs.contact.iter().map(|c| c.weight).collect();
+            let n_i = dofs.n_interior;
+            let gram = assembly::viscous_stiffness(mesh, geo, dofs, 0.5, 0.0);
+            let visc = sim.problem.material.viscosity;
+            let k = assembly::viscous_stiffness(mesh, geo, dofs, visc.eta, visc.xi);
+            let (lambda_g, lambda_a) = (dense_lambda(&gram, n_i, &w), dense_lambda(&k, n_i, &w));
+            let r = &sim.smallness;
+            assert!((r.c2 - 1.6).abs() < 1e-12);
+            let c_tau = r.c_tau.unwrap();
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-8 * a.abs().max(b.abs());
+            assert!(
+                close(c_tau * c_tau, 1.0 / lambda_g),
+                "{linear}: cτ = {c_tau}, λ_G = {lambda_g}"
+            );
+            let margin = r.discrete_margin.unwrap();
+            assert!(
+                close(margin, lambda_a - r.c2),
+                "{linear}: margin {margin}, λ_A = {lambda_a}"
+            );
+            assert!(close(r.lhs, r.c2 * c_tau * c_tau) && r.holds == (r.lhs < r.m_a));
+        }
+    }
+}

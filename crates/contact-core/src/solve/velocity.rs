@@ -597,3 +597,94 @@ impl VelocityStep {
         interior.max(contact)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fem::{assembly, Geometry};
+    use crate::scene::{self, presets};
+    use crate::solve::backend;
+    use serde_json::json;
+
+    /// The velocity step of paper-exp3 at h = 1/8 with Tresca bound `g` as the backend of
+    /// `linear` builds it, with K assembled here by element triplets and the DOF map.
+    fn velocity(linear: &str, g: f64) -> (VelocityStep, Csr, DofMap<2>) {
+        let mut doc = presets::get("paper-exp3").unwrap();
+        doc["mesh"]["h"] = json!("1/8");
+        doc["friction"] = json!({"law": "tresca", "g": g});
+        doc["solver"] = json!({"linear": linear});
+        let p = scene::validate(&doc).unwrap();
+        let mesh = p.mesh::<2>().unwrap();
+        let geo = Geometry::new(&mesh);
+        let dofs = DofMap::new(&mesh, &p.boundary);
+        let b = backend::choose(&p, &mesh, &dofs, None).unwrap();
+        let visc = p.material.viscosity;
+        let k = b.stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi);
+        let step = b
+            .velocity(Arc::new(k), &mesh, &dofs, p.friction.clone())
+            .unwrap();
+        let k = assembly::viscous_stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi);
+        (step, k, dofs)
+    }
+
+    /// The conditions of (3.13) at w for the load f, checked by hand: K w − f vanishes on
+    /// the interior rows; on Γ3 a stuck node's force is within ω g, a slipping node's is
+    /// −ω g sign(x). Returns the slipping nodes.
+    fn kkt(k: &Csr, dofs: &DofMap<2>, f: &[f64], w: &[f64], g: f64) -> usize {
+        let mut r = vec![0.0; f.len()];
+        k.mul_vec(w, &mut r);
+        r.iter_mut().zip(f).for_each(|(r, f)| *r -= f);
+        let tol = 1e-9 * f.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let n_i = dofs.n_interior;
+        assert!(r[..n_i].iter().all(|v| v.abs() <= tol));
+        let mut slipping = 0;
+        for (i, c) in dofs.contact.iter().enumerate() {
+            let (x, rc, bound) = (w[n_i + i], r[n_i + i], c.weight * g);
+            if x == 0.0 {
+                assert!(rc.abs() <= bound + tol, "stuck: |{rc}| > {bound}");
+            } else {
+                slipping += 1;
+                assert!(
+                    (rc + bound * x.signum()).abs() <= tol,
+                    "slip: {rc} vs {bound}"
+                );
+            }
+        }
+        slipping
+    }
+
+    /// Both paths solve (3.13) to its optimality conditions and to the same velocity, when
+    /// Γ3 slips everywhere, in part and nowhere; the second solve of each starts from the
+    /// first's warm start (on the multigrid path a slipping step's goes to semismooth Newton
+    /// at once).
+    #[test]
+    fn both_paths_meet_the_stick_slip_conditions_and_agree() {
+        let (mut slipped, mut stuck) = (0, 0);
+        for g in [0.5, 5.0, 5000.0] {
+            let mut solutions = Vec::new();
+            for linear in ["direct", "multigrid"] {
+                let (mut step, k, dofs) = velocity(linear, g);
+                let n = k.nrows;
+                let f: Vec<f64> = (0..n)
+                    .map(|i| 10.0 * (0.37 * i as f64 + 1.0).sin())
+                    .collect();
+                let mut w = vec![0.0; n];
+                for n in 1..=2 {
+                    let rep = step
+                        .solve(&f, &mut w, &SolverSettings::default(), n)
+                        .unwrap();
+                    assert!(rep.residual <= 1e-10);
+                    let slipping = kkt(&k, &dofs, &f, &w, g);
+                    slipped += slipping;
+                    stuck += dofs.contact.len() - slipping;
+                }
+                solutions.push(w);
+            }
+            let scale = solutions[0].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (a, b) in solutions[0].iter().zip(&solutions[1]) {
+                assert!((a - b).abs() <= 1e-8 * scale, "g = {g}: {a} vs {b}");
+            }
+        }
+        assert!(slipped > 0 && stuck > 0, "slipped {slipped}, stuck {stuck}");
+    }
+}

@@ -439,3 +439,6 @@ fn load_fault<const D: usize>(problem: &Problem, mesh: &Mesh<D>, t: f64, n: usiz
         ),
     }
 }
+
+#[cfg(test)]
+mod tests;
