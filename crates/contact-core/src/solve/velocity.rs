@@ -139,9 +139,6 @@ impl VelocityStep {
         debug_assert_eq!(k_ii.n(), n_i);
         let k_ci = k.block(n_i..n, 0..n_i);
         let m = dofs.n_contact();
-        let space = k_ii
-            .is_iterative()
-            .then(|| SolutionSpace::new(n, projection::CAPACITY));
         VelocityStep {
             n_i,
             k_ii,
@@ -160,7 +157,7 @@ impl VelocityStep {
             x: vec![0.0; m],
             reaction: vec![0.0; m],
             y: vec![0.0; n_i],
-            space,
+            space: None,
             space_slips: false,
             r: vec![0.0; n],
             krylov: 0,
@@ -169,6 +166,14 @@ impl VelocityStep {
             r_fresh: false,
             k,
         }
+    }
+
+    /// Each solve with K_II started from the K-projection of its load onto the earlier
+    /// steps' velocities ([`crate::linalg::projection`]): for a solver that takes a
+    /// starting guess.
+    pub fn with_solution_space(mut self) -> Self {
+        self.space = Some(SolutionSpace::new(self.k.nrows, projection::CAPACITY));
+        self
     }
 
     /// Slipping steps solved on all free DOFs by semismooth Newton with the multigrid

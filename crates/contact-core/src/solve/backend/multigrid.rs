@@ -82,13 +82,10 @@ impl<const D: usize> Backend<D> for Multigrid {
             let (blocks, levels) = multilevel::velocity_levels(mesh, dofs, n_i);
             let k_ii = LinearSolver::multigrid(Arc::new(k.block(0..n_i, 0..n_i)), blocks, levels)
                 .map_err(factor_error)?;
-            return Ok(VelocityStep::with_solver(
-                k,
-                dofs,
-                law,
-                SchurPath::default(),
-                k_ii,
-            ));
+            return Ok(
+                VelocityStep::with_solver(k, dofs, law, SchurPath::default(), k_ii)
+                    .with_solution_space(),
+            );
         }
         // One hierarchy, of K on all free DOFs: the slip solver's, through which K_II is
         // solved too.
@@ -97,7 +94,11 @@ impl<const D: usize> Backend<D> for Multigrid {
             .map(Arc::new)
             .map_err(factor_error)?;
         let k_ii = LinearSolver::leading_block(h.clone(), k.clone(), n_i).map_err(factor_error)?;
-        Ok(VelocityStep::with_solver(k, dofs, law, SchurPath::default(), k_ii).with_hierarchy(h))
+        Ok(
+            VelocityStep::with_solver(k, dofs, law, SchurPath::default(), k_ii)
+                .with_solution_space()
+                .with_hierarchy(h),
+        )
     }
 
     fn damage(&self, mesh: &Mesh<D>, h: Csr) -> Result<DamageStep, SolveError> {
