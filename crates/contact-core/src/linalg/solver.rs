@@ -211,6 +211,11 @@ impl LinearSolver {
         }
     }
 
+    /// Nonzeros of the direct factor's L (0 on the iterative paths).
+    pub fn factor_nnz(&self) -> usize {
+        self.factor().map_or(0, |c| c.nnz_l())
+    }
+
     /// The multigrid hierarchy (iterative paths).
     pub fn hierarchy(&self) -> Option<&Arc<Hierarchy>> {
         match self {

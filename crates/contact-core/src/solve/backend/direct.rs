@@ -1,10 +1,11 @@
 //! The direct family: sparse Cholesky factors, computed once per run.
 //! - K_II: factored once on the ordering of least fill ([`plan`]); S = K_CC − K_CI K_II⁻¹ K_IC
-//!   formed on a slipping step's first need, for the dense reduced problem on Γ3
-//!   ([`super::super::reduced`]).
+//!   formed on a slipping step's first need, for the dense reduced problem on Γ3: the slip
+//!   solver [`DenseReduced`], which keeps S for the run.
 //! - H: factored on a fixed pattern, refactored with the active rows and columns replaced
 //!   by the identity when the damage step's active set changes ([`Masked`]).
-//! - The smallness estimate: both Schur complements formed, their λ_min dense.
+//! - The smallness estimate: both Schur complements formed (S_A the slip solver's), their
+//!   λ_min dense.
 //!
 //! Every operator is assembled from element triplets, in the order of summation the direct
 //! path has always had (bit for bit the same numbers run after run).
@@ -19,9 +20,11 @@ use crate::linalg::{schur_complement, Cholesky, CholeskyPlan, Csr, LinearPath, L
 use crate::mesh::Mesh;
 use crate::problem::{FrictionLaw, Problem};
 use crate::solve::damage::{Bound, DamageStep, MaskedSolver};
-use crate::solve::velocity::VelocityStep;
-use crate::solve::SolveError;
+use crate::solve::velocity::{ContactSolver, SlipSolver, StepState, VelocityStep};
+use crate::solve::{friction_isotropic, friction_reduced, SolveError, SolverSettings};
 use faer::sparse::{SparseColMat, SparseColMatRef};
+use nalgebra::DMatrix;
+use std::any::Any;
 use std::sync::Arc;
 
 /// The symbolic analysis of a run's operator on a D-dimensional mesh: in 3D the ordering of
@@ -147,8 +150,8 @@ impl<const D: usize> Backend<D> for Direct {
             k,
             dofs,
             law,
-            SchurPath::default(),
             LinearSolver::Direct(factor),
+            Box::new(DenseReduced::default()),
         ))
     }
 
@@ -178,8 +181,115 @@ impl<const D: usize> Backend<D> for Direct {
             })?;
         let s_g = schur_complement(&gram, n_i, &g_ii, SchurPath::TrailingBlock).0;
         let lambda_g = min_eig_scaled(&s_g, &w_inv_sqrt);
-        let lambda_a = min_eig_scaled(velocity.schur()?, &w_inv_sqrt);
+        // S_A is the slip solver's: formed here once, reused by the slipping steps.
+        let (state, slip) = velocity.parts_mut();
+        let dense = slip
+            .as_any_mut()
+            .downcast_mut::<DenseReduced>()
+            .expect("the direct family's slip solver");
+        let lambda_a = min_eig_scaled(dense.schur(state), &w_inv_sqrt);
         Ok((lambda_g, lambda_a))
+    }
+}
+
+/// The dense reduced problem on Γ3: S = K_CC − K_CI K_II⁻¹ K_IC formed on first need as
+/// the trailing block of a factor of K with the contact DOFs last
+/// ([`crate::linalg::schur`]; blocked solves with the factor of K_II should the analysis not
+/// keep them last), the reduced problem solved ([`friction_reduced`] in 2D,
+/// [`friction_isotropic`] in 3D) from the last step's x, and w_I recovered by one more
+/// solve. S is kept for the run (and the smallness estimate's λ_min,
+/// [`Backend::trace_eigenvalues`]).
+#[derive(Clone, Default)]
+pub struct DenseReduced {
+    /// How S is formed; after forming it, the path taken.
+    path: SchurPath,
+    s: Option<DMatrix<f64>>,
+}
+
+impl DenseReduced {
+    /// S of the velocity step of `state` (its solver of K_II a factor), formed on first use.
+    pub fn schur(&mut self, state: &StepState) -> &DMatrix<f64> {
+        if self.s.is_none() {
+            let factor = state
+                .k_ii
+                .factor()
+                .expect("the direct family's factor of K_II");
+            let (s, path) = schur_complement(&state.k, state.n_i, factor, self.path);
+            self.path = path;
+            self.s = Some(s);
+        }
+        self.s.as_ref().unwrap()
+    }
+}
+
+impl SlipSolver for DenseReduced {
+    fn report(&self) -> ContactSolver {
+        ContactSolver::DenseSchur(self.path)
+    }
+
+    fn solve(
+        &mut self,
+        state: &mut StepState,
+        f: &[f64],
+        w: &mut [f64],
+        settings: &SolverSettings,
+        step: usize,
+    ) -> Result<usize, SolveError> {
+        let n_i = state.n_i;
+        // Same force scale as the step's full residual, and half its tolerance: the
+        // recovery of the interior adds rounding only.
+        let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
+        let inner = SolverSettings {
+            tolerance: 0.5 * settings.tolerance,
+            ..*settings
+        };
+        let s = self.schur(state);
+        let mut x = std::mem::take(&mut state.x);
+        let rep = match state.block {
+            1 => friction_reduced::solve(
+                &friction_reduced::Reduced {
+                    s,
+                    b: &state.b,
+                    weights: &state.weights,
+                    law: &state.law,
+                    scale: Some(scale),
+                },
+                &mut x,
+                &inner,
+                step,
+            ),
+            _ => friction_isotropic::solve(
+                &friction_isotropic::Reduced {
+                    s,
+                    b: &state.b,
+                    weights: &state.node_weights,
+                    law: &state.law,
+                    scale: Some(scale),
+                },
+                &mut x,
+                &inner,
+                step,
+            ),
+        };
+        state.x = x;
+        let iterations = rep?.iterations;
+        // w_I = K_II⁻¹ (f_I − K_IC x).
+        let mut rhs = f[..n_i].to_vec();
+        let mut kic_x = vec![0.0; n_i];
+        state.k_ci.tmul_vec_add(&state.x, &mut kic_x);
+        rhs.iter_mut().zip(&kic_x).for_each(|(a, v)| *a -= v);
+        let wi = &mut w[..n_i];
+        wi.copy_from_slice(&state.y);
+        state.solve_interior(&rhs, wi, scale, settings, step)?;
+        Ok(iterations)
+    }
+
+    fn boxed_clone(&self) -> Box<dyn SlipSolver> {
+        Box::new(self.clone())
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
     }
 }
 

@@ -3,7 +3,8 @@
 //! counts) and the per-job memory limit, before any operator is assembled. A backend family
 //! assembles the run's operators and builds on them every solver the scheme needs:
 //! - the velocity step (3.13): the solver of K_II, the interior block of the velocity
-//!   operator, and how a slipping step is solved;
+//!   operator, and its solver of slipping steps
+//!   ([`SlipSolver`](super::velocity::SlipSolver));
 //! - the damage step (3.10): the solver of H = M/k + κL masked by the active set
 //!   ([`MaskedSolver`](super::damage::MaskedSolver));
 //! - the smallness estimate (2.31): λ_min of the Schur complements onto Γ3.

@@ -198,7 +198,10 @@ impl<const D: usize> Simulation<D> {
 
     /// How the velocity step forms its Schur complement onto Γ3.
     pub fn schur_path(&self) -> crate::linalg::SchurPath {
-        self.velocity.solver.schur_path()
+        match self.slip_solver() {
+            crate::solve::velocity::ContactSolver::DenseSchur(path) => path,
+            _ => crate::linalg::SchurPath::default(),
+        }
     }
 
     /// The free-DOF velocity operator K (interior DOFs first) and the number of interior
