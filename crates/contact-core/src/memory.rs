@@ -5,8 +5,9 @@
 //! `contact-sim run`): it needs no mesh, only the mesh's node and cell counts. When a run is
 //! set up, the direct path is decided on the exact factor sizes instead
 //! ([`refine`]: the symbolic analyses' [`CholeskyPlan::factor_bytes`] in place of the count
-//! model's fill), made after assembly and before any numeric factorisation; [`choose_with`]
-//! decides on that figure. A demanded direct path is checked before the analyses only
+//! model's fill), made on the operators' patterns before anything is assembled; [`choose_with`]
+//! decides on that figure. The run's solver backend is chosen on these figures, once, by
+//! [`crate::solve::backend::choose`]. A demanded direct path is checked before the analyses only
 //! against [`without_factors`], since the count model over-estimates the factors where
 //! nested dissection wins (3D boxes from a few thousand unknowns on); `auto` picks its path
 //! on the count model, and a direct pick that the exact figure does not fit moves to the

@@ -65,9 +65,9 @@ fn a_direct_run_over_its_exact_prediction_is_refused_before_it_factorises() {
 /// the set-up's triplet assembly shares, to keep the test's memory small).
 #[test]
 fn the_exact_figure_decides_where_the_factors_set_the_peak() {
-    use contact_core::fem::{assembly, multilevel, DofMap, Geometry};
+    use contact_core::fem::{assembly, DofMap, Geometry};
     use contact_core::linalg::LinearPath;
-    use contact_core::solve::damage::DamageStep;
+    use contact_core::solve::backend::direct;
     let mut doc = presets::get("paper-convergence").unwrap();
     doc["mesh"]["h"] = json!("1/256");
     doc["time"] = json!({"T": 1, "N": 1});
@@ -80,8 +80,8 @@ fn the_exact_figure_decides_where_the_factors_set_the_peak() {
     let k = assembly::viscous_stiffness_in_pattern(&mesh, &geo, &dofs, visc.eta, visc.xi);
     let n_i = dofs.n_interior;
     let lower = k.block(0..n_i, 0..n_i).lower_csc();
-    let k_ii = multilevel::direct_plan::<2>(lower.as_ref()).unwrap();
-    let h = DamageStep::plan(&assembly::mass_in_pattern(&mesh, &geo)).unwrap();
+    let k_ii = direct::plan::<2>(lower.as_ref()).unwrap();
+    let h = direct::damage_plan(&assembly::mass_in_pattern(&mesh, &geo)).unwrap();
     let exact = memory::refine(&p, &[&k_ii, &h]).direct;
     let floor = memory::without_factors(&p).direct;
     assert!(

@@ -278,7 +278,7 @@ fn three_dimensional_isotropic_friction() {
 #[test]
 fn lanczos_smallness_matches_the_dense_eigenvalue() {
     use contact_core::linalg::LinearSolver;
-    use contact_core::solve::smallness::min_eig_by_lanczos;
+    use contact_core::solve::backend::multigrid::min_eig_by_lanczos;
     for c in [
         case::<2>("paper-convergence", json!({"h": "1/16"})),
         case::<3>("box-exp3", json!({"h": "1/6"})),

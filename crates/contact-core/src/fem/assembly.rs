@@ -52,7 +52,7 @@ pub fn viscous_stiffness_in_pattern<const D: usize>(
 
 /// The free-DOF pattern of a P1 vector operator: row (i, c) couples to every free DOF of the
 /// nodes that share a cell with node i. Values zero.
-fn free_pattern<const D: usize>(mesh: &Mesh<D>, dofs: &DofMap<D>) -> Csr {
+pub fn free_pattern<const D: usize>(mesh: &Mesh<D>, dofs: &DofMap<D>) -> Csr {
     let nn = mesh.n_nodes();
     let (start, cells_of) = cells_of_nodes(mesh);
     let free_of = |node: usize| {
@@ -124,7 +124,7 @@ fn cells_of_nodes<const D: usize>(mesh: &Mesh<D>) -> (Vec<usize>, Vec<usize>) {
 
 /// The pattern of a P1 scalar operator on all nodes: node i couples to every node that shares
 /// a cell with it. Values zero.
-fn node_pattern<const D: usize>(mesh: &Mesh<D>) -> Csr {
+pub fn node_pattern<const D: usize>(mesh: &Mesh<D>) -> Csr {
     let nn = mesh.n_nodes();
     let (start, cells_of) = cells_of_nodes(mesh);
     let mut indptr = Vec::with_capacity(nn + 1);

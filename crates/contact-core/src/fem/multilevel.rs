@@ -1,6 +1,7 @@
-//! The linear solvers of a run's two SPD operators, set up from the mesh: which DOFs form a
-//! node block, the near-nullspace, and — for a mesh with nested levels — the geometric
-//! prolongators.
+//! The levels of a run's two SPD operators for a multigrid hierarchy, from the mesh: which
+//! DOFs form a node block, the near-nullspace, and — for a mesh with nested levels — the
+//! geometric prolongators. The solvers built on them are the backend's
+//! ([`crate::solve::backend`]).
 //!
 //! Geometric levels come from red refinement (a given or polygon mesh with `mesh.refine`
 //! ≥ 1; the mesh as given is the coarsest level) or from halving a generated rectangle or
@@ -18,55 +19,13 @@
 use super::prolongation::{grid_stencils, lattice_stencils};
 use super::rigid_modes::{self, node_blocks, rigid_modes};
 use super::{DofMap, Slot};
-use crate::linalg::cholesky::FactorError;
 use crate::linalg::multigrid::{Blocks, Coarsening};
-use crate::linalg::{Cholesky, CholeskyPlan, Csr, LinearPath, LinearSolver};
+use crate::linalg::Csr;
 use crate::mesh::{Grid, Lattice, Mesh, MeshPattern};
-use faer::sparse::SparseColMatRef;
-use std::sync::Arc;
 
 /// A generated rectangle or box is halved while its finer level has more nodes than this;
 /// the last level is factored directly (a few thousand DOFs).
 const COARSE_NODES: usize = 700;
-
-/// The solver of the leading block (the first `lead` free DOFs: the interior ones) of a
-/// velocity-type operator `a` on the path given (`Auto` is resolved by the caller).
-pub fn velocity_solver<const D: usize>(
-    mesh: &Mesh<D>,
-    dofs: &DofMap<D>,
-    a: Csr,
-    lead: usize,
-    path: LinearPath,
-) -> Result<LinearSolver, FactorError> {
-    if path != LinearPath::Multigrid {
-        return direct::<D>(&a);
-    }
-    let (blocks, coarsening) = velocity_levels(mesh, dofs, lead);
-    LinearSolver::multigrid(Arc::new(a), blocks, coarsening)
-}
-
-/// The direct factor of an operator on a D-dimensional mesh, analysed by [`direct_plan`].
-fn direct<const D: usize>(a: &Csr) -> Result<LinearSolver, FactorError> {
-    let lower = a.lower_csc();
-    let plan = direct_plan::<D>(lower.as_ref())?;
-    Ok(LinearSolver::Direct(Cholesky::from_plan(
-        plan,
-        lower.as_ref(),
-    )?))
-}
-
-/// The symbolic analysis of a run's operator on a D-dimensional mesh for the direct path: in
-/// 3D the ordering of less fill of AMD and nested dissection (nested dissection wins on the
-/// boxes from a few thousand unknowns on, docs/src/speed/speed.md); in 2D AMD.
-pub fn direct_plan<const D: usize>(
-    a_lower: SparseColMatRef<'_, usize, f64>,
-) -> Result<CholeskyPlan, FactorError> {
-    if D == 3 {
-        CholeskyPlan::least_fill(a_lower)
-    } else {
-        CholeskyPlan::amd(a_lower)
-    }
-}
 
 /// The node blocks and the coarsening of a velocity-type operator on its first `lead` free
 /// DOFs: geometric levels where the mesh has them, else smoothed aggregation with the
@@ -136,23 +95,15 @@ pub fn geometric_scalar<const D: usize>(mesh: &Mesh<D>) -> Option<Coarsening> {
     })
 }
 
-/// The solver of a scalar nodal operator on `mesh` (the damage matrix H) on the path given:
-/// geometric levels where the mesh has them (P the node stencils themselves), else smoothed
-/// aggregation with the constants as near-nullspace.
-pub fn scalar_solver<const D: usize>(
-    mesh: &Mesh<D>,
-    a: Csr,
-    path: LinearPath,
-) -> Result<LinearSolver, FactorError> {
-    if path != LinearPath::Multigrid {
-        return direct::<D>(&a);
-    }
-    let n = a.nrows;
+/// The node blocks and the coarsening of a scalar nodal operator with `n` rows on `mesh` (the
+/// damage matrix H): geometric levels where the mesh has them (P the node stencils
+/// themselves), else smoothed aggregation with the constants as near-nullspace.
+pub fn scalar_levels<const D: usize>(mesh: &Mesh<D>, n: usize) -> (Blocks, Coarsening) {
     let coarsening = geometric_scalar(mesh).unwrap_or_else(|| Coarsening::Aggregation {
         nullspace: vec![1.0; n],
         k: 1,
     });
-    LinearSolver::multigrid(Arc::new(a), Blocks::scalar(n), coarsening)
+    (Blocks::scalar(n), coarsening)
 }
 
 /// The blocks with only DOFs below `lead`.
@@ -339,6 +290,7 @@ fn geometric<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::linalg::{Cholesky, CholeskyPlan};
 
     /// The values of the linear field v(x) = A x + b at the given nodes, D per node.
     fn linear_field<const D: usize>(nodes: &[[f64; D]], seed: f64) -> Vec<f64> {

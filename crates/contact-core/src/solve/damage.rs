@@ -4,29 +4,23 @@
 //!
 //! Method: primal–dual active set (PDAS, i.e. semismooth Newton on
 //! ζ = P_[0,1](ζ − D⁻¹(Hζ − g)), D = diag H). Each iteration fixes the active nodes at their
-//! bound and solves for the rest. faer has no rank update, so the pattern of H is kept and
-//! active rows/columns are replaced by the identity; the symbolic analysis is reused and a
-//! numeric refactorisation happens only when the active set changes. The active set of the
-//! previous step is the warm start, so a step whose active set does not change costs one
-//! triangular solve pair.
-//!
-//! On the multigrid path the masked system is solved by conjugate gradients instead,
-//! preconditioned by the V-cycle B of the whole H restricted to the free nodes
-//! (diag(B_FF, I): a principal block of an SPD matrix is SPD), warm-started from the previous
-//! ζ; the hierarchy is built once per run, whatever the active set.
+//! bound and solves for the rest: the masked system, H with the rows and columns of the
+//! active nodes replaced by the identity, solved by the run's backend ([`MaskedSolver`]: a
+//! factor refactored when the active set changes, or conjugate gradients applied from H's
+//! storage, [`crate::solve::backend`]). The active set of the previous step is the warm
+//! start, so a step whose active set does not change costs one masked solve.
 //!
 //! KKT conditions (checked as the residual): with λ = Hζ − g,
 //!   0 < ζ_i < 1 ⇒ λ_i = 0;  ζ_i = 0 ⇒ λ_i ≥ 0;  ζ_i = 1 ⇒ λ_i ≤ 0.
 
 use super::{SolveError, SolverReport, SolverSettings};
-use crate::linalg::multigrid::VCycle;
-use crate::linalg::pcg::{self, PcgWork, Preconditioner};
-use crate::linalg::{Cholesky, CholeskyPlan, Csr, LinearOperator, LinearSolver};
-use faer::sparse::SparseColMat;
+use crate::linalg::cholesky::FactorError;
+use crate::linalg::solver::NotConverged;
+use crate::linalg::Csr;
 use std::sync::Arc;
 
-/// Conjugate gradients on the multigrid path solve each masked system to this fraction of
-/// the step's tolerance (max norm, relative to ‖g‖∞).
+/// Iterative masked solves reach this fraction of the step's tolerance (max norm, relative
+/// to ‖g‖∞).
 const KRYLOV_FRACTION: f64 = 0.01;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -36,166 +30,63 @@ pub enum Bound {
     Upper,
 }
 
-/// The direct path: H's factor on a fixed pattern, refactored with the active rows and
-/// columns replaced by the identity.
-struct Factored {
-    /// Lower triangle of H in faer's CSC form; its values are refilled with the masked H.
-    lower: SparseColMat<usize, f64>,
-    /// (row, col) of each stored entry of `lower`.
-    entries: Vec<(usize, usize)>,
-    lower_values: Vec<f64>,
-    chol: Cholesky,
-}
+/// A solver of the damage step's masked systems, the run backend's: H with the rows and
+/// columns of the active nodes replaced by the identity.
+pub trait MaskedSolver: Send {
+    /// Makes its systems those of the active set `active` (a factor refactored; nothing
+    /// where the masked H is applied from H's storage).
+    fn set_active(&mut self, h: &Csr, active: &[Bound]) -> Result<(), FactorError>;
 
-/// The multigrid path: CG on the masked H (applied from H's storage) with the V-cycle of H.
-struct Iterative {
-    vcycle: VCycle,
-    work: PcgWork,
-    buffer: Vec<f64>,
-}
+    /// ζ ← (masked H)⁻¹ rhs from ζ as given, to ‖rhs − (masked H) ζ‖∞ ≤ `atol` (a factor
+    /// reaches round-off whatever `atol`). Returns the Krylov iterations.
+    fn solve(
+        &mut self,
+        h: &Csr,
+        active: &[Bound],
+        rhs: &[f64],
+        zeta: &mut [f64],
+        atol: f64,
+    ) -> Result<usize, NotConverged>;
 
-/// H with the rows and columns of the active nodes replaced by the identity, applied from
-/// H's storage (the masked matrix is never formed).
-struct Masked<'a> {
-    h: &'a Csr,
-    active: &'a [Bound],
-}
+    /// How far a node may pass a bound (its multiplier, relative to ‖g‖∞) before it changes
+    /// sides: above what the solves leave in ζ, so that degenerate nodes (bound active with
+    /// zero multiplier) do not flip back and forth with rounding.
+    fn hysteresis(&self, tolerance: f64) -> f64;
 
-impl LinearOperator for Masked<'_> {
-    fn dim(&self) -> usize {
-        self.h.nrows
-    }
-
-    fn apply(&self, x: &[f64], y: &mut [f64]) {
-        let h = self.h;
-        for (r, yr) in y.iter_mut().enumerate() {
-            *yr = if self.active[r] != Bound::Free {
-                x[r]
-            } else {
-                let row = h.indptr[r]..h.indptr[r + 1];
-                h.indices[row.clone()]
-                    .iter()
-                    .zip(&h.values[row])
-                    .filter(|(&c, _)| self.active[c as usize] == Bound::Free)
-                    .map(|(&c, &v)| v * x[c as usize])
-                    .sum()
-            };
-        }
-    }
-}
-
-enum Linear {
-    Direct(Box<Factored>),
-    Multigrid(Box<Iterative>),
-}
-
-/// diag(B_FF, I) for the V-cycle B of H and the free set F.
-struct MaskedVCycle<'a> {
-    vcycle: &'a mut VCycle,
-    active: &'a [Bound],
-    buffer: &'a mut Vec<f64>,
-}
-
-impl Preconditioner for MaskedVCycle<'_> {
-    fn apply(&mut self, r: &[f64], z: &mut [f64]) {
-        for ((b, &r), a) in self.buffer.iter_mut().zip(r).zip(self.active) {
-            *b = if *a == Bound::Free { r } else { 0.0 };
-        }
-        self.vcycle.apply(self.buffer, z);
-        for ((z, &r), a) in z.iter_mut().zip(r).zip(self.active) {
-            if *a != Bound::Free {
-                *z = r;
-            }
-        }
-    }
+    /// Numeric factorisations so far (0 without a factor).
+    fn factorizations(&self) -> usize;
 }
 
 pub struct DamageStep {
     /// Shared with the multigrid hierarchy's finest level on that path.
     h: Arc<Csr>,
     diag: Vec<f64>,
-    linear: Linear,
-    /// Active set the current factor (or masked operator) was made for.
+    solver: Box<dyn MaskedSolver>,
+    /// Active set the solver's systems are those of.
     factored: Vec<Bound>,
     /// Warm start for the next solve.
     active: Vec<Bound>,
-    /// Numeric factorisations done so far (for the summary; 0 on the multigrid path).
-    pub refactorizations: usize,
-    /// Krylov iterations of the last solve (multigrid path).
+    /// Krylov iterations of the last solve.
     krylov: usize,
 }
 
 impl DamageStep {
-    /// The multigrid path: CG on the masked systems preconditioned by `solver`'s V-cycle,
-    /// whose operator is H (shared, not copied).
-    pub fn multigrid(solver: LinearSolver) -> Result<Self, SolveError> {
-        let LinearSolver::Multigrid(k) = solver else {
-            panic!("DamageStep::multigrid takes a multigrid solver of H");
-        };
-        let (h, vcycle) = k.into_parts();
+    /// The step on H with the backend's masked solver, whose systems are H's own.
+    pub fn new(h: Arc<Csr>, solver: Box<dyn MaskedSolver>) -> Self {
         let n = h.nrows;
-        Ok(DamageStep {
+        DamageStep {
             diag: h.diagonal(),
-            linear: Linear::Multigrid(Box::new(Iterative {
-                vcycle,
-                work: PcgWork::new(n),
-                buffer: vec![0.0; n],
-            })),
             h,
+            solver,
             factored: vec![Bound::Free; n],
             active: vec![Bound::Free; n],
-            refactorizations: 0,
             krylov: 0,
-        })
-    }
-
-    /// The direct path: H's factor, refactored for the masked systems.
-    pub fn new(h: Csr) -> Result<Self, SolveError> {
-        let plan = Self::plan(&h)?;
-        Self::with_plan(h, plan)
-    }
-
-    /// The symbolic analysis of H's factor on the direct path, from any matrix with H's
-    /// pattern (the mass matrix M: H = M/k + κL is assembled into M's pattern). AMD: the
-    /// scalar operator's factor is small beside K_II's.
-    pub fn plan(pattern: &Csr) -> Result<CholeskyPlan, SolveError> {
-        CholeskyPlan::amd(pattern.lower_csc().as_ref()).map_err(|source| SolveError::Factor {
-            what: "damage",
-            source,
-        })
-    }
-
-    /// [`DamageStep::new`] on the analysis `plan` of H's pattern ([`DamageStep::plan`]).
-    pub fn with_plan(h: Csr, plan: CholeskyPlan) -> Result<Self, SolveError> {
-        let n = h.nrows;
-        let lower = h.lower_csc();
-        let (sym, vals) = lower.as_ref().parts();
-        let mut entries = Vec::with_capacity(vals.len());
-        for c in 0..sym.ncols() {
-            for &r in sym.row_idx_of_col_raw(c) {
-                entries.push((r, c));
-            }
         }
-        let lower_values = vals.to_vec();
-        let chol =
-            Cholesky::from_plan(plan, lower.as_ref()).map_err(|source| SolveError::Factor {
-                what: "damage",
-                source,
-            })?;
-        Ok(DamageStep {
-            diag: h.diagonal(),
-            h: Arc::new(h),
-            linear: Linear::Direct(Box::new(Factored {
-                lower,
-                entries,
-                lower_values,
-                chol,
-            })),
-            factored: vec![Bound::Free; n],
-            active: vec![Bound::Free; n],
-            refactorizations: 1,
-            krylov: 0,
-        })
+    }
+
+    /// Numeric factorisations so far (for the summary; 0 without a factor).
+    pub fn refactorizations(&self) -> usize {
+        self.solver.factorizations()
     }
 
     /// Krylov iterations of the last solve (0 on the direct path).
@@ -203,38 +94,15 @@ impl DamageStep {
         self.krylov
     }
 
-    /// Refactor H with the rows and columns of `active` replaced by the identity (direct
-    /// path; the multigrid path applies the masked H from H's storage).
+    /// Makes the solver's systems those of `active`.
     fn factor_for(&mut self, active: &[Bound]) -> Result<(), SolveError> {
-        let f = match &mut self.linear {
-            Linear::Direct(f) => f,
-            Linear::Multigrid(_) => {
-                self.factored.copy_from_slice(active);
-                return Ok(());
-            }
-        };
-        {
-            let vals = f.lower.val_mut();
-            for (k, &(r, c)) in f.entries.iter().enumerate() {
-                vals[k] = if active[r] != Bound::Free || active[c] != Bound::Free {
-                    if r == c {
-                        1.0
-                    } else {
-                        0.0
-                    }
-                } else {
-                    f.lower_values[k]
-                };
-            }
-        }
-        f.chol
-            .refactor(f.lower.as_ref())
+        self.solver
+            .set_active(&self.h, active)
             .map_err(|source| SolveError::Factor {
                 what: "damage",
                 source,
             })?;
         self.factored.copy_from_slice(active);
-        self.refactorizations += 1;
         Ok(())
     }
 
@@ -250,12 +118,7 @@ impl DamageStep {
         let n = g.len();
         let scale = g.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
         // Hysteresis against rounding at degenerate nodes (bound active with zero multiplier).
-        let eps = match self.linear {
-            Linear::Direct(_) => 1e-13,
-            // Iterative solves leave ζ accurate to about KRYLOV_FRACTION·tolerance: the
-            // hysteresis must exceed that or degenerate nodes flip back and forth.
-            Linear::Multigrid(_) => 0.1 * settings.tolerance,
-        };
+        let eps = self.solver.hysteresis(settings.tolerance);
         self.krylov = 0;
         let mut active = self.active.clone();
         let mut rhs = vec![0.0; n];
@@ -342,8 +205,8 @@ impl DamageStep {
         })
     }
 
-    /// ζ ← (masked H)⁻¹ rhs: a substitution pair, or CG from ζ's current values (the
-    /// previous iterate, active entries at their bounds).
+    /// ζ ← (masked H)⁻¹ rhs from ζ's current values (the previous iterate), to
+    /// KRYLOV_FRACTION of the tolerance where the solver is iterative.
     fn solve_masked(
         &mut self,
         active: &[Bound],
@@ -353,51 +216,21 @@ impl DamageStep {
         settings: &SolverSettings,
         step: usize,
     ) -> Result<(), SolveError> {
-        match &mut self.linear {
-            Linear::Direct(f) => {
-                zeta.copy_from_slice(rhs);
-                f.chol.solve_in_place(zeta);
+        let atol = KRYLOV_FRACTION * settings.tolerance * scale;
+        match self.solver.solve(&self.h, active, rhs, zeta, atol) {
+            Ok(iterations) => {
+                self.krylov += iterations;
                 Ok(())
             }
-            Linear::Multigrid(it) => {
-                for ((z, a), r) in zeta.iter_mut().zip(active).zip(rhs) {
-                    if *a != Bound::Free {
-                        *z = *r;
-                    }
-                }
-                let Iterative {
-                    vcycle,
-                    work,
-                    buffer,
-                } = &mut **it;
-                let masked = Masked { h: &self.h, active };
-                let mut pre = MaskedVCycle {
-                    vcycle,
-                    active,
-                    buffer,
-                };
-                let atol = KRYLOV_FRACTION * settings.tolerance * scale;
-                let rep = pcg::solve(
-                    &masked,
-                    &mut pre,
-                    rhs,
-                    zeta,
-                    atol,
-                    crate::linalg::solver::MAX_KRYLOV_ITERATIONS,
-                    work,
-                );
-                self.krylov += rep.iterations;
-                if rep.converged {
-                    Ok(())
-                } else {
-                    Err(SolveError::NotConverged {
-                        what: "damage step (multigrid conjugate gradients)",
-                        step,
-                        iterations: rep.iterations,
-                        residual: rep.residual / scale,
-                        tolerance: KRYLOV_FRACTION * settings.tolerance,
-                    })
-                }
+            Err(e) => {
+                self.krylov += e.iterations;
+                Err(SolveError::NotConverged {
+                    what: "damage step (multigrid conjugate gradients)",
+                    step,
+                    iterations: e.iterations,
+                    residual: e.residual / scale,
+                    tolerance: KRYLOV_FRACTION * settings.tolerance,
+                })
             }
         }
     }
@@ -477,11 +310,17 @@ mod tests {
     use crate::fem::{assembly, Geometry};
     use crate::mesh::Mesh;
     use crate::problem::MeshPattern;
+    use crate::solve::backend::{direct, multigrid, Backend};
     use proptest::prelude::RngExt;
     use proptest::test_runner::{RngAlgorithm, TestRng};
 
     fn square(n: usize) -> Mesh {
         Mesh::rectangle(1.0, 1.0, n, n, MeshPattern::Diagonal)
+    }
+
+    /// The direct backend's damage step on H.
+    fn direct_step(h: &Csr) -> DamageStep {
+        direct::damage_step(h.clone(), direct::damage_plan(h).unwrap()).unwrap()
     }
 
     fn h_matrix(n: usize, k: f64, kappa: f64) -> (Csr, Csr, usize) {
@@ -542,7 +381,7 @@ mod tests {
             (6, 0.5, 0.5),
         ] {
             let (h, m, nn) = h_matrix(n, k, kappa);
-            let mut solver = DamageStep::new(h.clone()).unwrap();
+            let mut solver = direct_step(&h);
             let mut zeta = vec![1.0; nn];
             solver.set_active_from(&zeta);
             for trial in 0..12 {
@@ -568,14 +407,10 @@ mod tests {
             (64, 1.0 / 64.0, 1.0),
         ] {
             let (h, m, nn) = h_matrix(n, k, kappa);
-            let mg = crate::fem::multilevel::scalar_solver(
-                &square(n),
-                h.clone(),
-                crate::linalg::LinearPath::Multigrid,
-            )
-            .unwrap();
-            let mut solver = DamageStep::multigrid(mg).unwrap();
-            let mut direct = DamageStep::new(h.clone()).unwrap();
+            let mut solver = multigrid::Multigrid::new(0)
+                .damage(&square(n), h.clone())
+                .unwrap();
+            let mut direct = direct_step(&h);
             let mut zeta = vec![1.0; nn];
             let mut zeta_d = zeta.clone();
             solver.set_active_from(&zeta);
@@ -605,7 +440,7 @@ mod tests {
             .collect();
         let mut g = vec![0.0; nn];
         h.mul_vec(&zs, &mut g);
-        let mut solver = DamageStep::new(h).unwrap();
+        let mut solver = direct_step(&h);
         let mut z = vec![0.0; nn];
         let rep = solver
             .solve(&g, &mut z, &SolverSettings::default(), 0)

@@ -50,58 +50,14 @@
 //! DOFs (more only while Newton fails), two S products (g is updated, not recomputed) and
 //! O(m) work per trial point. S is never copied.
 
-use super::friction_reduced;
+use super::friction_node::{self, node, norm, prox_plane as prox};
 use super::{SolveError, SolverReport, SolverSettings};
-use crate::problem::FrictionLaw;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
 use faer::{Conj, Mat, MatMut, Par};
 
 use super::reduced::mul;
 pub use super::reduced::Reduced;
-
-/// max over nodes of the distance of −g_i to ω_i ∂j(|·|)(x_i) (Clarke subdifferential):
-/// stick (x_i = 0): max(|g_i| − ω_i μ(0), 0); slip: |g_i + ω_i μ(|x_i|) x_i/|x_i||.
-/// NaN if any violation is NaN.
-pub fn kkt_violation(g: &[f64], x: &[f64], weights: &[f64], law: &FrictionLaw) -> f64 {
-    weights
-        .iter()
-        .enumerate()
-        .map(|(i, &w)| {
-            let (gi, xi) = (node(g, i), node(x, i));
-            if xi == [0.0, 0.0] {
-                let excess = norm(gi) - w * law.mu(0.0);
-                // (Not `max`, which would turn NaN into 0.)
-                if excess > 0.0 || excess.is_nan() {
-                    excess
-                } else {
-                    0.0
-                }
-            } else {
-                let r = norm(xi);
-                let f = w * law.mu(r) / r;
-                norm([gi[0] + f * xi[0], gi[1] + f * xi[1]])
-            }
-        })
-        .fold(0.0, |a: f64, v| {
-            if a.is_nan() || v.is_nan() {
-                f64::NAN
-            } else {
-                a.max(v)
-            }
-        })
-}
-
-/// prox of c·j(|·|) at z ∈ R² (c ≥ 0), the block soft threshold: 0 if |z| ≤ c μ(0), else
-/// (z/|z|)·r with r + c μ(r) = |z| (the scalar prox of [`friction_reduced::prox`] on |z|).
-pub fn prox(law: &FrictionLaw, c: f64, z: [f64; 2]) -> [f64; 2] {
-    let az = norm(z);
-    if az <= c * law.mu(0.0) {
-        return [0.0, 0.0];
-    }
-    let r = friction_reduced::prox(law, c, az);
-    [z[0] / az * r, z[1] / az * r]
-}
 
 /// Solves the reduced problem from the warm start `x` (overwritten with the solution).
 pub fn solve(
@@ -144,10 +100,10 @@ pub fn solve(
     let mut lowest = f64::INFINITY;
     let mut sd = vec![0.0; n];
     for it in 0..=settings.max_iterations {
-        let mut residual = kkt_violation(&g, x, p.weights, p.law) / scale;
+        let mut residual = friction_node::kkt_violation(2, &g, x, p.weights, p.law) / scale;
         if residual <= settings.tolerance && !fresh {
             g = p.gradient(x);
-            residual = kkt_violation(&g, x, p.weights, p.law) / scale;
+            residual = friction_node::kkt_violation(2, &g, x, p.weights, p.law) / scale;
         }
         if residual <= settings.tolerance {
             return Ok(SolverReport {
@@ -471,15 +427,6 @@ fn energy_change(p: &Reduced, x: &[f64], g: &[f64], d: &[f64], sd: &[f64]) -> f6
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(a, b)| a * b).sum()
-}
-
-/// Node i's 2-vector of a DOF vector.
-fn node(v: &[f64], i: usize) -> [f64; 2] {
-    [v[2 * i], v[2 * i + 1]]
-}
-
-fn norm(v: [f64; 2]) -> f64 {
-    v[0].hypot(v[1])
 }
 
 #[cfg(test)]

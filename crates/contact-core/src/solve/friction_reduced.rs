@@ -16,63 +16,11 @@
 //! global convergence from the gradient step, fast local convergence from Newton. For Tresca
 //! the Newton step is exact once the stick/slip partition is right, so it terminates finitely.
 
+use super::friction_node::{self, prox_line as prox};
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::linalg::dense::solve_principal;
-use crate::problem::FrictionLaw;
 
 pub use super::reduced::Reduced;
-
-/// max_i of the distance of −g_i to ω_i ∂j(x_i) (Clarke subdifferential).
-pub fn kkt_violation(g: &[f64], x: &[f64], weights: &[f64], law: &FrictionLaw) -> f64 {
-    g.iter()
-        .zip(x)
-        .zip(weights)
-        .map(|((&gi, &xi), &w)| {
-            if xi == 0.0 {
-                (gi.abs() - w * law.mu(0.0)).max(0.0)
-            } else {
-                (gi + w * law.mu(xi.abs()) * xi.signum()).abs()
-            }
-        })
-        .fold(0.0, f64::max)
-}
-
-/// prox of c·j(|·|) at z (c > 0): 0 if |z| ≤ c μ(0), else sign(z)·r with r + c μ(r) = |z|.
-/// Unique when 1 + c μ'(r) > 0 (guaranteed by the step size under the smallness condition).
-pub fn prox(law: &FrictionLaw, c: f64, z: f64) -> f64 {
-    let az = z.abs();
-    if az <= c * law.mu(0.0) {
-        return 0.0;
-    }
-    if let FrictionLaw::Tresca { g } = law {
-        return z.signum() * (az - c * g);
-    }
-    // q(r) = r + c μ(r) − |z| is increasing with q(0) < 0 ≤ q(|z|): safeguarded Newton.
-    let (mut lo, mut hi) = (0.0, az);
-    let mut r = 0.5 * az;
-    for _ in 0..200 {
-        let q = r + c * law.mu(r) - az;
-        if q.abs() <= 1e-15 * az {
-            break;
-        }
-        if q < 0.0 {
-            lo = r;
-        } else {
-            hi = r;
-        }
-        let dq = 1.0 + c * law.dmu(r);
-        let newton = r - q / dq;
-        r = if dq > 0.0 && newton > lo && newton < hi {
-            newton
-        } else {
-            0.5 * (lo + hi)
-        };
-        if hi - lo <= 1e-16 * az {
-            break;
-        }
-    }
-    z.signum() * r
-}
 
 /// Solves the reduced problem from the warm start `x` (overwritten with the solution).
 pub fn solve(
@@ -88,7 +36,7 @@ pub fn solve(
         .fold(f64::MIN_POSITIVE, f64::max);
     for it in 0..=settings.max_iterations {
         let g = p.gradient(x);
-        let residual = kkt_violation(&g, x, p.weights, p.law) / p.scale();
+        let residual = friction_node::kkt_violation(1, &g, x, p.weights, p.law) / p.scale();
         if residual <= settings.tolerance {
             return Ok(SolverReport {
                 iterations: it,
@@ -189,6 +137,7 @@ fn newton_on_partition(p: &Reduced, x: &[f64], slip: &[usize], sign: &[f64]) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::problem::FrictionLaw;
 
     use nalgebra::DMatrix;
     use proptest::prelude::RngExt;
@@ -320,25 +269,6 @@ mod tests {
             let rep = solve(&p, &mut x, &SolverSettings::default(), 0).unwrap();
             assert!(rep.residual <= 1e-10);
             assert_kkt(&p, &x, 1e-9);
-        }
-    }
-
-    #[test]
-    fn prox_solves_its_equation() {
-        let law = FrictionLaw::SlipWeakening {
-            mu0: 1.2,
-            mu1: 0.4,
-            alpha: 3.0,
-        };
-        for &z in &[-3.0, -0.5, 0.1, 0.2, 2.0] {
-            let c = 0.2; // c·c2 = 0.48 < 1
-            let x = prox(&law, c, z);
-            if x == 0.0 {
-                assert!(z.abs() <= c * 1.2);
-            } else {
-                assert!((x.abs() + c * law.mu(x.abs()) - z.abs()).abs() < 1e-13);
-                assert_eq!(x.signum(), z.signum());
-            }
         }
     }
 }

@@ -2,8 +2,10 @@
 //! Γ3 tangential DOFs, the damage variational inequality (3.10) as a box-constrained QP, the
 //! smallness condition (2.31), and the time loop that couples them.
 
+pub mod backend;
 pub mod damage;
 pub mod friction_isotropic;
+pub mod friction_node;
 pub mod friction_reduced;
 pub mod galerkin_guess;
 pub mod invariants;

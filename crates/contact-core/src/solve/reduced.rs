@@ -7,7 +7,7 @@
 //! 3D), and |·| is the Euclidean norm. Its solvers are [`super::friction_reduced`] (d = 2)
 //! and [`super::friction_isotropic`] (d = 3).
 
-use super::{friction_isotropic, friction_reduced};
+use super::friction_node;
 use crate::problem::FrictionLaw;
 use faer::{Accum, MatMut, MatRef, Par};
 use nalgebra::DMatrix;
@@ -80,11 +80,7 @@ impl Reduced<'_> {
     /// divided by the scale (given, or ‖b‖_∞).
     pub fn residual(&self, x: &[f64]) -> f64 {
         let g = self.gradient(x);
-        let violation = match self.block() {
-            1 => friction_reduced::kkt_violation(&g, x, self.weights, self.law),
-            _ => friction_isotropic::kkt_violation(&g, x, self.weights, self.law),
-        };
-        violation / self.scale()
+        friction_node::kkt_violation(self.block(), &g, x, self.weights, self.law) / self.scale()
     }
 }
 

@@ -35,7 +35,7 @@
 //! Convergence is declared on the KKT residual of the full problem (as the direct path's),
 //! from a freshly computed K w − f.
 
-use super::{friction_isotropic, friction_reduced};
+use super::friction_node;
 use super::{SolveError, SolverSettings};
 use crate::linalg::multigrid::truncated::{Jacobian, NodeBlock, Truncated};
 use crate::linalg::multigrid::Hierarchy;
@@ -181,10 +181,13 @@ impl SemismoothNewton {
     fn kkt(&self, g: &[f64], w: &[f64]) -> f64 {
         let n_i = self.n_i;
         let interior = g[..n_i].iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let contact = match self.block {
-            1 => friction_reduced::kkt_violation(&g[n_i..], &w[n_i..], &self.weights, &self.law),
-            _ => friction_isotropic::kkt_violation(&g[n_i..], &w[n_i..], &self.weights, &self.law),
-        };
+        let contact = friction_node::kkt_violation(
+            self.block,
+            &g[n_i..],
+            &w[n_i..],
+            &self.weights,
+            &self.law,
+        );
         if contact.is_nan() {
             f64::NAN
         } else {
@@ -214,7 +217,7 @@ impl SemismoothNewton {
             let x = self.node(w, i);
             let y = if self.block == 1 {
                 [
-                    friction_reduced::prox(&self.law, om / kb[0], x[0] - g[c] / kb[0]),
+                    friction_node::prox_line(&self.law, om / kb[0], x[0] - g[c] / kb[0]),
                     0.0,
                 ]
             } else {
@@ -226,7 +229,7 @@ impl SemismoothNewton {
                 let mut gy = [g[c], g[c + 1]];
                 for _ in 0..LOCAL_SWEEPS {
                     let z = [y[0] - step * gy[0], y[1] - step * gy[1]];
-                    let next = friction_isotropic::prox(&self.law, step * om, z);
+                    let next = friction_node::prox_plane(&self.law, step * om, z);
                     let dv = [next[0] - y[0], next[1] - y[1]];
                     if dv == [0.0, 0.0] {
                         break;
@@ -546,5 +549,73 @@ impl SemismoothNewton {
             }
         }
         unreachable!()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fem::{assembly, multilevel, DofMap, Geometry};
+    use crate::linalg::multigrid::Params;
+    use crate::scene::{self, presets};
+    use serde_json::json;
+
+    /// box-exp3 at h = 1/4 (3D: two tangential DOFs per Γ3 node) under a load on every free
+    /// DOF, for Tresca bounds that leave Γ3 slipping, in part and at rest: the solution meets
+    /// the isotropic stick/slip conditions, checked by hand on K w − f.
+    #[test]
+    fn a_solve_meets_the_isotropic_stick_slip_conditions() {
+        let mut doc = presets::get("box-exp3").unwrap();
+        doc["mesh"]["h"] = json!("1/4");
+        let p = scene::validate(&doc).unwrap();
+        let mesh = p.mesh::<3>().unwrap();
+        let geo = Geometry::new(&mesh);
+        let dofs = DofMap::new(&mesh, &p.boundary);
+        let visc = p.material.viscosity;
+        let k = Arc::new(assembly::viscous_stiffness_in_pattern(
+            &mesh, &geo, &dofs, visc.eta, visc.xi,
+        ));
+        let (blocks, levels) = multilevel::velocity_levels(&mesh, &dofs, dofs.n_free());
+        let h = Arc::new(Hierarchy::new(k.clone(), blocks, levels, Params::default()).unwrap());
+        let n_i = dofs.n_interior;
+        let weights: Vec<f64> = dofs.contact.iter().step_by(2).map(|c| c.weight).collect();
+        let n = k.nrows;
+        let f: Vec<f64> = (0..n).map(|i| (0.37 * i as f64 + 1.0).sin()).collect();
+        let tol = 1e-9 * f.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let (mut slipped, mut stuck) = (0, 0);
+        for g in [0.05, 0.5, 50.0] {
+            let law = FrictionLaw::Tresca { g };
+            let mut newton =
+                SemismoothNewton::new(k.clone(), h.clone(), n_i, 2, weights.clone(), law);
+            let mut w = vec![0.0; n];
+            let settings = SolverSettings::default();
+            let rep = newton
+                .solve(&f, &mut w, &settings, 0.1 * settings.tolerance, 1)
+                .unwrap();
+            assert!(rep.residual <= settings.tolerance);
+            // K w − f, by hand: zero on the interior rows; on Γ3 |r_i| ≤ ω_i g at rest,
+            // r_i = −ω_i g x_i/|x_i| when slipping.
+            let mut r = vec![0.0; n];
+            k.mul_vec(&w, &mut r);
+            r.iter_mut().zip(&f).for_each(|(r, f)| *r -= f);
+            assert!(r[..n_i].iter().all(|v| v.abs() <= tol));
+            let mut slipping = 0;
+            for (i, om) in weights.iter().enumerate() {
+                let c = n_i + 2 * i;
+                let (x, ri, bound) = ([w[c], w[c + 1]], [r[c], r[c + 1]], om * g);
+                let speed = x[0].hypot(x[1]);
+                if speed == 0.0 {
+                    assert!(ri[0].hypot(ri[1]) <= bound + tol, "node {i} at rest");
+                    stuck += 1;
+                } else {
+                    let e = [ri[0] + bound * x[0] / speed, ri[1] + bound * x[1] / speed];
+                    assert!(e[0].hypot(e[1]) <= tol, "node {i} slipping: {e:?}");
+                    slipping += 1;
+                }
+            }
+            assert_eq!(slipping, rep.slip_nodes);
+            slipped += slipping;
+        }
+        assert!(slipped > 0 && stuck > 0, "slipped {slipped}, stuck {stuck}");
     }
 }

@@ -10,24 +10,16 @@
 //!   convex iff λ_min(W^{-½} S_A W^{-½}) > c2τ (S_A: Schur complement of the velocity
 //!   operator). Since S_A ⪰ 2η S_G, the paper's estimate implies the discrete one.
 //!
-//! Both need λ_min(W^{-½} S W^{-½}) of a Schur complement S onto Γ3. The direct path forms S
-//! (the trailing block of the factor). The multigrid path never forms it: λ_min is 1/λ_max of
-//! T = W^{½} S⁻¹ W^{½}, and S⁻¹ = (A⁻¹)_CC, so each product with T is one multigrid-CG solve
-//! with A on all free DOFs (load on Γ3 only); λ_max(T) by Lanczos with full
-//! reorthogonalisation ([`min_eig_by_lanczos`]).
+//! Both need λ_min(W^{-½} S W^{-½}) of a Schur complement S onto Γ3, which the run's
+//! backend computes ([`Backend::trace_eigenvalues`]: S formed as the trailing block of a
+//! factor, or never formed and λ_min found by Lanczos on S⁻¹ with multigrid solves).
 
+use super::backend::Backend;
 use super::velocity::VelocityStep;
 use super::SolveError;
-use crate::fem::{assembly, multilevel, DofMap, Geometry};
-use crate::linalg::dense::{min_eig_scaled, tridiagonal_max_eig};
-use crate::linalg::multigrid::{Hierarchy, Params};
-use crate::linalg::schur::{schur_by_solves, SCHUR_COLUMN_TOLERANCE};
-use crate::linalg::Csr;
-use crate::linalg::{schur_complement, Cholesky, SchurPath};
-use crate::linalg::{LinearPath, LinearSolver};
+use crate::fem::{DofMap, Geometry};
 use crate::mesh::Mesh;
 use crate::problem::Problem;
-use std::sync::Arc;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct SmallnessReport {
@@ -69,6 +61,7 @@ pub fn check<const D: usize>(
     geo: &Geometry<D>,
     dofs: &DofMap<D>,
     velocity: &mut VelocityStep,
+    backend: &dyn Backend<D>,
 ) -> Result<SmallnessReport, SolveError> {
     let m_a = 2.0 * problem.material.viscosity.eta;
     let c2 = if dofs.n_contact() > 0 {
@@ -86,158 +79,71 @@ pub fn check<const D: usize>(
             discrete_margin: None,
         });
     }
-    let d: Vec<f64> = velocity.weights().iter().map(|w| 1.0 / w.sqrt()).collect();
-    // The multigrid path is the one for large meshes: no element triplets (24 (D(D+1))²
-    // bytes per cell, 11 GB at the 1/64 box).
-    let gram = match velocity.linear_solver() {
-        LinearSolver::Direct(_) => assembly::viscous_stiffness(mesh, geo, dofs, 0.5, 0.0),
-        _ => assembly::viscous_stiffness_in_pattern(mesh, geo, dofs, 0.5, 0.0),
-    };
-    let n_i = dofs.n_interior;
-    let factor_error = |source| SolveError::Factor {
-        what: "strain Gram",
-        source,
-    };
-    let s_g = match velocity.linear_solver() {
-        LinearSolver::Direct(_) => {
-            let g_ii = Cholesky::new(gram.block(0..n_i, 0..n_i).lower_csc().as_ref())
-                .map_err(factor_error)?;
-            schur_complement(&gram, n_i, &g_ii, SchurPath::TrailingBlock).0
-        }
-        LinearSolver::LeadingBlock(_) => {
-            return lanczos_report(mesh, dofs, velocity, gram, c2, m_a);
-        }
-        LinearSolver::Multigrid(_) => {
-            let mut g_ii = multilevel::velocity_solver(
-                mesh,
-                dofs,
-                gram.block(0..n_i, 0..n_i),
-                n_i,
-                LinearPath::Multigrid,
-            )
-            .map_err(factor_error)?;
-            schur_by_solves(&gram, n_i, &mut g_ii).map_err(|e| SolveError::NotConverged {
-                what: "strain Gram Schur complement (multigrid)",
-                step: 0,
-                iterations: e.iterations,
-                residual: e.residual,
-                tolerance: SCHUR_COLUMN_TOLERANCE,
-            })?
-        }
-    };
-    let lambda_g = min_eig_scaled(&s_g, &d);
-    let lambda_a = min_eig_scaled(velocity.schur()?, &d);
+    let gram = backend.stiffness(mesh, geo, dofs, 0.5, 0.0);
+    let (lambda_g, lambda_a) = backend.trace_eigenvalues(mesh, dofs, gram, velocity)?;
     Ok(SmallnessReport::from_eigenvalues(
         c2, m_a, lambda_g, lambda_a,
     ))
 }
 
-/// The report on the multigrid path: both λ_min by Lanczos, no S formed.
-fn lanczos_report<const D: usize>(
-    mesh: &Mesh<D>,
-    dofs: &DofMap<D>,
-    velocity: &VelocityStep,
-    gram: Csr,
-    c2: f64,
-    m_a: f64,
-) -> Result<SmallnessReport, SolveError> {
-    let w_sqrt: Vec<f64> = velocity.weights().iter().map(|w| w.sqrt()).collect();
-    let (_, n_i) = velocity.operator();
-    let k_hierarchy = velocity
-        .linear_solver()
-        .hierarchy()
-        .expect("the multigrid path's")
-        .clone();
-    let mut k_solver = LinearSolver::with_hierarchy(k_hierarchy, velocity.shared_operator());
-    let gram = Arc::new(gram);
-    let (blocks, levels) = multilevel::velocity_levels(mesh, dofs, dofs.n_free());
-    let g_hierarchy =
-        Hierarchy::new(gram.clone(), blocks, levels, Params::default()).map_err(|source| {
-            SolveError::Factor {
-                what: "strain Gram",
-                source,
-            }
-        })?;
-    let mut g_solver = LinearSolver::with_hierarchy(Arc::new(g_hierarchy), gram);
-    let lambda_g = min_eig_by_lanczos(&mut g_solver, n_i, &w_sqrt)?;
-    let lambda_a = min_eig_by_lanczos(&mut k_solver, n_i, &w_sqrt)?;
-    Ok(SmallnessReport::from_eigenvalues(
-        c2, m_a, lambda_g, lambda_a,
-    ))
-}
+#[cfg(test)]
+mod tests {
+    use crate::fem::assembly;
+    use crate::scene::{self, presets};
+    use crate::solve::stepper::Simulation;
+    use crate::solve::SolverSettings;
+    use nalgebra::DMatrix;
+    use serde_json::json;
 
-/// Most Lanczos steps.
-const LANCZOS_STEPS: usize = 300;
-/// Each solve of the Lanczos iteration stops at this max-norm residual relative to its load.
-const SOLVE_TOLERANCE: f64 = 1e-11;
-/// Lanczos stops when the largest Ritz value moves by less than this, relative.
-const LANCZOS_TOLERANCE: f64 = 1e-10;
+    /// λ_min(W^{-½} S W^{-½}), S the Schur complement of `a` onto its DOFs from `n_i` on,
+    /// formed densely (the reference the backends are checked against).
+    fn dense_lambda(a: &crate::linalg::Csr, n_i: usize, w: &[f64]) -> f64 {
+        let n = a.nrows;
+        let dense = DMatrix::from_fn(n, n, |i, j| a.get(i, j));
+        let m = n - n_i;
+        let a_ii = dense.view((0, 0), (n_i, n_i)).into_owned();
+        let a_ic = dense.view((0, n_i), (n_i, m)).into_owned();
+        let a_cc = dense.view((n_i, n_i), (m, m)).into_owned();
+        let x = a_ii.cholesky().unwrap().solve(&a_ic);
+        let s = a_cc - a_ic.transpose() * x;
+        let scaled = DMatrix::from_fn(m, m, |i, j| s[(i, j)] / (w[i] * w[j]).sqrt());
+        scaled.symmetric_eigen().eigenvalues.min()
+    }
 
-/// λ_min(W^{-½} S W^{-½}) for S the Schur complement of the solver's operator A (n × n) onto
-/// its DOFs from `lead` on, W = diag(w_sqrt²): 1/λ_max of T = W^{½} (A⁻¹)_CC W^{½} by Lanczos
-/// with full reorthogonalisation from a fixed start vector (deterministic); each product with
-/// T is one solve A z = [0; W^{½} v] to [`SOLVE_TOLERANCE`].
-pub fn min_eig_by_lanczos(
-    a: &mut LinearSolver,
-    lead: usize,
-    w_sqrt: &[f64],
-) -> Result<f64, SolveError> {
-    let n = a.n();
-    let m = n - lead;
-    if m == 0 {
-        return Ok(f64::INFINITY);
+    /// Both backends' estimates agree with the dense eigenvalues of the Schur complements of
+    /// the Gram matrix (cτ² = 1/λ_G) and of K (the discrete margin λ_A − c2τ), for a
+    /// slip-weakening law (c2τ = (μ0 − μ1) α = 1.6).
+    #[test]
+    fn both_backends_match_the_dense_schur_eigenvalues() {
+        for linear in ["direct", "multigrid"] {
+            let mut doc = presets::get("paper-exp3").unwrap();
+            doc["mesh"]["h"] = json!("1/8");
+            doc["time"] = json!({"T": 1, "N": 1});
+            doc["friction"] = json!({"law": "slip_weakening", "mu0": 1.2, "mu1": 0.4, "alpha": 2});
+            doc["solver"] = json!({"linear": linear});
+            let p = scene::validate(&doc).unwrap();
+            let sim = Simulation::<2>::new(p, SolverSettings::default()).unwrap();
+            let (mesh, geo, dofs) = (&sim.mesh, &sim.geo, &sim.dofs);
+            let w: Vec<f64> = dofs.contact.iter().map(|c| c.weight).collect();
+            let n_i = dofs.n_interior;
+            let gram = assembly::viscous_stiffness(mesh, geo, dofs, 0.5, 0.0);
+            let visc = sim.problem.material.viscosity;
+            let k = assembly::viscous_stiffness(mesh, geo, dofs, visc.eta, visc.xi);
+            let (lambda_g, lambda_a) = (dense_lambda(&gram, n_i, &w), dense_lambda(&k, n_i, &w));
+            let r = &sim.smallness;
+            assert!((r.c2 - 1.6).abs() < 1e-12);
+            let c_tau = r.c_tau.unwrap();
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-8 * a.abs().max(b.abs());
+            assert!(
+                close(c_tau * c_tau, 1.0 / lambda_g),
+                "{linear}: cτ = {c_tau}, λ_G = {lambda_g}"
+            );
+            let margin = r.discrete_margin.unwrap();
+            assert!(
+                close(margin, lambda_a - r.c2),
+                "{linear}: margin {margin}, λ_A = {lambda_a}"
+            );
+            assert!(close(r.lhs, r.c2 * c_tau * c_tau) && r.holds == (r.lhs < r.m_a));
+        }
     }
-    let mut apply = |v: &[f64], out: &mut [f64], z: &mut Vec<f64>| -> Result<(), SolveError> {
-        let mut b = vec![0.0; n];
-        for i in 0..m {
-            b[lead + i] = w_sqrt[i] * v[i];
-        }
-        let scale = b.iter().fold(f64::MIN_POSITIVE, |s, x| s.max(x.abs()));
-        z.iter_mut().for_each(|x| *x = 0.0);
-        a.solve(&b, z, SOLVE_TOLERANCE * scale)
-            .map_err(|e| SolveError::NotConverged {
-                what: "smallness check (multigrid solve of the Lanczos iteration)",
-                step: 0,
-                iterations: e.iterations,
-                residual: e.residual / scale,
-                tolerance: SOLVE_TOLERANCE,
-            })?;
-        for i in 0..m {
-            out[i] = w_sqrt[i] * z[lead + i];
-        }
-        Ok(())
-    };
-    let mut z = vec![0.0; n];
-    let mut basis: Vec<Vec<f64>> = Vec::new();
-    let mut v: Vec<f64> = (0..m)
-        .map(|i| 1.0 + 0.5 * ((i as f64) * 0.618_033_988_7).fract())
-        .collect();
-    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
-    let s = norm(&v);
-    v.iter_mut().for_each(|x| *x /= s);
-    let (mut alphas, mut betas) = (Vec::new(), Vec::new());
-    let mut w = vec![0.0; m];
-    let mut last = 0.0;
-    for step in 0..LANCZOS_STEPS.min(m) {
-        apply(&v, &mut w, &mut z)?;
-        let alpha: f64 = w.iter().zip(&v).map(|(a, b)| a * b).sum();
-        basis.push(v.clone());
-        // Full reorthogonalisation (twice) against every basis vector.
-        for _ in 0..2 {
-            for q in &basis {
-                let c: f64 = w.iter().zip(q).map(|(a, b)| a * b).sum();
-                w.iter_mut().zip(q).for_each(|(a, b)| *a -= c * b);
-            }
-        }
-        alphas.push(alpha);
-        let beta = norm(&w);
-        let top = tridiagonal_max_eig(&alphas, &betas);
-        if step > 0 && (top - last).abs() <= LANCZOS_TOLERANCE * top || beta <= 1e-14 * top {
-            return Ok(1.0 / top);
-        }
-        last = top;
-        betas.push(beta);
-        v.iter_mut().zip(&w).for_each(|(v, w)| *v = w / beta);
-    }
-    Ok(1.0 / last)
 }

@@ -6,36 +6,29 @@
 //! Eliminating w_I = K_II⁻¹ (f_I − K_IC x) leaves the small non-smooth problem of
 //! [`super::friction_reduced`] with S = K_CC − K_CI K_II⁻¹ K_IC and b = f_C − K_CI K_II⁻¹ f_I.
 //!
-//! K_II is factored once per job, or (the multigrid path) gets a multigrid hierarchy once and
-//! is solved by preconditioned conjugate gradients to half the step's tolerance
-//! ([`LinearSolver`], `INTERIOR_FRACTION`). Per step: one solve for y = K_II⁻¹ f_I (on the multigrid path
-//! from the K_II-projection of y onto the earlier steps' solutions,
-//! [`crate::linalg::projection`]); if every contact node
-//! sticks (|b_i| ≤ ω_i μ(0), checked exactly) then x = 0 and w_I = y: done. Otherwise S is
-//! formed (once, lazily: as the trailing block of a factor of K with the contact DOFs last,
-//! [`crate::linalg::schur`], or on the multigrid path column by column by solves), the
-//! reduced problem is solved, and one more solve recovers w_I.
-//!
-//! On the multigrid path with K's own hierarchy on all free DOFs ([`VelocityStep::with_hierarchy`];
-//! K_II is then solved through it as well, [`LinearSolver::LeadingBlock`]) a slipping step
-//! never forms S: (3.13) is solved on all free DOFs by the truncated
-//! nonsmooth Newton multigrid method of [`super::semismooth_newton`], warm-started from the
-//! previous step's velocity.
+//! The run's backend ([`super::backend`]) hands the step its solver of K_II ([`LinearSolver`]:
+//! a factor made once per job, or a multigrid hierarchy made once and preconditioned
+//! conjugate gradients to half the step's tolerance, `INTERIOR_FRACTION`) and its solver of
+//! slipping steps ([`SlipSolver`]). Per step: one solve for y = K_II⁻¹ f_I (from the
+//! K_II-projection of y onto the earlier steps' solutions where the backend attached a
+//! solution space, [`crate::linalg::projection`]); if every contact node sticks
+//! (|b_i| ≤ ω_i μ(0), checked exactly) then x = 0 and w_I = y: done. Otherwise the slip
+//! solver solves the step: the direct family's the dense reduced problem on S (formed once,
+//! lazily) and one more solve for w_I; the multigrid family's the truncated nonsmooth Newton
+//! multigrid method of [`super::semismooth_newton`] on all free DOFs, never forming S, to
+//! which a step after a slipping one goes at once. Either way the step's residual is the
+//! full problem's KKT residual, checked here.
 //!
 //! Each Γ3 node has d − 1 consecutive tangential DOFs: one in 2D (the reduced problem of
 //! [`super::friction_reduced`]), two in 3D (the isotropic, group-sparse one of
 //! [`super::friction_isotropic`], with the Euclidean norm of the node's 2-vector).
 
-use super::semismooth_newton::SemismoothNewton;
-use super::{friction_isotropic, friction_reduced, galerkin_guess};
-use super::{SolveError, SolverReport, SolverSettings};
+use super::{friction_node, SolveError, SolverReport, SolverSettings};
 use crate::fem::DofMap;
-use crate::linalg::multigrid::Hierarchy;
 use crate::linalg::projection::{self, SolutionSpace};
-use crate::linalg::schur::{schur_by_solves, SCHUR_COLUMN_TOLERANCE};
-use crate::linalg::{schur_complement, Csr, LinearSolver, SchurPath};
+use crate::linalg::{Csr, LinearSolver, SchurPath};
 use crate::problem::FrictionLaw;
-use nalgebra::DMatrix;
+use std::any::Any;
 use std::sync::Arc;
 
 /// How a velocity step's friction problem is solved.
@@ -67,6 +60,70 @@ impl ContactSolver {
     }
 }
 
+/// The solver of a velocity step in which some Γ3 node slips, handed to the step by the
+/// run's backend ([`super::backend::Backend::velocity`]): the dense reduced problem on S
+/// (`backend/direct.rs`), semismooth Newton on all free DOFs (`backend/multigrid.rs`).
+pub trait SlipSolver: Send + Sync {
+    /// How a slipping step is (or was) solved (the summary's `mesh.contact_solver`).
+    fn report(&self) -> ContactSolver;
+
+    /// Whether a step after a slipping one comes here at once, without the stick test's
+    /// solve (a solver that also finds an all-stick solution, from the last velocity).
+    fn after_slip_at_once(&self) -> bool {
+        false
+    }
+
+    /// Solves (3.13) for the free-DOF load `f` into `w` (a step that does not stick, or one
+    /// after a slipping step when [`SlipSolver::after_slip_at_once`]). On entry `state`
+    /// holds the warm start `x` and, after the stick test, y = K_II⁻¹ f_I and its contact
+    /// load `b`; on return `state.x` holds the tangential velocities (`w[n_i..]`), and
+    /// `state.r` K w − f where `state.r_fresh` says so. Returns the solver's iterations.
+    fn solve(
+        &mut self,
+        state: &mut StepState,
+        f: &[f64],
+        w: &mut [f64],
+        settings: &SolverSettings,
+        step: usize,
+    ) -> Result<usize, SolveError>;
+
+    /// A clone (sharing what the solver shares: operators, factors, hierarchies).
+    fn boxed_clone(&self) -> Box<dyn SlipSolver>;
+
+    /// The solver as [`Any`], for its backend to reach its own type (the direct family's
+    /// smallness estimate reuses its S).
+    fn as_any_mut(&mut self) -> &mut dyn Any;
+}
+
+/// The slip solver of a velocity step without a Γ3: nothing slips, it is never called.
+#[derive(Clone, Copy)]
+pub struct NoContact;
+
+impl SlipSolver for NoContact {
+    fn report(&self) -> ContactSolver {
+        ContactSolver::StickOnly
+    }
+
+    fn solve(
+        &mut self,
+        _state: &mut StepState,
+        _f: &[f64],
+        _w: &mut [f64],
+        _settings: &SolverSettings,
+        _step: usize,
+    ) -> Result<usize, SolveError> {
+        unreachable!("a velocity step without a Γ3 never slips")
+    }
+
+    fn boxed_clone(&self) -> Box<dyn SlipSolver> {
+        Box::new(*self)
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+}
+
 /// Most rounds of iterative refinement of the interior velocity per step.
 const REFINEMENTS: usize = 3;
 
@@ -76,77 +133,84 @@ const REFINEMENTS: usize = 3;
 /// CG's recursive residual, on which it stops, and the true one it reports.
 const INTERIOR_FRACTION: f64 = 0.5;
 
-/// The Newton iterations of a slipping step solve their Jacobian systems (at least) to this
-/// fraction of the step's tolerance: the full KKT residual then stays a decade below the
-/// tolerance, and the norms agree with the direct path to about 1e-13 (box-exp3 at 1/16: 2e-14
-/// with g = 2, where 0.01 cost 25 % more iterations).
-const JACOBIAN_FRACTION: f64 = 0.1;
-
-/// Cloning shares the factor of K_II (see [`Cholesky`]); the clone has its own warm start.
-#[derive(Clone)]
+/// The velocity step: its state and the backend's solver of slipping steps. Cloning shares
+/// the factor of K_II (see [`crate::linalg::Cholesky`]); the clone has its own warm start.
 pub struct VelocityStep {
+    state: StepState,
+    slip: Box<dyn SlipSolver>,
+}
+
+impl Clone for VelocityStep {
+    fn clone(&self) -> Self {
+        VelocityStep {
+            state: self.state.clone(),
+            slip: self.slip.boxed_clone(),
+        }
+    }
+}
+
+/// What a velocity step holds whatever its slip solver: the operators, the solver of K_II,
+/// the warm starts and the step's work; what a [`SlipSolver`] reads and writes.
+#[derive(Clone)]
+pub struct StepState {
     /// The operator on all free DOFs (for residuals), interior first, contact last.
-    k: Arc<Csr>,
-    n_i: usize,
-    k_ii: LinearSolver,
+    pub(crate) k: Arc<Csr>,
+    pub(crate) n_i: usize,
+    pub(crate) k_ii: LinearSolver,
     /// Contact rows, interior columns.
-    k_ci: Csr,
+    pub(crate) k_ci: Csr,
     /// Tangential DOFs per Γ3 node: d − 1.
-    block: usize,
+    pub(crate) block: usize,
     /// ω_i per contact DOF (repeated over a node's DOFs) ...
-    weights: Vec<f64>,
+    pub(crate) weights: Vec<f64>,
     /// ... and per Γ3 node (what the 3D reduced problem takes).
-    node_weights: Vec<f64>,
-    law: FrictionLaw,
-    /// How S is formed; after forming it, the path taken.
-    schur_path: SchurPath,
-    schur: Option<DMatrix<f64>>,
+    pub(crate) node_weights: Vec<f64>,
+    pub(crate) law: FrictionLaw,
     /// Tangential velocities on Γ3 (the warm start of the next step).
-    x: Vec<f64>,
+    pub(crate) x: Vec<f64>,
     /// Reaction on the contact DOFs, −(S x − b): the discrete friction force at each node.
-    reaction: Vec<f64>,
-    y: Vec<f64>,
-    /// The earlier steps' velocities on all free DOFs (multigrid path): the K-projection of
-    /// y onto them starts the stick test's solve, the minimiser of E over their span a
-    /// slipping step's Newton method ([`galerkin_guess`]).
-    space: Option<SolutionSpace>,
+    pub(crate) reaction: Vec<f64>,
+    /// K_II⁻¹ f_I of the step's stick test ...
+    pub(crate) y: Vec<f64>,
+    /// ... and its contact load b = f_C − K_CI y.
+    pub(crate) b: Vec<f64>,
+    /// The earlier steps' velocities on all free DOFs (a solver that takes a starting
+    /// guess): the K-projection of y onto them starts the stick test's solve, the minimiser
+    /// of E over their span a slipping step's Newton method
+    /// ([`super::galerkin_guess`]).
+    pub(crate) space: Option<SolutionSpace>,
     /// Some vector of the space moves on Γ3 (a slipping step's velocity): the stick test's
     /// projection, which needs a span with x = 0, then starts from an empty space.
-    space_slips: bool,
-    r: Vec<f64>,
+    pub(crate) space_slips: bool,
+    pub(crate) r: Vec<f64>,
     /// Krylov iterations of the current step (multigrid path).
-    krylov: usize,
-    /// The multigrid path's solver of slipping steps on all free DOFs.
-    newton: Option<Box<SemismoothNewton>>,
-    /// The last step's free-DOF velocity (the Newton warm start).
-    w_last: Vec<f64>,
-    /// `r` holds K w − f of this step's solution already (the Newton method's own, or the
+    pub(crate) krylov: usize,
+    /// The last step's free-DOF velocity (a warm start).
+    pub(crate) w_last: Vec<f64>,
+    /// `r` holds K w − f of this step's solution already (the slip solver's own, or the
     /// stick solve's true residual).
-    r_fresh: bool,
+    pub(crate) r_fresh: bool,
 }
 
 impl VelocityStep {
-    /// The step with a given solver of K_II (the leading n_interior block of `k`).
+    /// The step with a given solver of K_II (the leading n_interior block of `k`) and of
+    /// slipping steps.
     pub fn with_solver<const D: usize>(
         k: Arc<Csr>,
         dofs: &DofMap<D>,
         law: FrictionLaw,
-        path: SchurPath,
         k_ii: LinearSolver,
+        slip: Box<dyn SlipSolver>,
     ) -> Self {
         let n_i = dofs.n_interior;
         let n = dofs.n_free();
         debug_assert_eq!(k_ii.n(), n_i);
         let k_ci = k.block(n_i..n, 0..n_i);
         let m = dofs.n_contact();
-        let space = k_ii
-            .is_iterative()
-            .then(|| SolutionSpace::new(n, projection::CAPACITY));
-        VelocityStep {
+        let state = StepState {
             n_i,
             k_ii,
             k_ci,
-            schur_path: path,
             block: D - 1,
             weights: dofs.contact.iter().map(|c| c.weight).collect(),
             node_weights: dofs
@@ -156,96 +220,87 @@ impl VelocityStep {
                 .map(|c| c.weight)
                 .collect(),
             law,
-            schur: None,
             x: vec![0.0; m],
             reaction: vec![0.0; m],
             y: vec![0.0; n_i],
-            space,
+            b: vec![0.0; m],
+            space: None,
             space_slips: false,
             r: vec![0.0; n],
             krylov: 0,
-            newton: None,
             w_last: vec![0.0; n],
             r_fresh: false,
             k,
-        }
+        };
+        VelocityStep { state, slip }
     }
 
-    /// Slipping steps solved on all free DOFs by semismooth Newton with the multigrid
-    /// `hierarchy` of K (all free DOFs), instead of on the dense S.
-    pub fn with_hierarchy(mut self, hierarchy: Arc<Hierarchy>) -> Self {
-        self.newton = Some(Box::new(SemismoothNewton::new(
-            self.k.clone(),
-            hierarchy,
-            self.n_i,
-            self.block,
-            self.node_weights.clone(),
-            self.law.clone(),
-        )));
+    /// Each solve with K_II started from the K-projection of its load onto the earlier
+    /// steps' velocities ([`crate::linalg::projection`]): for a solver that takes a
+    /// starting guess.
+    pub fn with_solution_space(mut self) -> Self {
+        self.state.space = Some(SolutionSpace::new(self.state.k.nrows, projection::CAPACITY));
         self
     }
 
     /// How a slipping step is (or was) solved.
     pub fn slip_solver(&self) -> ContactSolver {
-        if self.newton.is_some() {
-            ContactSolver::SemismoothNewton
-        } else {
-            ContactSolver::DenseSchur(self.schur_path)
-        }
+        self.slip.report()
+    }
+
+    /// The step's state and its slip solver, borrowed together (for its backend).
+    pub fn parts_mut(&mut self) -> (&mut StepState, &mut dyn SlipSolver) {
+        (&mut self.state, self.slip.as_mut())
     }
 
     pub fn n_contact(&self) -> usize {
-        self.weights.len()
+        self.state.weights.len()
     }
 
     pub fn weights(&self) -> &[f64] {
-        &self.weights
+        &self.state.weights
     }
 
     /// Tangential velocity of each Γ3 DOF after the last solve.
     pub fn contact_velocity(&self) -> &[f64] {
-        &self.x
+        &self.state.x
     }
 
     /// Discrete friction force −(S x − b) of each Γ3 DOF after the last solve (integrated over
     /// the node's share ω_i of Γ3; divide by ω_i for a traction density).
     pub fn contact_force(&self) -> &[f64] {
-        &self.reaction
+        &self.state.reaction
     }
 
     /// Set the warm start (e.g. when resuming from a checkpoint).
     pub fn set_contact_velocity(&mut self, x: &[f64]) {
-        self.x.copy_from_slice(x);
+        self.state.x.copy_from_slice(x);
     }
 
     /// Nonzeros of the factor of K_II and its dimension (0 nonzeros on the multigrid path).
     pub fn factor_size(&self) -> (usize, usize) {
-        (self.k_ii.n(), self.k_ii.factor().map_or(0, |c| c.nnz_l()))
+        let k_ii = &self.state.k_ii;
+        (k_ii.n(), k_ii.factor_nnz())
     }
 
     /// The solver of K_II.
     pub fn linear_solver(&self) -> &LinearSolver {
-        &self.k_ii
+        &self.state.k_ii
     }
 
     /// Krylov iterations of the last step (0 on the direct path).
     pub fn krylov_iterations(&self) -> usize {
-        self.krylov
-    }
-
-    /// How S is (to be) formed.
-    pub fn schur_path(&self) -> SchurPath {
-        self.schur_path
+        self.state.krylov
     }
 
     /// The free-DOF operator K and the number of interior DOFs (for benchmarks).
     pub fn operator(&self) -> (&Csr, usize) {
-        (self.k.as_ref(), self.n_i)
+        (self.state.k.as_ref(), self.state.n_i)
     }
 
     /// K on all free DOFs, shared (no copy).
     pub fn shared_operator(&self) -> Arc<Csr> {
-        self.k.clone()
+        self.state.k.clone()
     }
 
     /// One solve with K_II, in place (for benchmarks): a substitution pair on the direct
@@ -254,48 +309,76 @@ impl VelocityStep {
         let b = v.to_vec();
         let atol = 1e-10 * b.iter().fold(f64::MIN_POSITIVE, |m, x| m.max(x.abs()));
         v.iter_mut().for_each(|x| *x = 0.0);
-        let _ = self.k_ii.solve(&b, v, atol);
+        let _ = self.state.k_ii.solve(&b, v, atol);
     }
 
-    /// S = K_CC − K_CI K_II⁻¹ K_IC, computed on first use.
-    pub fn schur(&mut self) -> Result<&DMatrix<f64>, SolveError> {
-        if self.schur.is_none() {
-            let s = match self.k_ii.factor() {
-                Some(f) => {
-                    let (s, path) = schur_complement(&self.k, self.n_i, f, self.schur_path);
-                    self.schur_path = path;
-                    s
-                }
-                None => self.schur_by_solves()?,
-            };
-            self.schur = Some(s);
+    /// Solves (3.13) for the free-DOF load `f`, writing the free-DOF velocity into `w`.
+    /// The reported residual is the relative KKT residual of the FULL problem, computed from
+    /// K w − f (not from the reduced quantities).
+    pub fn solve(
+        &mut self,
+        f: &[f64],
+        w: &mut [f64],
+        settings: &SolverSettings,
+        step: usize,
+    ) -> Result<SolverReport, SolveError> {
+        let state = &mut self.state;
+        let slip = self.slip.as_mut();
+        let n_i = state.n_i;
+        let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
+        state.krylov = 0;
+        state.r_fresh = false;
+        let iterations = if slip.after_slip_at_once() && state.x.iter().any(|&v| v != 0.0) {
+            // The last step slipped: this one goes to the slip solver at once (which also
+            // finds an all-stick solution), without the stick test's solve.
+            let iterations = slip.solve(state, f, w, settings, step)?;
+            state.y.copy_from_slice(&w[..n_i]);
+            iterations
+        } else {
+            state.solve_stick_or_slip(slip, f, w, settings, step)?
+        };
+        let mut residual = if std::mem::take(&mut state.r_fresh) {
+            state.kkt_of_residual()
+        } else {
+            state.full_residual(f, w)
+        } / scale;
+        if residual > settings.tolerance && residual.is_finite() {
+            residual = state.refine(f, w, scale, settings.tolerance);
         }
-        Ok(self.schur.as_ref().unwrap())
-    }
-
-    /// S column by column on the multigrid path ([`schur_by_solves`]).
-    fn schur_by_solves(&mut self) -> Result<DMatrix<f64>, SolveError> {
-        self.schur_path = SchurPath::BlockedSolves;
-        schur_by_solves(&self.k, self.n_i, &mut self.k_ii).map_err(|e| SolveError::NotConverged {
-            what: "Schur complement column (multigrid)",
-            step: 0,
-            iterations: e.iterations,
-            residual: e.residual,
-            tolerance: SCHUR_COLUMN_TOLERANCE,
+        if !residual.is_finite() {
+            return Err(SolveError::NonFinite("velocity", step));
+        }
+        if residual > settings.tolerance {
+            return Err(SolveError::NotConverged {
+                what: "velocity step",
+                step,
+                iterations,
+                residual,
+                tolerance: settings.tolerance,
+            });
+        }
+        state.w_last.copy_from_slice(w);
+        Ok(SolverReport {
+            iterations,
+            residual,
+            krylov_iterations: state.krylov,
         })
     }
+}
 
-    /// The stick test with y = K_II⁻¹ f_I, then (if some node slips) the reduced problem or
-    /// the full-space method. Returns the friction solver's iterations.
-    fn solve_stick_or_reduced(
+impl StepState {
+    /// The stick test with y = K_II⁻¹ f_I, then (if some node slips) the slip solver.
+    /// Returns the slip solver's iterations.
+    fn solve_stick_or_slip(
         &mut self,
+        slip: &mut dyn SlipSolver,
         f: &[f64],
         w: &mut [f64],
         settings: &SolverSettings,
         step: usize,
     ) -> Result<usize, SolveError> {
         let n_i = self.n_i;
-        let m = self.n_contact();
+        let m = self.weights.len();
         let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
         let mut y = std::mem::take(&mut self.y);
         if let Some(space) = &mut self.space {
@@ -316,19 +399,11 @@ impl VelocityStep {
         solved?;
         let mut iterations = 0;
         if m > 0 {
-            let mut b = f[n_i..].to_vec();
+            self.b.copy_from_slice(&f[n_i..]);
             let mut kci_y = vec![0.0; m];
             self.k_ci.mul_vec(&self.y, &mut kci_y);
-            b.iter_mut().zip(&kci_y).for_each(|(b, v)| *b -= v);
-            let mu0 = self.law.mu(0.0);
-            let all_stick = match self.block {
-                1 => b.iter().zip(&self.weights).all(|(b, w)| b.abs() <= w * mu0),
-                _ => b
-                    .chunks(self.block)
-                    .zip(self.weights.chunks(self.block))
-                    .all(|(b, w)| b.iter().map(|v| v * v).sum::<f64>().sqrt() <= w[0] * mu0),
-            };
-            if all_stick {
+            self.b.iter_mut().zip(&kci_y).for_each(|(b, v)| *b -= v);
+            if friction_node::all_stick(self.block, &self.b, &self.node_weights, &self.law) {
                 self.x.iter_mut().for_each(|v| *v = 0.0);
                 w[..n_i].copy_from_slice(&self.y);
                 // K w − f of w = (y, 0) is (−(f_I − K_II y), −b): the solve's true residual
@@ -336,70 +411,11 @@ impl VelocityStep {
                 if let Some(residual) = self.k_ii.last_residual() {
                     let (r_i, r_c) = self.r.split_at_mut(n_i);
                     r_i.iter_mut().zip(residual).for_each(|(r, v)| *r = -v);
-                    r_c.iter_mut().zip(&b).for_each(|(r, v)| *r = -v);
+                    r_c.iter_mut().zip(&self.b).for_each(|(r, v)| *r = -v);
                     self.r_fresh = true;
                 }
-            } else if self.newton.is_some() {
-                iterations = self.solve_full(f, w, settings, step)?;
             } else {
-                let mut x = std::mem::take(&mut self.x);
-                let law = self.law.clone();
-                let weights = std::mem::take(&mut self.weights);
-                let node_weights = std::mem::take(&mut self.node_weights);
-                // Same force scale as the full residual below, and half its tolerance: the
-                // recovery of the interior adds rounding only.
-                let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
-                let inner = SolverSettings {
-                    tolerance: 0.5 * settings.tolerance,
-                    ..*settings
-                };
-                let block = self.block;
-                let s = match self.schur() {
-                    Ok(s) => s,
-                    Err(e) => {
-                        self.weights = weights;
-                        self.node_weights = node_weights;
-                        return Err(e);
-                    }
-                };
-                let rep = match block {
-                    1 => friction_reduced::solve(
-                        &friction_reduced::Reduced {
-                            s,
-                            b: &b,
-                            weights: &weights,
-                            law: &law,
-                            scale: Some(scale),
-                        },
-                        &mut x,
-                        &inner,
-                        step,
-                    ),
-                    _ => friction_isotropic::solve(
-                        &friction_isotropic::Reduced {
-                            s,
-                            b: &b,
-                            weights: &node_weights,
-                            law: &law,
-                            scale: Some(scale),
-                        },
-                        &mut x,
-                        &inner,
-                        step,
-                    ),
-                };
-                self.weights = weights;
-                self.node_weights = node_weights;
-                iterations = rep?.iterations;
-                // w_I = K_II⁻¹ (f_I − K_IC x).
-                let mut rhs = f[..n_i].to_vec();
-                let mut kic_x = vec![0.0; n_i];
-                self.k_ci.tmul_vec_add(&x, &mut kic_x);
-                rhs.iter_mut().zip(&kic_x).for_each(|(a, v)| *a -= v);
-                self.x = x;
-                let wi = &mut w[..n_i];
-                wi.copy_from_slice(&self.y);
-                self.solve_interior(&rhs, wi, scale, settings, step)?;
+                iterations = slip.solve(self, f, w, settings, step)?;
             }
             w[n_i..].copy_from_slice(&self.x);
         } else {
@@ -412,52 +428,9 @@ impl VelocityStep {
         Ok(iterations)
     }
 
-    /// A slipping step on all free DOFs (multigrid path): semismooth Newton, started from
-    /// the minimiser of E over the span of the earlier velocities ([`galerkin_guess`]; no
-    /// worse in energy than the last step's velocity, or after an all-stick step this
-    /// step's stick solution). Returns the Newton iterations.
-    fn solve_full(
-        &mut self,
-        f: &[f64],
-        w: &mut [f64],
-        settings: &SolverSettings,
-        step: usize,
-    ) -> Result<usize, SolveError> {
-        let n_i = self.n_i;
-        w.copy_from_slice(&self.w_last);
-        if self.x.iter().all(|&v| v == 0.0) {
-            w[..n_i].copy_from_slice(&self.y);
-        }
-        if let Some(space) = &mut self.space {
-            let contact = galerkin_guess::Contact {
-                n_interior: n_i,
-                block: self.block,
-                weights: &self.node_weights,
-                law: &self.law,
-            };
-            galerkin_guess::minimise(space, f, &contact, w);
-        }
-        // Half the tolerance, as the dense path's reduced solve: the full check follows.
-        let inner = SolverSettings {
-            tolerance: 0.5 * settings.tolerance,
-            ..*settings
-        };
-        let newton = self.newton.as_mut().expect("the multigrid path's");
-        let rep = newton.solve(f, w, &inner, JACOBIAN_FRACTION * settings.tolerance, step)?;
-        self.krylov += rep.krylov_iterations;
-        self.r.copy_from_slice(newton.gradient());
-        self.r_fresh = true;
-        self.x.copy_from_slice(&w[n_i..]);
-        if let Some(space) = &mut self.space {
-            space.extend(self.k.as_ref(), w);
-            self.space_slips |= self.x.iter().any(|&v| v != 0.0);
-        }
-        Ok(rep.newton_iterations)
-    }
-
     /// K_II y = b on the solver's path, from the guess in `y`, to INTERIOR_FRACTION of the
     /// tolerance relative to `scale`.
-    fn solve_interior(
+    pub(crate) fn solve_interior(
         &mut self,
         b: &[f64],
         y: &mut [f64],
@@ -481,59 +454,6 @@ impl VelocityStep {
         }
     }
 
-    /// Solves (3.13) for the free-DOF load `f`, writing the free-DOF velocity into `w`.
-    /// The reported residual is the relative KKT residual of the FULL problem, computed from
-    /// K w − f (not from the reduced quantities).
-    pub fn solve(
-        &mut self,
-        f: &[f64],
-        w: &mut [f64],
-        settings: &SolverSettings,
-        step: usize,
-    ) -> Result<SolverReport, SolveError> {
-        let n_i = self.n_i;
-        let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
-        self.krylov = 0;
-        self.r_fresh = false;
-        let iterations = if self.newton.is_some() && self.x.iter().any(|&v| v != 0.0) {
-            // The last step slipped: this one goes to the full-space method at once (which
-            // also finds an all-stick solution), without the stick test's solve.
-            let iterations = self.solve_full(f, w, settings, step)?;
-            self.y.copy_from_slice(&w[..n_i]);
-            iterations
-        } else {
-            self.solve_stick_or_reduced(f, w, settings, step)?
-        };
-        let mut residual = if std::mem::take(&mut self.r_fresh) {
-            self.kkt_of_residual()
-        } else {
-            self.full_residual(f, w)
-        } / scale;
-        if residual > settings.tolerance && residual.is_finite() {
-            residual = self.refine(f, w, scale, settings.tolerance);
-        }
-        if !residual.is_finite() {
-            return Err(SolveError::NonFinite("velocity", step));
-        }
-        if residual > settings.tolerance {
-            return Err(SolveError::NotConverged {
-                what: "velocity step",
-                step,
-                iterations,
-                residual,
-                tolerance: settings.tolerance,
-            });
-        }
-        self.w_last.copy_from_slice(w);
-        Ok(SolverReport {
-            iterations,
-            residual,
-            krylov_iterations: self.krylov,
-        })
-    }
-}
-
-impl VelocityStep {
     /// The fallback for ill-conditioned K (a slender body: its condition grows like
     /// (length/height)^4), where the rounding of K w alone, about ε·‖|K||w|‖∞, exceeds the
     /// tolerance times ‖f‖∞: a few rounds of iterative refinement of w_I (x fixed) with the
@@ -592,18 +512,124 @@ impl VelocityStep {
     fn kkt_of_residual(&mut self) -> f64 {
         let n_i = self.n_i;
         let interior = self.r[..n_i].iter().fold(0.0f64, |s, v| s.max(v.abs()));
-        let contact = match self.block {
-            1 => friction_reduced::kkt_violation(&self.r[n_i..], &self.x, &self.weights, &self.law),
-            _ => friction_isotropic::kkt_violation(
-                &self.r[n_i..],
-                &self.x,
-                &self.node_weights,
-                &self.law,
-            ),
-        };
+        let contact = friction_node::kkt_violation(
+            self.block,
+            &self.r[n_i..],
+            &self.x,
+            &self.node_weights,
+            &self.law,
+        );
         for (q, r) in self.reaction.iter_mut().zip(&self.r[n_i..]) {
             *q = -r;
         }
         interior.max(contact)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fem::{assembly, Geometry};
+    use crate::scene::{self, presets};
+    use crate::solve::backend;
+    use serde_json::json;
+
+    /// The velocity step of paper-exp3 at h = 1/8 with Tresca bound `g` as the backend of
+    /// `linear` builds it, with K assembled here by element triplets and the DOF map.
+    fn velocity(linear: &str, g: f64) -> (VelocityStep, Csr, DofMap<2>) {
+        let mut doc = presets::get("paper-exp3").unwrap();
+        doc["mesh"]["h"] = json!("1/8");
+        doc["friction"] = json!({"law": "tresca", "g": g});
+        doc["solver"] = json!({"linear": linear});
+        let p = scene::validate(&doc).unwrap();
+        let mesh = p.mesh::<2>().unwrap();
+        let geo = Geometry::new(&mesh);
+        let dofs = DofMap::new(&mesh, &p.boundary);
+        let b = backend::choose(&p, &mesh, &dofs, None).unwrap();
+        let visc = p.material.viscosity;
+        let k = b.stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi);
+        let step = b
+            .velocity(Arc::new(k), &mesh, &dofs, p.friction.clone())
+            .unwrap();
+        let k = assembly::viscous_stiffness(&mesh, &geo, &dofs, visc.eta, visc.xi);
+        (step, k, dofs)
+    }
+
+    /// The conditions of (3.13) at w for the load f, checked by hand: K w − f vanishes on
+    /// the interior rows; on Γ3 a stuck node's force is within ω g, a slipping node's is
+    /// −ω g sign(x). Returns the slipping nodes.
+    fn kkt(k: &Csr, dofs: &DofMap<2>, f: &[f64], w: &[f64], g: f64) -> usize {
+        let mut r = vec![0.0; f.len()];
+        k.mul_vec(w, &mut r);
+        r.iter_mut().zip(f).for_each(|(r, f)| *r -= f);
+        let tol = 1e-9 * f.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let n_i = dofs.n_interior;
+        assert!(r[..n_i].iter().all(|v| v.abs() <= tol));
+        let mut slipping = 0;
+        for (i, c) in dofs.contact.iter().enumerate() {
+            let (x, rc, bound) = (w[n_i + i], r[n_i + i], c.weight * g);
+            if x == 0.0 {
+                assert!(rc.abs() <= bound + tol, "stuck: |{rc}| > {bound}");
+            } else {
+                slipping += 1;
+                assert!(
+                    (rc + bound * x.signum()).abs() <= tol,
+                    "slip: {rc} vs {bound}"
+                );
+            }
+        }
+        slipping
+    }
+
+    /// Each family hands the step its slip solver, and a clone of the step keeps it: the
+    /// dense reduced problem on S (the trailing block of the factor) on the direct path,
+    /// semismooth Newton on all DOFs on the multigrid one.
+    #[test]
+    fn each_backend_hands_its_slip_solver() {
+        let (direct, _, _) = velocity("direct", 0.5);
+        let dense = ContactSolver::DenseSchur(SchurPath::TrailingBlock);
+        assert_eq!(direct.slip_solver(), dense);
+        assert_eq!(direct.clone().slip_solver(), dense);
+        let (multigrid, _, _) = velocity("multigrid", 0.5);
+        assert_eq!(multigrid.slip_solver(), ContactSolver::SemismoothNewton);
+        assert_eq!(
+            multigrid.clone().slip_solver(),
+            ContactSolver::SemismoothNewton
+        );
+    }
+
+    /// Both paths solve (3.13) to its optimality conditions and to the same velocity, when
+    /// Γ3 slips everywhere, in part and nowhere; the second solve of each starts from the
+    /// first's warm start (on the multigrid path a slipping step's goes to semismooth Newton
+    /// at once).
+    #[test]
+    fn both_paths_meet_the_stick_slip_conditions_and_agree() {
+        let (mut slipped, mut stuck) = (0, 0);
+        for g in [0.5, 5.0, 5000.0] {
+            let mut solutions = Vec::new();
+            for linear in ["direct", "multigrid"] {
+                let (mut step, k, dofs) = velocity(linear, g);
+                let n = k.nrows;
+                let f: Vec<f64> = (0..n)
+                    .map(|i| 10.0 * (0.37 * i as f64 + 1.0).sin())
+                    .collect();
+                let mut w = vec![0.0; n];
+                for n in 1..=2 {
+                    let rep = step
+                        .solve(&f, &mut w, &SolverSettings::default(), n)
+                        .unwrap();
+                    assert!(rep.residual <= 1e-10);
+                    let slipping = kkt(&k, &dofs, &f, &w, g);
+                    slipped += slipping;
+                    stuck += dofs.contact.len() - slipping;
+                }
+                solutions.push(w);
+            }
+            let scale = solutions[0].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (a, b) in solutions[0].iter().zip(&solutions[1]) {
+                assert!((a - b).abs() <= 1e-8 * scale, "g = {g}: {a} vs {b}");
+            }
+        }
+        assert!(slipped > 0 && stuck > 0, "slipped {slipped}, stuck {stuck}");
     }
 }

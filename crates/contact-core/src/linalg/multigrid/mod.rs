@@ -376,3 +376,52 @@ impl Preconditioner for VCycle {
         z.copy_from_slice(&self.work[0].x);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fem::{assembly, multilevel, Geometry};
+    use crate::mesh::Mesh;
+    use crate::problem::MeshPattern;
+
+    fn dot(a: &[f64], b: &[f64]) -> f64 {
+        a.iter().zip(b).map(|(x, y)| x * y).sum()
+    }
+
+    /// H = 64 M + L of a square mesh with the levels the damage step would get.
+    fn hierarchy(pattern: MeshPattern) -> Arc<Hierarchy> {
+        let mesh = Mesh::rectangle(1.0, 1.0, 32, 32, pattern);
+        let geo = Geometry::new(&mesh);
+        let m = assembly::mass_in_pattern(&mesh, &geo);
+        let l = assembly::laplacian_in_pattern_of(&mesh, &geo, &m);
+        let h = assembly::combine(64.0, &m, 1.0, &l);
+        let (blocks, levels) = multilevel::scalar_levels(&mesh, h.nrows);
+        Arc::new(Hierarchy::new(Arc::new(h), blocks, levels, Params::default()).unwrap())
+    }
+
+    /// The V-cycle B is symmetric, xᵀ B y = yᵀ B x, and positive, for geometric levels (a
+    /// halved diagonal grid) and smoothed aggregation (the cross grid, not nested).
+    #[test]
+    fn v_cycles_are_symmetric_and_positive() {
+        for (pattern, kind) in [
+            (MeshPattern::Diagonal, "geometric"),
+            (MeshPattern::Cross, "smoothed aggregation"),
+        ] {
+            let h = hierarchy(pattern);
+            assert!(h.describe().contains(kind), "{}", h.describe());
+            let n = h.operator().nrows;
+            let x: Vec<f64> = (0..n).map(|i| (1.3 * i as f64).sin()).collect();
+            let y: Vec<f64> = (0..n).map(|i| (0.7 * i as f64 + 2.0).cos()).collect();
+            let mut b = h.vcycle();
+            let (mut bx, mut by) = (vec![0.0; n], vec![0.0; n]);
+            b.apply(&x, &mut bx);
+            b.apply(&y, &mut by);
+            let (l, r) = (dot(&y, &bx), dot(&x, &by));
+            assert!(
+                (l - r).abs() <= 1e-12 * l.abs().max(r.abs()),
+                "{kind}: {l} vs {r}"
+            );
+            assert!(dot(&x, &bx) > 0.0 && dot(&y, &by) > 0.0);
+        }
+    }
+}

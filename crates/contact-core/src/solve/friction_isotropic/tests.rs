@@ -1,4 +1,6 @@
 use super::*;
+use crate::problem::FrictionLaw;
+use crate::solve::friction_reduced;
 use nalgebra::DMatrix;
 
 use proptest::prelude::RngExt;
@@ -532,59 +534,6 @@ fn decoupled_problem_matches_the_2d_solver() {
             assert_eq!(x[2 * i] == 0.0, x1[i] == 0.0, "trial {trial} node {i}");
         }
     }
-}
-
-#[test]
-fn prox_is_the_block_soft_threshold() {
-    let laws = [
-        FrictionLaw::Tresca { g: 1.5 },
-        FrictionLaw::SlipWeakening {
-            mu0: 1.2,
-            mu1: 0.4,
-            alpha: 3.0,
-        },
-    ];
-    let c = 0.2; // c·c2 = 0.48 < 1
-    for law in &laws {
-        for z in [[-3.0, 0.5], [0.1, -0.1], [0.2, 0.0], [1.0, 2.0], [0.0, 0.0]] {
-            let y = prox(law, c, z);
-            let az = z[0].hypot(z[1]);
-            if y == [0.0, 0.0] {
-                assert!(az <= c * law.mu(0.0), "{law:?} {z:?}");
-            } else {
-                let r = y[0].hypot(y[1]);
-                assert!((r + c * law.mu(r) - az).abs() < 1e-13);
-                // Along z.
-                assert!((y[0] * z[1] - y[1] * z[0]).abs() < 1e-14 * az * r);
-                assert!(y[0] * z[0] + y[1] * z[1] > 0.0);
-            }
-            // The minimiser of c j(|y|) + ½ |y − z|² (convex for c c2 < 1).
-            let f = |v: [f64; 2]| {
-                c * law.potential(v[0].hypot(v[1]))
-                    + 0.5 * ((v[0] - z[0]).powi(2) + (v[1] - z[1]).powi(2))
-            };
-            for (dx, dy) in [(1e-4, 0.0), (0.0, 1e-4), (-1e-4, 1e-4), (1e-4, 1e-4)] {
-                assert!(f([y[0] + dx, y[1] + dy]) >= f(y) - 1e-15);
-            }
-        }
-    }
-}
-
-#[test]
-fn kkt_violation_by_hand() {
-    let law = FrictionLaw::Tresca { g: 2.0 };
-    let w = [1.0, 0.5];
-    // Node 0 stuck with |g| = 5 > 2: violation 3. Node 1 slipping along (1, 0) with
-    // g = (−1, 0.5): g + 0.5·2·(1, 0) = (0, 0.5).
-    let g = [3.0, 4.0, -1.0, 0.5];
-    let x = [0.0, 0.0, 2.0, 0.0];
-    assert!((kkt_violation(&g, &x, &w, &law) - 3.0).abs() < 1e-15);
-    let g = [0.6, 0.8, -1.0, 0.5];
-    assert!((kkt_violation(&g, &x, &w, &law) - 0.5).abs() < 1e-15);
-    let g = [0.6, 0.8, -1.0, 0.0];
-    assert_eq!(kkt_violation(&g, &x, &w, &law), 0.0);
-    let g = [f64::NAN, 0.8, -1.0, 0.0];
-    assert!(kkt_violation(&g, &x, &w, &law).is_nan());
 }
 
 #[test]

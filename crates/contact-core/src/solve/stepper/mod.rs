@@ -1,0 +1,444 @@
+//! Problem 3.1's time loop. For n = 1..N, from (u_{n−1}, ζ_{n−1}) only
+//! ([`Simulation::step`]):
+//! 1. B_{n−1} = B(ε(u_{n−1}), ζ_{n−1}) per element (3.8);
+//! 2. velocity load and velocity step (3.13) → w_n  ∥  damage step (3.10) → ζ_n;
+//! 3. u_n = u_{n−1} + k w_n (3.12);
+//! 4. the step's norms; σ_n = A ε(w_n) + B_{n−1} (3.8) only when stored ([`Simulation::fields`]).
+//!
+//! The two sub-problems of step 2 are independent and run on two threads for meshes large
+//! enough to pay for it. Physics absent from the scene is not computed: no damage block → ζ ≡ 1
+//! and no damage solve; no Γ3 → a single linear solve per step.
+//!
+//! The set-up before the first step (mesh, operators, solvers, the initial state) is in
+//! `setup.rs`; what a step stores and reports beyond its norms (fields, the contact state,
+//! stresses, the initial fields) in `output.rs`.
+
+mod output;
+mod setup;
+
+pub use output::{initial_fields, initial_fields_of, ContactNode, StepFields, Stress};
+pub use setup::Prepared;
+
+use super::damage::DamageStep;
+use super::smallness::SmallnessReport;
+use super::velocity::VelocityStep;
+use super::{SolveError, SolverReport, SolverSettings};
+use crate::fem::{loads, norms, DofMap, Geometry};
+use crate::laws::constitutive::elastic_stress;
+use crate::laws::damage_source::phi;
+use crate::laws::Tensor;
+use crate::linalg::{Csr, LinearPath};
+use crate::mesh::Mesh;
+use crate::problem::Problem;
+use setup::formula_text;
+
+/// Below this many nodes the two sub-problems run one after the other (thread hand-off
+/// would cost more than it saves).
+const PARALLEL_MIN_NODES: usize = 3000;
+
+/// The state at a time node: all that is needed to continue (a checkpoint).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct State {
+    /// Index n of the time node t_n = n k.
+    pub step: usize,
+    /// Displacement u_n, interleaved (x, y[, z]) per node.
+    pub u: Vec<f64>,
+    /// Damage ζ_n per node.
+    pub zeta: Vec<f64>,
+    /// Warm starts of the two sub-problem solvers after step n, filled only by
+    /// [`Simulation::checkpoint_state`] (empty otherwise): the tangential velocities on Γ3
+    /// and the damage active set (0 free, 1 at ζ = 0, 2 at ζ = 1). Restoring them makes a
+    /// resumed run on the direct path repeat an uninterrupted one bit for bit; without them,
+    /// or on the multigrid path (whose CG starting guesses are not kept), it agrees to the
+    /// solver tolerance.
+    #[serde(default)]
+    pub contact_velocity: Vec<f64>,
+    #[serde(default)]
+    pub damage_active: Vec<u8>,
+}
+
+/// What one time step did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StepReport {
+    pub n: usize,
+    pub t: f64,
+    #[serde(rename = "w_V")]
+    pub w_v: f64,
+    #[serde(rename = "u_V")]
+    pub u_v: f64,
+    #[serde(rename = "zeta_L2")]
+    pub zeta_l2: f64,
+    pub zeta_min: f64,
+    pub velocity: SolverReport,
+    pub damage: Option<SolverReport>,
+    /// Γ3 nodes with nonzero tangential velocity.
+    pub slip_nodes: usize,
+}
+
+/// The velocity sub-problem (3.13): its solver and work vectors.
+struct VelocityPart {
+    solver: VelocityStep,
+    /// The velocity load over all DOFs (global, interleaved) ...
+    load: Vec<f64>,
+    /// ... and on the free DOFs.
+    load_free: Vec<f64>,
+    /// w_n on the free DOFs.
+    w_free: Vec<f64>,
+}
+
+/// The damage sub-problem (3.10): its solver and work vectors.
+struct DamagePart {
+    solver: DamageStep,
+    /// The linear term M ζ_{n−1}/k + F_{n−1}.
+    g: Vec<f64>,
+    /// The source vector F_{n−1}.
+    f: Vec<f64>,
+    /// ζ_n once solved; on entry the solver's starting point.
+    next: Vec<f64>,
+}
+
+/// What the two sub-problems of step n read, borrowed from the [`Simulation`]: the data, the
+/// discretisation, and the state at t_{n−1} with its per-element ε(u_{n−1}) and B_{n−1}.
+struct StepInput<'a, const D: usize> {
+    n: usize,
+    k: f64,
+    t: f64,
+    problem: &'a Problem,
+    mesh: &'a Mesh<D>,
+    geo: &'a Geometry<D>,
+    dofs: &'a DofMap<D>,
+    settings: &'a SolverSettings,
+    mass: &'a Csr,
+    zeta_prev: &'a [f64],
+    eps: &'a [Tensor<D>],
+    b: &'a [Tensor<D>],
+}
+
+impl VelocityPart {
+    /// The velocity step (3.13): w_n is the stationary point over V^h of
+    /// E(w) = ½ (A ε(w), ε(w)) + (B_{n−1}, ε(w)) − (f_n, w) + Σ_i ω_i j(w_τ(x_i)),
+    /// its minimiser when j is convex (unique under the smallness condition (2.31)).
+    fn step<const D: usize>(&mut self, s: &StepInput<D>) -> Result<SolverReport, SolveError> {
+        self.assemble_load(s)?;
+        s.dofs.to_free(&self.load, &mut self.load_free);
+        self.solver
+            .solve(&self.load_free, &mut self.w_free, s.settings, s.n)
+    }
+
+    /// The velocity load, the linear part of (3.13): (f_n, ψ)_V − (B_{n−1}, ε(ψ))_Q for every
+    /// nodal basis function ψ, with f_n of (2.23) from the body force f0 and the tractions f2
+    /// at t_n. A load that is not finite is reported at the formula responsible.
+    fn assemble_load<const D: usize>(&mut self, s: &StepInput<D>) -> Result<(), SolveError> {
+        let load = &mut self.load;
+        load.iter_mut().for_each(|v| *v = 0.0);
+        loads::add_body_force(s.mesh, s.geo, &s.problem.body_force, s.t, load);
+        loads::add_tractions(s.mesh, &s.problem.boundary, s.t, load);
+        if load.iter().any(|v| !v.is_finite()) {
+            return Err(load_fault(s.problem, s.mesh, s.t, s.n));
+        }
+        loads::add_stress_divergence(s.mesh, s.geo, s.b, load);
+        Ok(())
+    }
+}
+
+impl DamagePart {
+    /// The damage step (3.10): ζ_n minimises ½ ζᵀ (M/k + κK) ζ − gᵀζ subject to
+    /// 0 ≤ ζ_i ≤ 1 at every node, g from [`DamagePart::assemble_rhs`].
+    fn step<const D: usize>(&mut self, s: &StepInput<D>) -> Result<SolverReport, SolveError> {
+        self.assemble_rhs(s)?;
+        self.solver.solve(&self.g, &mut self.next, s.settings, s.n)
+    }
+
+    /// g = M ζ_{n−1}/k + F_{n−1} with (F_{n−1})_i = ∫_Ω φ(ε(u_{n−1}), ζ_{n−1}) ψ_i dx: the
+    /// backward difference (3.1) of ζ and the source of (3.10), both at step n−1. A source
+    /// that overflows is reported at the coefficient responsible: the box QP of an infinite
+    /// g has no solution, and its iterates would be NaN.
+    fn assemble_rhs<const D: usize>(&mut self, s: &StepInput<D>) -> Result<(), SolveError> {
+        let source = s
+            .problem
+            .damage
+            .as_ref()
+            .expect("damage part implies damage data")
+            .source;
+        loads::damage_source(
+            s.mesh,
+            s.geo,
+            s.zeta_prev,
+            |e, z| phi(&source, &s.eps[e], z),
+            &mut self.f,
+        );
+        s.mass.mul_vec(s.zeta_prev, &mut self.g);
+        for (g, f) in self.g.iter_mut().zip(&self.f) {
+            *g = *g / s.k + f;
+        }
+        if self.g.iter().all(|g| g.is_finite()) {
+            return Ok(());
+        }
+        let z = source.zeta_star;
+        let pointer = if (source.a * (1.0 - z) / z).is_finite() {
+            "/damage/source/b"
+        } else {
+            "/damage/source/a"
+        };
+        Err(SolveError::Data {
+            pointer: pointer.into(),
+            message: format!(
+                "the damage source φ = a (1 − ζ)/ζ − b |ε(u)|² with a = {}, b = {}, ζ* = {} \
+                 is not finite in step {} (its integral overflows); the damage equation \
+                 (3.10) needs a finite source",
+                source.a, source.b, source.zeta_star, s.n
+            ),
+        })
+    }
+}
+
+/// One job's assembled operators, factorisations and current state, in dimension D.
+pub struct Simulation<const D: usize = 2> {
+    pub problem: Problem,
+    pub mesh: Mesh<D>,
+    pub geo: Geometry<D>,
+    pub dofs: DofMap<D>,
+    pub settings: SolverSettings,
+    pub smallness: SmallnessReport,
+    pub state: State,
+    /// w_n of the last step (global, interleaved).
+    pub w: Vec<f64>,
+    mass: Csr,
+    velocity: VelocityPart,
+    damage: Option<DamagePart>,
+    /// Per-element ε(u_{n−1}) and B_{n−1} of the current step.
+    eps: Vec<Tensor<D>>,
+    b: Vec<Tensor<D>>,
+    pub setup_seconds: f64,
+    /// The linear path taken and its predicted peak bytes ([`crate::memory`]).
+    pub linear: LinearPath,
+    pub predicted_bytes: u64,
+}
+
+impl<const D: usize> Simulation<D> {
+    /// Meshes, assembles and factors everything once; checks the smallness condition.
+    pub fn new(problem: Problem, settings: SolverSettings) -> Result<Simulation<D>, SolveError> {
+        let prepared = Prepared::within(&problem, settings.memory_limit)?;
+        Simulation::from_prepared(problem, settings, prepared)
+    }
+
+    /// The state with the solvers' warm starts, for a checkpoint.
+    pub fn checkpoint_state(&self) -> State {
+        State {
+            contact_velocity: self.velocity.solver.contact_velocity().to_vec(),
+            damage_active: self
+                .damage
+                .as_ref()
+                .map_or_else(Vec::new, |d| d.solver.active_codes()),
+            ..self.state.clone()
+        }
+    }
+
+    /// Continue from a checkpointed state (warm starts restored when present and of the
+    /// right size, else rebuilt from ζ).
+    pub fn restore(&mut self, mut state: State) {
+        assert_eq!(state.u.len(), self.state.u.len());
+        assert_eq!(state.zeta.len(), self.state.zeta.len());
+        let warm = std::mem::take(&mut state.contact_velocity);
+        if warm.len() == self.velocity.solver.n_contact() {
+            self.velocity.solver.set_contact_velocity(&warm);
+        }
+        let active = std::mem::take(&mut state.damage_active);
+        if let Some(d) = &mut self.damage {
+            if !d.solver.set_active_codes(&active) {
+                d.solver.set_active_from(&state.zeta);
+            }
+            d.next.copy_from_slice(&state.zeta);
+        }
+        self.state = state;
+    }
+
+    pub fn finished(&self) -> bool {
+        self.state.step >= self.problem.steps
+    }
+
+    /// Advances one time step of Problem 3.1, from (u_{n−1}, ζ_{n−1}) only: B_{n−1}, then the
+    /// velocity step (3.13) ∥ the damage step (3.10), then u_n and ζ_n, then the step's norms.
+    pub fn step(&mut self) -> Result<StepReport, SolveError> {
+        let n = self.state.step + 1;
+        let k = self.problem.k();
+        let t = n as f64 * k;
+        self.history_stress();
+        let (velocity, damage) = self.solve_sub_problems(n, k, t)?;
+        self.advance(n, k);
+        self.report(n, k, t, velocity, damage)
+    }
+
+    /// B_{n−1} = B(ε(u_{n−1}), ζ̄_{n−1}) on every element, the history term of (3.8) and (3.13),
+    /// with ζ̄ the mean of ζ_{n−1} at the element's vertices (the P0 projection of (3.8) for
+    /// the paper's B (4.1)); keeps ε(u_{n−1}), which the damage source φ reads too.
+    fn history_stress(&mut self) {
+        history_stress(
+            &self.problem,
+            &self.mesh,
+            &self.geo,
+            &self.state.u,
+            &self.state.zeta,
+            &mut self.eps,
+            &mut self.b,
+        );
+    }
+
+    /// The velocity step (3.13) ∥ the damage step (3.10) of step n: neither reads the other's
+    /// result, so on large meshes the damage step runs on a second thread. A velocity error
+    /// is reported before a damage error.
+    fn solve_sub_problems(
+        &mut self,
+        n: usize,
+        k: f64,
+        t: f64,
+    ) -> Result<(SolverReport, Option<SolverReport>), SolveError> {
+        let parallel = self.damage.is_some() && self.mesh.n_nodes() >= PARALLEL_MIN_NODES;
+        let input = StepInput {
+            n,
+            k,
+            t,
+            problem: &self.problem,
+            mesh: &self.mesh,
+            geo: &self.geo,
+            dofs: &self.dofs,
+            settings: &self.settings,
+            mass: &self.mass,
+            zeta_prev: &self.state.zeta,
+            eps: &self.eps,
+            b: &self.b,
+        };
+        let velocity = &mut self.velocity;
+        let (v, d) = match self.damage.as_mut() {
+            Some(d) if parallel => std::thread::scope(|s| {
+                let h = s.spawn(|| d.step(&input));
+                let v = velocity.step(&input);
+                (v, Some(h.join().expect("damage thread panicked")))
+            }),
+            Some(d) => (velocity.step(&input), Some(d.step(&input))),
+            None => (velocity.step(&input), None),
+        };
+        Ok((v?, d.transpose()?))
+    }
+
+    /// u_n = u_{n−1} + k w_n (3.12) and ζ_n from the damage step: the state moves to t_n.
+    fn advance(&mut self, n: usize, k: f64) {
+        self.dofs.to_global(&self.velocity.w_free, &mut self.w);
+        for (u, w) in self.state.u.iter_mut().zip(&self.w) {
+            *u += k * w;
+        }
+        if let Some(d) = &self.damage {
+            self.state.zeta.copy_from_slice(&d.next);
+        }
+        self.state.step = n;
+    }
+
+    /// The report of step n: |w_n|_V and |u_n|_V (|v|_V = ‖ε(v)‖_L2(Ω)), |ζ_n|_Z0 =
+    /// (ζ_nᵀ M ζ_n)^½, min ζ_n, the solvers' reports and the slipping Γ3 nodes. A norm that
+    /// is not finite is an error.
+    fn report(
+        &self,
+        n: usize,
+        k: f64,
+        t: f64,
+        velocity: SolverReport,
+        damage: Option<SolverReport>,
+    ) -> Result<StepReport, SolveError> {
+        // Both in one pass: ε(u_n) = ε(u_{n−1}) + k ε(w_n) per element.
+        let (mut w2, mut u2) = (0.0, 0.0);
+        for (e, eps) in self.eps.iter().enumerate() {
+            let ew = self.geo.strain(&self.mesh, e, &self.w);
+            w2 += self.geo.measure[e] * ew.norm_squared();
+            u2 += self.geo.measure[e] * (eps + ew * k).norm_squared();
+        }
+        let mut scratch = vec![0.0; self.mesh.n_nodes()];
+        let report = StepReport {
+            n,
+            t,
+            w_v: w2.sqrt(),
+            u_v: u2.sqrt(),
+            zeta_l2: norms::mass_norm(&self.mass, &self.state.zeta, &mut scratch),
+            zeta_min: self
+                .state
+                .zeta
+                .iter()
+                .cloned()
+                .fold(f64::INFINITY, f64::min),
+            velocity,
+            damage,
+            slip_nodes: self
+                .velocity
+                .solver
+                .contact_velocity()
+                .chunks(D - 1)
+                .filter(|x| x.iter().any(|v| *v != 0.0))
+                .count(),
+        };
+        if !(report.w_v.is_finite() && report.u_v.is_finite() && report.zeta_l2.is_finite()) {
+            return Err(SolveError::NonFinite("solution", n));
+        }
+        Ok(report)
+    }
+}
+
+/// ε(u)|_T and B(ε(u), ζ̄)|_T on every element, ζ̄ the mean of ζ at the element's vertices
+/// (the P0 projection of (3.8) for the paper's B (4.1)).
+fn history_stress<const D: usize>(
+    problem: &Problem,
+    mesh: &Mesh<D>,
+    geo: &Geometry<D>,
+    u: &[f64],
+    zeta: &[f64],
+    eps: &mut [Tensor<D>],
+    b: &mut [Tensor<D>],
+) {
+    for (e, eps) in eps.iter_mut().enumerate() {
+        *eps = geo.strain(mesh, e, u);
+    }
+    let elasticity = problem.material.elasticity;
+    for (e, cell) in mesh.cells().enumerate() {
+        let zbar = cell.iter().map(|&n| zeta[n]).sum::<f64>() / (D + 1) as f64;
+        b[e] = elastic_stress(&elasticity, &eps[e], zbar);
+    }
+}
+
+/// The error for a non-finite load vector at step n: the field and point responsible.
+fn load_fault<const D: usize>(problem: &Problem, mesh: &Mesh<D>, t: f64, n: usize) -> SolveError {
+    use crate::problem::BoundaryKind;
+    let Some(f) = loads::find_non_finite(mesh, &problem.body_force, &problem.boundary, t) else {
+        // Finite values whose integrals overflow.
+        return SolveError::NonFinite("load vector", n);
+    };
+    let (pointer, field) = match f.part {
+        None => (
+            format!("/loads/f0/{}", f.component),
+            &problem.body_force.0[f.component],
+        ),
+        Some(p) => match &problem.boundary[p].kind {
+            BoundaryKind::Traction(f2) => (
+                format!("/boundary/{p}/f2/{}", f.component),
+                &f2.0[f.component],
+            ),
+            _ => return SolveError::NonFinite("load vector", n),
+        },
+    };
+    SolveError::Data {
+        pointer,
+        message: format!(
+            "{} evaluates to {} at {}, a quadrature point of time step {n}; loads must be \
+             finite on the whole domain and time interval",
+            formula_text(field),
+            f.value,
+            match D {
+                2 => format!("(x, y, t) = ({}, {}, {t})", f.at[0], f.at[1]),
+                _ => format!(
+                    "(x, y, z, t) = ({}, {}, {}, {t})",
+                    f.at[0], f.at[1], f.at[2]
+                ),
+            }
+        ),
+    }
+}
+
+#[cfg(test)]
+mod tests;

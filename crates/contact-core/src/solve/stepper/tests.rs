@@ -1,0 +1,131 @@
+//! After every step, each sub-problem's optimality conditions hold for the data the step
+//! built, checked against operators assembled here (by element triplets, whatever the path):
+//! the velocity step (3.13) on the free DOFs (interior rows of K w − f vanish, the Tresca law
+//! holds node by node on Γ3, the normal velocity is zero there) and the damage step (3.10)
+//! (box constraints and complementarity).
+
+use super::*;
+use crate::fem::assembly;
+use crate::scene::{self, presets};
+use serde_json::json;
+
+/// paper-exp3 at h = 1/8, three steps, Tresca bound `g`, on the path `linear`.
+fn problem(linear: &str, g: f64) -> Problem {
+    let mut doc = presets::get("paper-exp3").unwrap();
+    doc["mesh"]["h"] = json!("1/8");
+    doc["time"] = json!({"T": 1, "N": 3});
+    doc["friction"] = json!({"law": "tresca", "g": g});
+    doc["solver"] = json!({"linear": linear});
+    scene::validate(&doc).unwrap()
+}
+
+fn max_abs(v: &[f64]) -> f64 {
+    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
+/// The velocity step's conditions, with `g` the Tresca bound; returns the slipping nodes.
+fn velocity_kkt(sim: &Simulation<2>, g: f64) -> usize {
+    let visc = sim.problem.material.viscosity;
+    let k = assembly::viscous_stiffness(&sim.mesh, &sim.geo, &sim.dofs, visc.eta, visc.xi);
+    let (f, w) = (&sim.velocity.load_free, &sim.velocity.w_free);
+    let mut r = vec![0.0; f.len()];
+    k.mul_vec(w, &mut r);
+    r.iter_mut().zip(f).for_each(|(r, f)| *r -= f);
+    let tol = 1e-9 * max_abs(f);
+    let n_i = sim.dofs.n_interior;
+    assert!(
+        max_abs(&r[..n_i]) <= tol,
+        "interior residual {}",
+        max_abs(&r[..n_i])
+    );
+    let mut slipping = 0;
+    for (i, c) in sim.dofs.contact.iter().enumerate() {
+        let (x, rc, bound) = (w[n_i + i], r[n_i + i], c.weight * g);
+        if x == 0.0 {
+            assert!(
+                rc.abs() <= bound + tol,
+                "stuck node {}: |{rc}| > {bound}",
+                c.node
+            );
+        } else {
+            slipping += 1;
+            let v = (rc + bound * x.signum()).abs();
+            assert!(
+                v <= tol,
+                "slipping node {}: force {rc}, bound {bound}",
+                c.node
+            );
+        }
+    }
+    let scale = max_abs(&sim.w).max(f64::MIN_POSITIVE);
+    for (node, n) in &sim.dofs.normals {
+        let wn = sim.w[2 * node] * n[0] + sim.w[2 * node + 1] * n[1];
+        assert!(wn.abs() <= 1e-14 * scale, "w·n = {wn} at node {node}");
+    }
+    slipping
+}
+
+/// The damage step's conditions: 0 ≤ ζ ≤ 1 and, with λ = Hζ − g, λ = 0 where 0 < ζ < 1,
+/// λ ≥ 0 at 0, λ ≤ 0 at 1. Returns the nodes at a bound.
+fn damage_kkt(sim: &Simulation<2>, h: &Csr) -> usize {
+    let g = &sim.damage.as_ref().unwrap().g;
+    let zeta = &sim.state.zeta;
+    let mut lambda = vec![0.0; zeta.len()];
+    h.mul_vec(zeta, &mut lambda);
+    lambda.iter_mut().zip(g).for_each(|(l, g)| *l -= g);
+    let tol = 1e-9 * max_abs(g);
+    let mut at_bound = 0;
+    for (i, (&z, &l)) in zeta.iter().zip(&lambda).enumerate() {
+        assert!((0.0..=1.0).contains(&z), "ζ = {z} at node {i}");
+        if z == 0.0 {
+            assert!(l >= -tol, "node {i} at 0: λ = {l}");
+        } else if z == 1.0 {
+            assert!(l <= tol, "node {i} at 1: λ = {l}");
+        } else {
+            assert!(l.abs() <= tol, "free node {i}: λ = {l}");
+        }
+        at_bound += usize::from(z == 0.0 || z == 1.0);
+    }
+    at_bound
+}
+
+#[test]
+fn every_step_meets_both_sub_problems_optimality_conditions() {
+    for linear in ["direct", "multigrid"] {
+        let mut slipped = 0;
+        for g in [2.0, 20.0] {
+            let p = problem(linear, g);
+            let mut sim = Simulation::<2>::new(p, SolverSettings::default()).unwrap();
+            let d = sim.problem.damage.clone().unwrap();
+            let m = assembly::mass(&sim.mesh, &sim.geo);
+            let l = assembly::laplacian(&sim.mesh, &sim.geo);
+            let h = assembly::combine(1.0 / sim.problem.k(), &m, d.kappa, &l);
+            while !sim.finished() {
+                let report = sim.step().unwrap();
+                let slipping = velocity_kkt(&sim, g);
+                assert_eq!(slipping, report.slip_nodes);
+                slipped += slipping;
+                damage_kkt(&sim, &h);
+            }
+        }
+        // Both sides of the friction law were exercised.
+        assert!(slipped > 0, "{linear}: no step slipped");
+    }
+}
+
+/// A checkpoint's state with its warm starts restores a run that repeats the uninterrupted
+/// one bit for bit on the direct path.
+#[test]
+fn a_restored_run_repeats_the_uninterrupted_one() {
+    let p = problem("direct", 2.0);
+    let mut whole = Simulation::<2>::new(p.clone(), SolverSettings::default()).unwrap();
+    let first = whole.step().unwrap();
+    let saved = whole.checkpoint_state();
+    let rest: Vec<StepReport> = (0..2).map(|_| whole.step().unwrap()).collect();
+    let mut resumed = Simulation::<2>::new(p, SolverSettings::default()).unwrap();
+    resumed.restore(saved);
+    assert_eq!(resumed.state.step, first.n);
+    let again: Vec<StepReport> = (0..2).map(|_| resumed.step().unwrap()).collect();
+    assert_eq!(rest, again);
+    assert!(resumed.finished());
+}
