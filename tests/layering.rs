@@ -435,10 +435,5 @@ fn core_files_form_no_cycle() {
             "{from} is expected to use {to}: {g:?}"
         );
     }
-    // study/ is split by the same issue's run-driver work and joins the check with it.
-    let g: Graph = g
-        .into_iter()
-        .filter(|(m, _)| !m.starts_with("study/"))
-        .collect();
     assert_eq!(find_cycle(&g), None, "file graph: {g:?}");
 }

@@ -1,6 +1,7 @@
 //! The solvers of Problem 3.1: the velocity hemivariational inequality (3.13) reduced to the
 //! Γ3 tangential DOFs, the damage variational inequality (3.10) as a box-constrained QP, the
-//! smallness condition (2.31), and the time loop that couples them.
+//! smallness condition (2.31), and the time step that couples them ([`stepper`];
+//! [`crate::run`] loops over the steps).
 
 pub mod backend;
 pub mod damage;

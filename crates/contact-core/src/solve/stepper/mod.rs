@@ -1,5 +1,5 @@
-//! Problem 3.1's time loop. For n = 1..N, from (u_{n−1}, ζ_{n−1}) only
-//! ([`Simulation::step`]):
+//! Problem 3.1's time step ([`crate::run::Run`] loops over them). For n = 1..N, from
+//! (u_{n−1}, ζ_{n−1}) only ([`Simulation::step`]):
 //! 1. B_{n−1} = B(ε(u_{n−1}), ζ_{n−1}) per element (3.8);
 //! 2. velocity load and velocity step (3.13) → w_n  ∥  damage step (3.10) → ζ_n;
 //! 3. u_n = u_{n−1} + k w_n (3.12);
