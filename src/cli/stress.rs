@@ -25,7 +25,7 @@ pub fn main(args: StressArgs) -> ExitCode {
     let report = contact_core::harness::stress::run_with(args.quick, |i, n, case| {
         bar.set_length(n as u64);
         bar.set_position(i as u64);
-        bar.set_message(case.name);
+        bar.set_message(case.name.clone());
     });
     bar.finish_and_clear();
     match args.format {

@@ -13,7 +13,7 @@ fn quick_suite_completes_or_refuses_as_required() {
     let tol = report.tolerance;
     for c in &report.cases {
         assert!(c.as_expected, "{}: {:?}", c.name, c.reason);
-        match c.expect {
+        match &c.expect {
             Expect::Complete => {
                 assert_eq!(c.outcome, Outcome::Completed, "{}", c.name);
                 assert!(
@@ -27,7 +27,7 @@ fn quick_suite_completes_or_refuses_as_required() {
                 assert_eq!(c.outcome, Outcome::Refused, "{}", c.name);
                 let reason = c.reason.as_deref().unwrap_or("");
                 assert!(
-                    reason.contains(why) && reason.contains("(2.31)"),
+                    reason.contains(why.as_str()) && reason.contains("(2.31)"),
                     "{}: {reason}",
                     c.name
                 );
@@ -40,7 +40,7 @@ fn quick_suite_completes_or_refuses_as_required() {
         }
     }
     // Both ends of the friction range, and a refusal, are really in the table.
-    let names: Vec<&str> = report.cases.iter().map(|c| c.name).collect();
+    let names: Vec<&str> = report.cases.iter().map(|c| c.name.as_str()).collect();
     for name in [
         "tresca-g0",
         "tresca-g1e4",
