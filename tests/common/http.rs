@@ -163,7 +163,16 @@ pub fn connect_from(from: IpAddr, to: SocketAddr) -> Result<TcpStream, String> {
 /// Opens the event stream of `id` and returns its body as read within `for_` (the stream
 /// ends by itself once the job is finished).
 pub fn sse_text(addr: SocketAddr, id: &str, for_: Duration) -> Result<String, String> {
-    let agent = ureq::Agent::new_with_config(config(for_));
+    // The stream is read for `for_`; its response head may take longer on a loaded machine
+    // (the load test reads for as little as 300 ms while every core is busy).
+    let agent = ureq::Agent::new_with_config(
+        ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .max_redirects(0)
+            .timeout_recv_response(Some(Duration::from_secs(30)))
+            .timeout_recv_body(Some(for_))
+            .build(),
+    );
     let res = agent
         .get(format!("http://{addr}/jobs/{id}/events"))
         .header("Accept", "text/event-stream")
