@@ -3,7 +3,7 @@
 use super::mesh_files::SceneDir;
 use super::{fail, preset, pretty, progress};
 use clap::Args;
-use contact_core::memory::MemoryError;
+use contact_core::admission::{self, Limits, Pointers};
 use contact_core::mesh::AnyMesh;
 use contact_core::output::fields::MeshJson;
 use contact_core::output::Summary;
@@ -102,8 +102,17 @@ pub fn main(args: RunArgs) -> ExitCode {
             .or_else(|| contact_core::memory::default_limit(1)),
         ..Default::default()
     };
-    if let Err(e) = contact_core::memory::choose(&problem, settings.memory_limit) {
-        return refused(&e);
+    // The per-job limits the service admits a job under, here the memory limit alone.
+    let limits = Limits {
+        max_memory: settings.memory_limit,
+        ..Limits::default()
+    };
+    let at = Pointers {
+        mesh: "/mesh".into(),
+        ..Pointers::scene()
+    };
+    if let Err(e) = admission::check_run(&problem, &limits, &at) {
+        return refused(&e.pointer, &e.message);
     }
     let bar = progress::bar(problem.steps as u64, "steps");
     let (result, io_error) = match problem.dim() {
@@ -122,18 +131,18 @@ pub fn main(args: RunArgs) -> ExitCode {
             println!("{text}");
             ExitCode::SUCCESS
         }
-        Err(RunError::Solve(SolveError::Memory(e))) => refused(&e),
+        Err(RunError::Solve(SolveError::Memory(e))) => refused(e.pointer(), &e.to_string()),
         Err(e) => fail(1, &io_error.unwrap_or_else(|| e.to_string())),
     }
 }
 
 /// A run over the memory limit, whether the cheap check or the set-up's exact one found it:
 /// the field and both figures on stderr, exit code 2.
-fn refused(e: &MemoryError) -> ExitCode {
+fn refused(pointer: &str, message: &str) -> ExitCode {
     eprintln!(
         "{}",
         pretty(
-            &serde_json::json!({"title": "the run does not fit the memory limit", "errors": [{"pointer": e.pointer(), "message": e.to_string()}]})
+            &serde_json::json!({"title": "the run does not fit the memory limit", "errors": [{"pointer": pointer, "message": message}]})
         )
     );
     ExitCode::from(2)
