@@ -97,6 +97,16 @@ impl Quantity {
     }
 }
 
+/// A target study's pilot ladders: resolutions n of the h-ladder (run at `s_h` steps) and
+/// step counts N of the k-ladder (run at resolution `n_k`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PilotLadders {
+    pub h: Vec<usize>,
+    pub k: Vec<usize>,
+    pub n_k: usize,
+    pub s_h: usize,
+}
+
 /// A validated target study.
 #[derive(Debug, Clone)]
 pub struct TargetSpec {
@@ -117,26 +127,26 @@ impl TargetSpec {
         self.base.body.is_some()
     }
 
-    /// Nodes of the finest first pilot level (n0·2^(FIRST_PILOT_LEVELS − 1), at N0 steps):
-    /// below it a node limit leaves nothing to plan with.
-    pub fn pilot_nodes(&self) -> usize {
-        with(
-            &self.base,
-            (self.n0 << (FIRST_PILOT_LEVELS - 1), PILOT_STEPS),
-        )
-        .n_nodes()
+    /// The first pilot ladders: the h-ladder n0·2^i at the k-ladder's finest N and the
+    /// k-ladder N0·2^j at the h-ladder's finest n, i, j < [`FIRST_PILOT_LEVELS`]. They cross
+    /// at their finest levels: each is run where the other parameter is already resolved a
+    /// little (at the coarsest one, the other part's interaction distorts it: on the paper's
+    /// test, k barely matters on a 2 × 2 mesh).
+    pub fn first_ladders(&self) -> PilotLadders {
+        let last = FIRST_PILOT_LEVELS - 1;
+        PilotLadders {
+            h: (0..FIRST_PILOT_LEVELS).map(|i| self.n0 << i).collect(),
+            k: (0..FIRST_PILOT_LEVELS).map(|j| PILOT_STEPS << j).collect(),
+            n_k: self.n0 << last,
+            s_h: PILOT_STEPS << last,
+        }
     }
 
-    /// The first pilot levels (n, N): the h-ladder n0·2^i at the k-ladder's finest N and the
-    /// k-ladder N0·2^j at the h-ladder's finest n, i, j < [`FIRST_PILOT_LEVELS`] (they cross
-    /// at their finest levels).
-    pub fn first_pilots(&self) -> std::collections::BTreeSet<(usize, usize)> {
-        let last = FIRST_PILOT_LEVELS - 1;
-        let (n_k, s_h) = (self.n0 << last, PILOT_STEPS << last);
-        (0..FIRST_PILOT_LEVELS)
-            .map(|i| (self.n0 << i, s_h))
-            .chain((0..FIRST_PILOT_LEVELS).map(|j| (n_k, PILOT_STEPS << j)))
-            .collect()
+    /// The runs (n, N) of the first pilot ladders ([`TargetSpec::first_ladders`]).
+    pub fn first_pilots(&self) -> BTreeSet<(usize, usize)> {
+        let l = self.first_ladders();
+        let h_runs = l.h.iter().map(|&n| (n, l.s_h));
+        h_runs.chain(l.k.iter().map(|&s| (l.n_k, s))).collect()
     }
 
     /// Time steps of the first pilot runs: a target study's progress scale before its plan.

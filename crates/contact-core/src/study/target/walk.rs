@@ -161,13 +161,12 @@ pub(super) fn run_in<const D: usize>(
     let (spec, exec) = (planner.spec, planner.exec);
     let keep_u = spec.quantity == Quantity::U;
     let (n0, s0) = (spec.n0, PILOT_STEPS);
-    // The ladders cross at their third levels: each is run where the other parameter is
-    // already resolved a little (at the coarsest one, the other part's interaction
-    // distorts it: on the paper's test, k barely matters on a 2 × 2 mesh).
-    let (n_k, s_h) = (
-        n0 << (FIRST_PILOT_LEVELS - 1),
-        s0 << (FIRST_PILOT_LEVELS - 1),
-    );
+    let PilotLadders {
+        h: mut h_ladder,
+        k: mut k_ladder,
+        n_k,
+        s_h,
+    } = spec.first_ladders();
     let done_steps = AtomicUsize::new(0);
     let total_steps = AtomicUsize::new(0);
     let tick = || {
@@ -175,8 +174,6 @@ pub(super) fn run_in<const D: usize>(
         progress(d, total_steps.load(Ordering::Relaxed).max(d))
     };
     let mut runs: BTreeMap<(usize, usize), LevelRun<D>> = BTreeMap::new();
-    let mut h_ladder: Vec<usize> = (0..FIRST_PILOT_LEVELS).map(|i| n0 << i).collect();
-    let mut k_ladder: Vec<usize> = (0..FIRST_PILOT_LEVELS).map(|i| s0 << i).collect();
     let (mut model, cost, choice, candidates, scale) = loop {
         let wanted: BTreeSet<(usize, usize)> = h_ladder
             .iter()
