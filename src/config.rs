@@ -37,8 +37,10 @@ pub struct Config {
     /// Body limit of a mesh upload (`POST /meshes`) in bytes; the reader's own limit
     /// (`contact_core::mesh::import::MAX_FILE_BYTES`, 256 MiB) applies above it.
     pub max_mesh_bytes: usize,
-    /// Runs of one study computed at the same time (its reference and its levels).
-    pub study_threads: usize,
+    /// Threads each job computes with (`--threads-per-job`; default: cores ÷ workers, at
+    /// least 1); a study's runs computed at the same time share them. Not part of any
+    /// computation's hash: the numbers are the same bits for every count.
+    pub threads_per_job: usize,
     /// Deepest array/object nesting accepted in a submitted document (scenes need 4).
     pub max_json_depth: usize,
     /// Submissions per second per client IP (token bucket refill rate; 0 disables).
@@ -71,6 +73,11 @@ impl Config {
     }
 }
 
+/// The cores of the machine divided among `workers` jobs (at least one thread each).
+pub fn threads_per_job(workers: usize) -> usize {
+    (contact_core::linalg::par::Threads::available() / workers.max(1)).max(1)
+}
+
 impl Default for Config {
     fn default() -> Self {
         let workers = std::thread::available_parallelism().map_or(2, |n| n.get());
@@ -88,7 +95,7 @@ impl Default for Config {
             max_job_memory: contact_core::memory::default_limit(workers),
             max_body_bytes: 1 << 20,
             max_mesh_bytes: 64 << 20,
-            study_threads: 2,
+            threads_per_job: threads_per_job(workers),
             max_json_depth: 32,
             submit_rate: 10.0,
             submit_burst: 50,

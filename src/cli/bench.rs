@@ -25,6 +25,10 @@ pub struct BenchArgs {
     /// ratio).
     #[arg(long = "friction-g", value_delimiter = ',')]
     pub friction_g: Vec<f64>,
+    /// Thread counts to run every level with, in turn (e.g. `1,2`: the speed-up measured in
+    /// one process). Default: all cores.
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u64).range(1..=1024))]
+    pub threads: Vec<u64>,
     /// Instead: Tables 1 and 2 together (one shared reference) against the reference
     /// run alone.
     #[arg(long)]
@@ -74,7 +78,19 @@ pub fn main(args: BenchArgs) -> ExitCode {
         .linear_solver
         .as_deref()
         .and_then(contact_core::linalg::LinearPath::parse);
-    match bench::run(&args.preset, &args.levels, repeat, linear, &args.friction_g) {
+    let threads: Vec<usize> = if args.threads.is_empty() {
+        vec![contact_core::linalg::par::Threads::available()]
+    } else {
+        args.threads.iter().map(|&t| t as usize).collect()
+    };
+    match bench::run(
+        &args.preset,
+        &args.levels,
+        repeat,
+        linear,
+        &args.friction_g,
+        &threads,
+    ) {
         Ok(report) => {
             eprintln!("{}", report.table());
             println!("{}", pretty(&report));

@@ -14,6 +14,10 @@ pub struct NodeArgs {
     /// Worker threads (default: number of cores; 0 with `serve`: an API-only node).
     #[arg(long)]
     pub workers: Option<usize>,
+    /// Threads each job computes with (default: cores ÷ workers, at least 1); a study's
+    /// runs computed at once share them.
+    #[arg(long = "threads-per-job", value_parser = clap::value_parser!(u64).range(1..=1024))]
+    pub threads_per_job: Option<u64>,
     /// Job store: a `postgres://user@host/db` URL shared by many nodes, or omitted for
     /// the embedded SQLite database in the data directory (single node).
     #[arg(long)]
@@ -61,6 +65,10 @@ impl NodeArgs {
         Ok(Config {
             data_dir: self.data_dir,
             workers,
+            threads_per_job: self.threads_per_job.map_or_else(
+                || contact_sim::config::threads_per_job(workers),
+                |t| t as usize,
+            ),
             max_job_memory: self
                 .max_job_memory
                 .or_else(|| contact_core::memory::default_limit(workers)),

@@ -41,6 +41,10 @@ pub struct RunArgs {
     /// Linear solver path, overriding the scene's `solver.linear`: auto, direct or multigrid.
     #[arg(long = "linear-solver", value_parser = ["auto", "direct", "multigrid"])]
     pub linear_solver: Option<String>,
+    /// Threads of the run (default: all cores). The numbers are the same bits for every
+    /// count.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1024))]
+    pub threads: Option<u64>,
     /// Per-job memory limit in bytes (suffixes K, M, G, T): the run is refused before any
     /// numeric work if its predicted peak exceeds it. Default: 80 % of physical memory.
     #[arg(long = "max-job-memory", value_parser = contact_core::memory::parse_bytes)]
@@ -100,6 +104,11 @@ pub fn main(args: RunArgs) -> ExitCode {
         memory_limit: args
             .max_job_memory
             .or_else(|| contact_core::memory::default_limit(1)),
+        threads: args
+            .threads
+            .map_or_else(contact_core::linalg::par::Threads::available, |t| {
+                t as usize
+            }),
         ..Default::default()
     };
     // The per-job limits the service admits a job under, here the memory limit alone.

@@ -20,9 +20,10 @@ pub struct StudyArgs {
     /// json (the result documents) or text (the paper's table layout).
     #[arg(long, value_enum, default_value_t = StudyFormat::Json)]
     pub format: StudyFormat,
-    /// Runs computed at once (default: number of cores, at most 4).
-    #[arg(long)]
-    pub threads: Option<usize>,
+    /// Threads of the study (default: all cores): runs computed at once share them, at
+    /// most one run per thread. The numbers are the same bits for every count.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1024))]
+    pub threads: Option<u64>,
     /// Also write NAME.json, NAME.txt and NAME.svg (the report plots) per study here.
     #[arg(long = "report-dir")]
     pub report_dir: Option<PathBuf>,
@@ -74,7 +75,7 @@ pub fn main(args: StudyArgs) -> ExitCode {
     let cache = study::ReferenceCache::new(4);
     let threads = args
         .threads
-        .unwrap_or_else(|| study::Execution::default().threads);
+        .map_or_else(|| study::Execution::default().threads, |t| t as usize);
     let mut outcomes = Vec::with_capacity(requests.len());
     for r in &requests {
         // Its length is known once the schedule is: the hook sets it.

@@ -49,6 +49,7 @@ impl Runtime {
         let id = job.id;
         let settings = SolverSettings {
             memory_limit: self.config.max_job_memory,
+            threads: self.config.threads_per_job,
             ..SolverSettings::default()
         };
         let mut run = Run::<D>::new(problem, settings).map_err(|e| solve_problem(&e))?;

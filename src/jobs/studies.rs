@@ -40,7 +40,7 @@ impl Runtime {
         self.run_study_job(id, worker, cancel, |progress| {
             let outcome = request.execute(study::request::Context {
                 cache: &self.references,
-                threads: self.config.study_threads,
+                threads: self.config.threads_per_job,
                 settings: SolverSettings::default(),
                 limits: self.config.job_limits(),
                 progress,

@@ -6,7 +6,7 @@
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
 use super::{DofMap, Geometry, Slot};
-use crate::linalg::Csr;
+use crate::linalg::{par, Csr};
 use crate::mesh::Mesh;
 
 /// (A ε(w), ε(v)) with A(τ) = 2η τ + ξ tr(τ) I on the free DOFs (3.13):
@@ -40,14 +40,108 @@ pub fn viscous_stiffness_in_pattern<const D: usize>(
     xi: f64,
 ) -> Csr {
     let mut k = free_pattern(mesh, dofs);
-    viscous_entries(mesh, geo, dofs, eta, xi, |i, j, v| {
-        let row = k.indptr[i]..k.indptr[i + 1];
-        let p = k.indices[row.clone()]
-            .binary_search(&(j as u32))
-            .expect("entry in the pattern");
-        k.values[row.start + p] += v;
+    let (start, cells_of) = cells_of_nodes(mesh);
+    let mut owner = vec![(0usize, 0usize); dofs.n_free()];
+    for (s, slot) in dofs.slot.iter().enumerate() {
+        if let Slot::Free(f) = slot {
+            owner[*f] = (s / D, s % D);
+        }
+    }
+    let nd = (D + 1) * D;
+    add_by_rows(&mut k, |r, add| {
+        let (node, c) = owner[r];
+        let mut ke = Vec::new();
+        for &e in &cells_of[start[node]..start[node + 1]] {
+            let cell = mesh.cell(e);
+            let a = cell
+                .iter()
+                .position(|&v| v == node)
+                .expect("a node of its cell");
+            let (g, m) = (geo.grads(e), geo.measure[e]);
+            if cell.iter().all(|&v| dofs.frame(v).is_none()) {
+                for b in 0..=D {
+                    for d in 0..D {
+                        if let Slot::Free(j) = dofs.slot[D * cell[b] + d] {
+                            add(j, stiffness_entry(g, m, eta, xi, (a, c), (b, d)));
+                        }
+                    }
+                }
+                continue;
+            }
+            // A cell touching a rotated frame: its whole element matrix, rotated, of which
+            // this row is taken (the rotation mixes the node's components).
+            ke.resize(nd * nd, 0.0);
+            for a in 0..=D {
+                for c in 0..D {
+                    for b in 0..=D {
+                        for d in 0..D {
+                            ke[(a * D + c) * nd + b * D + d] =
+                                stiffness_entry(g, m, eta, xi, (a, c), (b, d));
+                        }
+                    }
+                }
+            }
+            rotate(&mut ke, nd, cell, dofs);
+            for b in 0..=D {
+                for d in 0..D {
+                    if let Slot::Free(j) = dofs.slot[D * cell[b] + d] {
+                        add(j, ke[(a * D + c) * nd + b * D + d]);
+                    }
+                }
+            }
+        }
     });
     k
+}
+
+/// Adds into the values of `k` (its pattern fixed) what `row(r, add)` gives for each row r:
+/// `add(j, v)` adds v at (r, j). Blocks of rows are filled on the pool's threads; a row's sum
+/// is formed in the order `row` adds, whatever the split.
+fn add_by_rows(k: &mut Csr, row: impl Fn(usize, &mut dyn FnMut(usize, f64)) + Sync + Send) {
+    let Csr {
+        nrows,
+        indptr,
+        indices,
+        values,
+        ..
+    } = k;
+    let rows: Vec<usize> = (0..*nrows)
+        .step_by(par::ROW_CHUNK)
+        .chain([*nrows])
+        .collect();
+    let bounds: Vec<usize> = rows.iter().map(|&r| indptr[r]).collect();
+    par::for_each_segment_mut(values, &bounds, |seg, vals| {
+        let base = bounds[seg];
+        for r in rows[seg]..rows[seg + 1] {
+            let cols = &indices[indptr[r]..indptr[r + 1]];
+            let at = indptr[r] - base;
+            row(r, &mut |j, v| {
+                let p = cols
+                    .binary_search(&(j as u32))
+                    .expect("entry in the pattern");
+                vals[at + p] += v;
+            });
+        }
+    });
+}
+
+/// Entry ((a, c), (b, d)) of a cell's (A ε(ψ_(b,d)), ε(ψ_(a,c))) for its barycentric
+/// gradients `g` and measure `m`.
+#[inline]
+fn stiffness_entry<const D: usize>(
+    g: &[[f64; D]],
+    m: f64,
+    eta: f64,
+    xi: f64,
+    (a, c): (usize, usize),
+    (b, d): (usize, usize),
+) -> f64 {
+    let mut gab = g[a][0] * g[b][0];
+    for k in 1..D {
+        gab += g[a][k] * g[b][k];
+    }
+    let delta = if c == d { gab } else { 0.0 };
+    m * (eta * (delta + g[a][d] * g[b][c]) + xi * g[a][c] * g[b][d])
 }
 
 /// The free-DOF pattern of a P1 vector operator: row (i, c) couples to every free DOF of the
@@ -69,33 +163,48 @@ pub fn free_pattern<const D: usize>(mesh: &Mesh<D>, dofs: &DofMap<D>) -> Csr {
         }
     }
     rows.sort_unstable();
-    let mut indptr = Vec::with_capacity(n + 1);
-    let mut indices = Vec::new();
-    indptr.push(0);
-    let mut near: Vec<usize> = Vec::new();
-    let mut cols: Vec<usize> = Vec::new();
-    for &(_, i) in &rows {
-        near.clear();
-        for &e in &cells_of[start[i]..start[i + 1]] {
-            near.extend_from_slice(mesh.cell(e));
-        }
+    pattern_by_rows(n, |r, cols| {
+        let i = rows[r].1;
+        let mut near: Vec<usize> = cells_of[start[i]..start[i + 1]]
+            .iter()
+            .flat_map(|&e| mesh.cell(e).iter().copied())
+            .collect();
         near.sort_unstable();
         near.dedup();
-        cols.clear();
         for &j in &near {
-            cols.extend(free_of(j));
+            cols.extend(free_of(j).map(|c| c as u32));
         }
-        cols.sort_unstable();
-        indices.extend(cols.iter().map(|&c| c as u32));
-        indptr.push(indices.len());
+    })
+}
+
+/// The square pattern (values zero) whose row r `row(r, cols)` appends to `cols` (sorted
+/// afterwards); blocks of rows are formed on the pool's threads and joined in order.
+fn pattern_by_rows(n: usize, row: impl Fn(usize, &mut Vec<u32>) + Sync + Send) -> Csr {
+    let blocks = par::map_ranges(n, par::ROW_CHUNK, |rows| {
+        let (mut lengths, mut indices) = (Vec::with_capacity(rows.len()), Vec::new());
+        for r in rows {
+            let first = indices.len();
+            row(r, &mut indices);
+            indices[first..].sort_unstable();
+            lengths.push(indices.len() - first);
+        }
+        (lengths, indices)
+    });
+    let mut indptr = Vec::with_capacity(n + 1);
+    indptr.push(0);
+    let mut indices = Vec::with_capacity(blocks.iter().map(|b| b.1.len()).sum());
+    for (lengths, cols) in blocks {
+        for l in lengths {
+            indptr.push(indptr.last().unwrap() + l);
+        }
+        indices.extend_from_slice(&cols);
     }
-    let values = vec![0.0; indices.len()];
     Csr {
         nrows: n,
         ncols: n,
         indptr,
+        values: vec![0.0; indices.len()],
         indices,
-        values,
     }
 }
 
@@ -127,28 +236,21 @@ fn cells_of_nodes<const D: usize>(mesh: &Mesh<D>) -> (Vec<usize>, Vec<usize>) {
 pub fn node_pattern<const D: usize>(mesh: &Mesh<D>) -> Csr {
     let nn = mesh.n_nodes();
     let (start, cells_of) = cells_of_nodes(mesh);
-    let mut indptr = Vec::with_capacity(nn + 1);
-    let mut indices = Vec::new();
-    indptr.push(0);
-    let mut near: Vec<usize> = Vec::new();
-    for i in 0..nn {
-        near.clear();
+    pattern_by_rows(nn, |i, cols| {
+        let first = cols.len();
         for &e in &cells_of[start[i]..start[i + 1]] {
-            near.extend_from_slice(mesh.cell(e));
+            cols.extend(mesh.cell(e).iter().map(|&v| v as u32));
         }
-        near.sort_unstable();
-        near.dedup();
-        indices.extend(near.iter().map(|&c| c as u32));
-        indptr.push(indices.len());
-    }
-    let values = vec![0.0; indices.len()];
-    Csr {
-        nrows: nn,
-        ncols: nn,
-        indptr,
-        indices,
-        values,
-    }
+        cols[first..].sort_unstable();
+        let mut kept = first;
+        for p in first..cols.len() {
+            if p == first || cols[p] != cols[kept - 1] {
+                cols[kept] = cols[p];
+                kept += 1;
+            }
+        }
+        cols.truncate(kept);
+    })
 }
 
 /// Every element contribution (free row, free column, value) of [`viscous_stiffness`], cell
@@ -165,14 +267,8 @@ fn viscous_entries<const D: usize>(
     let mut ke = vec![0.0; nd * nd];
     for (e, cell) in mesh.cells().enumerate() {
         let (g, m) = (geo.grads(e), geo.measure[e]);
-        let entry = |a: usize, c: usize, b: usize, d: usize| {
-            let mut gab = g[a][0] * g[b][0];
-            for k in 1..D {
-                gab += g[a][k] * g[b][k];
-            }
-            let delta = if c == d { gab } else { 0.0 };
-            m * (eta * (delta + g[a][d] * g[b][c]) + xi * g[a][c] * g[b][d])
-        };
+        let entry =
+            |a: usize, c: usize, b: usize, d: usize| stiffness_entry(g, m, eta, xi, (a, c), (b, d));
         if cell.iter().all(|&v| dofs.frame(v).is_none()) {
             for a in 0..=D {
                 for c in 0..D {
@@ -311,19 +407,21 @@ fn scalar_matrix<const D: usize>(
 fn scalar_in_pattern<const D: usize>(
     mesh: &Mesh<D>,
     mut pattern: Csr,
-    entry: impl Fn(usize, usize, usize) -> f64,
+    entry: impl Fn(usize, usize, usize) -> f64 + Sync + Send,
 ) -> Csr {
-    for (e, cell) in mesh.cells().enumerate() {
-        for a in 0..=D {
-            let row = pattern.indptr[cell[a]]..pattern.indptr[cell[a] + 1];
+    let (start, cells_of) = cells_of_nodes(mesh);
+    add_by_rows(&mut pattern, |node, add| {
+        for &e in &cells_of[start[node]..start[node + 1]] {
+            let cell = mesh.cell(e);
+            let a = cell
+                .iter()
+                .position(|&v| v == node)
+                .expect("a node of its cell");
             for b in 0..=D {
-                let p = pattern.indices[row.clone()]
-                    .binary_search(&(cell[b] as u32))
-                    .expect("entry in the pattern");
-                pattern.values[row.start + p] += entry(e, a, b);
+                add(cell[b], entry(e, a, b));
             }
         }
-    }
+    });
     pattern
 }
 
@@ -356,6 +454,36 @@ mod tests {
     /// The pattern-first assembly gives the triplet assembly's matrix (same pattern, values
     /// to round-off), on a box with rotated frames on a curved-free but clamped and contact
     /// boundary and on a rectangle.
+    #[test]
+    fn assembly_on_threads_is_the_same_bits() {
+        let mesh = Mesh::cuboid(2.0, 1.0, 1.0, 6, 3, 3);
+        let geo = Geometry::new(&mesh);
+        let dofs = DofMap::all_free(&mesh);
+        let all = |_: ()| {
+            let k = viscous_stiffness_in_pattern(&mesh, &geo, &dofs, 1.0, 0.5);
+            let m = mass_in_pattern(&mesh, &geo);
+            let l = laplacian_in_pattern_of(&mesh, &geo, &m);
+            [k, m, l].map(|a| {
+                (
+                    a.indptr,
+                    a.indices,
+                    a.values.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                )
+            })
+        };
+        let one = all(());
+        assert!(
+            one[0].0.len() > 4 * par::ROW_CHUNK,
+            "the mesh splits into several row blocks"
+        );
+        for t in [2, 3] {
+            assert!(
+                one == crate::linalg::par::Threads::new(t).install(|| all(())),
+                "{t} threads"
+            );
+        }
+    }
+
     #[test]
     fn assembly_into_the_pattern_equals_the_triplet_assembly() {
         let mesh = Mesh::cuboid(2.0, 1.0, 1.0, 4, 2, 2);

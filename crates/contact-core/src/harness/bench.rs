@@ -46,6 +46,11 @@ pub struct BenchLevel {
     pub velocity_max_iterations: usize,
     /// Total time against the first friction bound's run at the same level (1 for it).
     pub time_over_first_g: f64,
+    /// Threads of the run ([`SolverSettings::threads`]).
+    pub threads: usize,
+    /// Total time of the first thread count's run at the same level and bound divided by
+    /// this run's (1 for it): the speed-up, measured in the same process.
+    pub speedup: f64,
     /// Most Krylov iterations of one step's velocity and damage solves (0 on the direct path).
     pub velocity_max_krylov_iterations: usize,
     pub damage_max_krylov_iterations: usize,
@@ -69,12 +74,14 @@ pub struct BenchReport {
 impl BenchReport {
     /// A plain-text table for humans.
     pub fn table(&self) -> String {
-        let mut s = String::from("  1/h       g   nodes  unknowns steps  setup_s  solve_s  total_s  vs_g0  step_ms  subst_ms  step/subst  matvec_ms  step/matvec  slip_steps  slip_max  newton  its_v  its_v_mean  its_d  pred_MiB  peak_MiB  solver\n");
+        let mut s = String::from("  1/h       g thr speedup   nodes  unknowns steps  setup_s  solve_s  total_s  vs_g0  step_ms  subst_ms  step/subst  matvec_ms  step/matvec  slip_steps  slip_max  newton  its_v  its_v_mean  its_d  pred_MiB  peak_MiB  solver\n");
         for l in &self.levels {
             s += &format!(
-                "{:5} {:>7} {:7} {:9} {:5} {:8.4} {:8.4} {:8.4} {:6.2} {:8.3} {:9.3} {:11.2} {:10.3} {:12.1} {:11} {:9} {:7} {:6} {:11.2} {:6} {:9.0} {:9}  {}\n",
+                "{:5} {:>7} {:3} {:7.2} {:7} {:9} {:5} {:8.4} {:8.4} {:8.4} {:6.2} {:8.3} {:9.3} {:11.2} {:10.3} {:12.1} {:11} {:9} {:7} {:6} {:11.2} {:6} {:9.0} {:9}  {}\n",
                 l.level,
                 l.friction_g.map_or("-".into(), |g| format!("{g}")),
+                l.threads,
+                l.speedup,
                 l.nodes,
                 l.unknowns,
                 l.steps,
@@ -107,13 +114,15 @@ pub const DEFAULT_PRESET: &str = "paper-convergence";
 
 /// Runs `preset` (2D or 3D) at each level, each `repeat` times (fastest end-to-end run
 /// reported), on the path `linear` (None: the scene's own `solver.linear`), once per Tresca
-/// bound in `friction_g` (empty: the scene's own friction law).
+/// bound in `friction_g` (empty: the scene's own friction law), with each thread count of
+/// `threads` in turn.
 pub fn run(
     preset: &str,
     levels: &[usize],
     repeat: usize,
     linear: Option<LinearPath>,
     friction_g: &[f64],
+    threads: &[usize],
 ) -> Result<BenchReport, Box<dyn std::error::Error>> {
     let mut out = Vec::new();
     let bounds: Vec<Option<f64>> = if friction_g.is_empty() {
@@ -124,17 +133,22 @@ pub fn run(
     for &level in levels {
         let mut first = None;
         for &g in &bounds {
-            let mut best: Option<BenchLevel> = None;
-            for _ in 0..repeat {
-                let r = one(preset, level, linear, g)?;
-                if best.as_ref().is_none_or(|b| r.total_s < b.total_s) {
-                    best = Some(r);
+            let mut one_thread_count = None;
+            for &t in threads {
+                let mut best: Option<BenchLevel> = None;
+                for _ in 0..repeat {
+                    let r = one(preset, level, linear, g, t)?;
+                    if best.as_ref().is_none_or(|b| r.total_s < b.total_s) {
+                        best = Some(r);
+                    }
                 }
+                let mut best = best.expect("repeat ≥ 1");
+                let t0 = *first.get_or_insert(best.total_s);
+                let t1 = *one_thread_count.get_or_insert(best.total_s);
+                best.time_over_first_g = best.total_s / t0;
+                best.speedup = t1 / best.total_s;
+                out.push(best);
             }
-            let mut best = best.expect("repeat ≥ 1");
-            let t0 = *first.get_or_insert(best.total_s);
-            best.time_over_first_g = best.total_s / t0;
-            out.push(best);
         }
     }
     Ok(BenchReport {
@@ -149,6 +163,7 @@ fn one(
     level: usize,
     linear: Option<LinearPath>,
     friction_g: Option<f64>,
+    threads: usize,
 ) -> Result<BenchLevel, Box<dyn std::error::Error>> {
     reset_peak_rss();
     let start = Instant::now();
@@ -160,8 +175,8 @@ fn one(
         problem.friction = crate::problem::FrictionLaw::Tresca { g };
     }
     match problem.dim() {
-        2 => measure::<2>(problem, level, start),
-        _ => measure::<3>(problem, level, start),
+        2 => measure::<2>(problem, level, start, threads),
+        _ => measure::<3>(problem, level, start, threads),
     }
 }
 
@@ -205,7 +220,7 @@ impl<const D: usize> Hooks<D> for Tally {
 
     fn before_step(&mut self, run: &Run<D>) -> ControlFlow<Self::Stop> {
         self.products
-            .extend(run.sim().time_products(PRODUCTS_PER_STEP));
+            .extend(run.in_pool(|sim| sim.time_products(PRODUCTS_PER_STEP)));
         ControlFlow::Continue(())
     }
 
@@ -233,8 +248,13 @@ fn measure<const D: usize>(
     problem: crate::problem::Problem,
     level: usize,
     start: Instant,
+    threads: usize,
 ) -> Result<BenchLevel, Box<dyn std::error::Error>> {
-    let mut run = Run::<D>::new(problem, SolverSettings::default())?;
+    let settings = SolverSettings {
+        threads,
+        ..SolverSettings::default()
+    };
+    let mut run = Run::<D>::new(problem, settings)?;
     let setup_s = start.elapsed().as_secs_f64();
     let mut tally = Tally::default();
     let ControlFlow::Continue(()) = run.drive(&mut tally)?;
@@ -249,12 +269,13 @@ fn measure<const D: usize>(
         slip_max,
         newton,
     } = tally;
-    let sim = run.sim_mut();
     let total_s = setup_s + solve_s;
-    let mut subs: Vec<f64> = (0..21).map(|_| sim.time_one_substitution()).collect();
+    let mut subs: Vec<f64> =
+        run.in_pool_mut(|sim| (0..21).map(|_| sim.time_one_substitution()).collect());
     subs.sort_by(f64::total_cmp);
     let substitution_s = subs[subs.len() / 2];
-    products.extend(sim.time_products(21));
+    products.extend(run.in_pool(|sim| sim.time_products(21)));
+    let sim = run.sim();
     products.sort_by(f64::total_cmp);
     let matvec_s = products[products.len() / 2];
     let steps = sim.problem.steps;
@@ -281,6 +302,8 @@ fn measure<const D: usize>(
         max_slip_nodes: slip_max,
         velocity_max_iterations: newton,
         time_over_first_g: 1.0,
+        threads,
+        speedup: 1.0,
         velocity_max_krylov_iterations: its_v,
         velocity_mean_krylov_iterations: its_v_sum as f64 / steps as f64,
         damage_max_krylov_iterations: its_d,
@@ -485,7 +508,7 @@ pub fn tables(repeat: usize, threads: usize) -> Result<TablesBench, Box<dyn std:
     let (mut tables_s, mut reference_alone_s) = (f64::INFINITY, f64::INFINITY);
     for _ in 0..repeat {
         reference_alone_s =
-            reference_alone_s.min(one("paper-convergence", 128, None, None)?.total_s);
+            reference_alone_s.min(one("paper-convergence", 128, None, None, 1)?.total_s);
         let start = Instant::now();
         let cache = study::ReferenceCache::new(1);
         study::run_many(&plans, &cache, exec, &|_, _| {

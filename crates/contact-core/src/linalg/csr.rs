@@ -1,6 +1,7 @@
 //! Compressed sparse row matrices: the assembled operators in their own storage, so that
 //! matrix–vector products (residuals, KKT checks) never touch the factorisation.
 
+use super::par;
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 
 /// A square or rectangular CSR matrix with sorted, duplicate-free column indices per row.
@@ -72,18 +73,21 @@ impl Csr {
         self.values.len()
     }
 
-    /// y = A x.
+    /// y = A x, row blocks split over the calling pool's threads ([`par`]).
     pub fn mul_vec(&self, x: &[f64], y: &mut [f64]) {
         debug_assert_eq!(x.len(), self.ncols);
         debug_assert_eq!(y.len(), self.nrows);
-        for (r, yr) in y.iter_mut().enumerate() {
-            let mut s = 0.0;
-            let row = self.indptr[r]..self.indptr[r + 1];
-            for (&c, &v) in self.indices[row.clone()].iter().zip(&self.values[row]) {
-                s += v * x[c as usize];
+        par::for_each_chunk_mut(y, par::ROW_CHUNK, |start, ys| {
+            for (i, yr) in ys.iter_mut().enumerate() {
+                let r = start + i;
+                let mut s = 0.0;
+                let row = self.indptr[r]..self.indptr[r + 1];
+                for (&c, &v) in self.indices[row.clone()].iter().zip(&self.values[row]) {
+                    s += v * x[c as usize];
+                }
+                *yr = s;
             }
-            *yr = s;
-        }
+        });
     }
 
     /// y += Aᵀ x.

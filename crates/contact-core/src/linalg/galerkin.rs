@@ -6,7 +6,7 @@
 //! All results are [`Csr`] with sorted, duplicate-free rows; work and memory are linear in
 //! the number of products formed (no triplet lists).
 
-use super::Csr;
+use super::{par, Csr};
 
 /// Aᵀ (ncols × nrows), rows sorted by construction (a counting sort by column).
 pub fn transpose(a: &Csr) -> Csr {
@@ -40,37 +40,83 @@ pub fn transpose(a: &Csr) -> Csr {
 /// A·B for A (n × m) and B (m × k).
 pub fn product(a: &Csr, b: &Csr) -> Csr {
     assert_eq!(a.ncols, b.nrows, "inner dimensions differ");
-    let mut acc = vec![0.0; b.ncols];
-    let mut seen = vec![usize::MAX; b.ncols];
-    let mut indptr = Vec::with_capacity(a.nrows + 1);
-    let mut indices = Vec::new();
-    let mut values = Vec::new();
-    indptr.push(0);
-    let mut row: Vec<usize> = Vec::new();
-    for r in 0..a.nrows {
-        row.clear();
+    by_rows(a.nrows, b.ncols, |r, acc| {
         for p in a.indptr[r]..a.indptr[r + 1] {
             let (m, av) = (a.indices[p] as usize, a.values[p]);
             for q in b.indptr[m]..b.indptr[m + 1] {
-                let c = b.indices[q] as usize;
-                if seen[c] != r {
-                    seen[c] = r;
-                    acc[c] = 0.0;
-                    row.push(c);
-                }
-                acc[c] += av * b.values[q];
+                acc.add(b.indices[q] as usize, av * b.values[q]);
             }
         }
-        row.sort_unstable();
-        for &c in &row {
-            indices.push(c as u32);
-            values.push(acc[c]);
+    })
+}
+
+/// The dense accumulator of one row of a product (Gustavson): the entries of the row being
+/// formed, and which columns it has.
+struct Accumulator {
+    acc: Vec<f64>,
+    /// The row that last touched each column (`usize::MAX`: none).
+    seen: Vec<usize>,
+    cols: Vec<usize>,
+    row: usize,
+}
+
+impl Accumulator {
+    #[inline]
+    fn add(&mut self, c: usize, v: f64) {
+        if self.seen[c] != self.row {
+            self.seen[c] = self.row;
+            self.acc[c] = 0.0;
+            self.cols.push(c);
         }
-        indptr.push(indices.len());
+        self.acc[c] += v;
+    }
+}
+
+/// The `nrows` × `ncols` matrix whose row i `row(i, acc)` adds into `acc`. Blocks of rows
+/// are formed on the pool's threads, each with an accumulator of its own, and joined in
+/// order; a row's arithmetic does not depend on the split, so neither does the result.
+fn by_rows(nrows: usize, ncols: usize, row: impl Fn(usize, &mut Accumulator) + Sync + Send) -> Csr {
+    let threads = par::current_threads();
+    let chunk = match threads {
+        1 => nrows.max(1),
+        t => nrows.div_ceil(4 * t).max(1),
+    };
+    let blocks = par::map_ranges(nrows, chunk, |rows| {
+        let mut acc = Accumulator {
+            acc: vec![0.0; ncols],
+            seen: vec![usize::MAX; ncols],
+            cols: Vec::new(),
+            row: 0,
+        };
+        let (mut lengths, mut indices, mut values) =
+            (Vec::with_capacity(rows.len()), Vec::new(), Vec::new());
+        for i in rows {
+            acc.row = i;
+            acc.cols.clear();
+            row(i, &mut acc);
+            acc.cols.sort_unstable();
+            for &j in &acc.cols {
+                indices.push(j as u32);
+                values.push(acc.acc[j]);
+            }
+            lengths.push(acc.cols.len());
+        }
+        (lengths, indices, values)
+    });
+    let nnz = blocks.iter().map(|b| b.1.len()).sum();
+    let mut indptr = Vec::with_capacity(nrows + 1);
+    let (mut indices, mut values) = (Vec::with_capacity(nnz), Vec::with_capacity(nnz));
+    indptr.push(0);
+    for (lengths, i, v) in blocks {
+        for l in lengths {
+            indptr.push(indptr.last().unwrap() + l);
+        }
+        indices.extend_from_slice(&i);
+        values.extend_from_slice(&v);
     }
     Csr {
-        nrows: a.nrows,
-        ncols: b.ncols,
+        nrows,
+        ncols,
         indptr,
         indices,
         values,
@@ -134,7 +180,7 @@ pub fn galerkin(a: &Csr, p: &Csr, pt: &Csr) -> Csr {
 }
 
 /// C_IJ = Σ_r Pᵀ_Ir Σ_m A_rm P_mJ, one row of C at a time: only C and one dense accumulator
-/// are held.
+/// per thread are held.
 fn triple_product(a: &Csr, p: &Csr, pt: &Csr) -> Csr {
     assert_eq!(
         (a.nrows, a.ncols),
@@ -146,45 +192,17 @@ fn triple_product(a: &Csr, p: &Csr, pt: &Csr) -> Csr {
         (p.ncols, p.nrows),
         "Pᵀ must be P's transpose"
     );
-    let nc = p.ncols;
-    let mut acc = vec![0.0; nc];
-    let mut seen = vec![usize::MAX; nc];
-    let mut indptr = Vec::with_capacity(nc + 1);
-    let mut indices = Vec::new();
-    let mut values = Vec::new();
-    indptr.push(0);
-    let mut row: Vec<usize> = Vec::new();
-    for i in 0..nc {
-        row.clear();
+    by_rows(p.ncols, p.ncols, |i, acc| {
         for q in pt.indptr[i]..pt.indptr[i + 1] {
             let (r, w) = (pt.indices[q] as usize, pt.values[q]);
             for s in a.indptr[r]..a.indptr[r + 1] {
                 let (m, wa) = (a.indices[s] as usize, w * a.values[s]);
                 for t in p.indptr[m]..p.indptr[m + 1] {
-                    let j = p.indices[t] as usize;
-                    if seen[j] != i {
-                        seen[j] = i;
-                        acc[j] = 0.0;
-                        row.push(j);
-                    }
-                    acc[j] += wa * p.values[t];
+                    acc.add(p.indices[t] as usize, wa * p.values[t]);
                 }
             }
         }
-        row.sort_unstable();
-        for &j in &row {
-            indices.push(j as u32);
-            values.push(acc[j]);
-        }
-        indptr.push(indices.len());
-    }
-    Csr {
-        nrows: nc,
-        ncols: nc,
-        indptr,
-        indices,
-        values,
-    }
+    })
 }
 
 #[cfg(test)]
@@ -236,6 +254,32 @@ mod tests {
                 assert_eq!(at[j][i], da[i][j]);
                 assert!((s[i][j] - (2.0 * da[i][j] - 3.0 * d3[i][j])).abs() < 1e-12);
             }
+        }
+    }
+
+    #[test]
+    fn products_on_threads_are_the_same_bits() {
+        let b = sample(300, 300, 7);
+        let a = add(1.0, &b, 1.0, &transpose(&b));
+        let p = sample(300, 40, 8);
+        let pt = transpose(&p);
+        let bits = |c: Csr| {
+            (
+                c.indptr,
+                c.indices,
+                c.values.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            )
+        };
+        let all = || {
+            [
+                bits(product(&a, &p)),
+                bits(triple_product(&a, &p, &pt)),
+                bits(galerkin(&a, &p, &pt)),
+            ]
+        };
+        let one = all();
+        for t in [2, 3] {
+            assert!(one == par::Threads::new(t).install(all), "{t} threads");
         }
     }
 

@@ -4,7 +4,8 @@
 //! Cholesky ([`cholesky`]), conjugate gradients ([`pcg`]) and their starting guesses from
 //! earlier solutions ([`projection`]), the multigrid hierarchy with its
 //! coarsening and smoother ([`multigrid`]), sparse products ([`galerkin`]), the Schur
-//! complement onto Γ3 ([`schur`]), the nested-dissection ordering ([`nested_dissection`]).
+//! complement onto Γ3 ([`schur`]), the nested-dissection ordering ([`nested_dissection`]),
+//! and the threads every kernel splits its work over ([`par`]).
 
 pub mod cholesky;
 pub mod csr;
@@ -13,6 +14,7 @@ pub mod galerkin;
 pub mod multigrid;
 pub mod nested_dissection;
 pub mod operator;
+pub mod par;
 pub mod pcg;
 pub mod projection;
 pub mod schur;

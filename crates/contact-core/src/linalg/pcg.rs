@@ -7,6 +7,7 @@
 //! true residual is recomputed and, if it misses the target, the iteration restarts from the
 //! current x (at most [`RESTARTS`] times).
 
+use super::par::{self, dot, max_abs};
 use super::LinearOperator;
 
 /// Restarts from the true residual when the recursive one has drifted.
@@ -63,18 +64,26 @@ impl PcgWork {
     }
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-fn max_abs(a: &[f64]) -> f64 {
-    a.iter().fold(0.0f64, |m, v| m.max(v.abs()))
-}
-
 /// r ← b − A x.
 fn residual(a: &(impl LinearOperator + ?Sized), b: &[f64], x: &[f64], r: &mut [f64]) {
     a.apply(x, r);
-    r.iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
+    par::zip_apply(r, b, |r, b| b - r);
+}
+
+/// x ← x + α p, r ← r − α q, and ‖r‖∞ of the new r, in one pass over the four vectors.
+fn step(alpha: f64, p: &[f64], q: &[f64], x: &mut [f64], r: &mut [f64]) -> f64 {
+    par::map_chunks2_mut(x, r, par::VECTOR_CHUNK, |s, xc, rc| {
+        let (pc, qc) = (&p[s..s + xc.len()], &q[s..s + xc.len()]);
+        let mut m = 0.0f64;
+        for (((x, r), p), q) in xc.iter_mut().zip(rc.iter_mut()).zip(pc).zip(qc) {
+            *x += alpha * p;
+            *r -= alpha * q;
+            m = m.max(r.abs());
+        }
+        m
+    })
+    .into_iter()
+    .fold(0.0, f64::max)
 }
 
 /// Solves A x = b from the initial guess in `x` (a warm start) until ‖b − A x‖∞ ≤ `atol`
@@ -119,22 +128,14 @@ pub fn solve(
                 break;
             }
             let alpha = rz / pq;
-            x.iter_mut()
-                .zip(p.iter())
-                .for_each(|(x, p)| *x += alpha * p);
-            r.iter_mut()
-                .zip(q.iter())
-                .for_each(|(r, q)| *r -= alpha * q);
-            if max_abs(r) <= atol {
+            if step(alpha, p, q, x, r) <= atol {
                 break;
             }
             precond.apply(r, z);
             let rz_next = dot(r, z);
             let beta = rz_next / rz;
             rz = rz_next;
-            p.iter_mut()
-                .zip(z.iter())
-                .for_each(|(p, z)| *p = z + beta * *p);
+            par::zip_apply(p, z, |p, z| z + beta * p);
         }
         residual(a, b, x, r);
         res = max_abs(r);

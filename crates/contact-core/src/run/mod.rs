@@ -18,6 +18,7 @@
 //! [`Run::drive`] returns.
 
 use crate::estimate::{ErrorEstimator, EstimateRow};
+use crate::linalg::par::Threads;
 use crate::output::Summary;
 use crate::problem::Problem;
 use crate::solve::stepper::{Prepared, Simulation, State, StepReport};
@@ -66,6 +67,8 @@ impl<const D: usize> Hooks<D> for ToEnd {
 /// the reports of the steps so far and the solve time.
 pub struct Run<const D: usize> {
     sim: Simulation<D>,
+    /// The pool its set-up and steps run in (`SolverSettings::threads`).
+    threads: Threads,
     estimator: Option<ErrorEstimator<D>>,
     reports: Vec<StepReport>,
     /// When the first step was started (the summary's solve time counts from there).
@@ -77,7 +80,9 @@ impl<const D: usize> Run<D> {
     /// Sets `problem` up (meshing, assembly, the solver backend) with its error estimator
     /// when the scene asks for one.
     pub fn new(problem: Problem, settings: SolverSettings) -> Result<Run<D>, SolveError> {
-        Self::around(Simulation::new(problem, settings)?)
+        let threads = Threads::new(settings.threads);
+        let sim = threads.install(|| Simulation::new(problem, settings))?;
+        Self::around(sim, threads)
     }
 
     /// [`Run::new`] on a set-up made before (shared by the runs of a study at one mesh).
@@ -86,15 +91,18 @@ impl<const D: usize> Run<D> {
         settings: SolverSettings,
         prepared: Prepared<D>,
     ) -> Result<Run<D>, SolveError> {
-        Self::around(Simulation::from_prepared(problem, settings, prepared)?)
+        let threads = Threads::new(settings.threads);
+        let sim = threads.install(|| Simulation::from_prepared(problem, settings, prepared))?;
+        Self::around(sim, threads)
     }
 
-    fn around(sim: Simulation<D>) -> Result<Run<D>, SolveError> {
+    fn around(sim: Simulation<D>, threads: Threads) -> Result<Run<D>, SolveError> {
         let estimator = match sim.problem.error_estimate {
-            true => Some(ErrorEstimator::new(&sim, sim.settings)?),
+            true => Some(threads.install(|| ErrorEstimator::new(&sim, sim.settings))?),
             false => None,
         };
         Ok(Run {
+            threads,
             reports: Vec::with_capacity(sim.problem.steps),
             sim,
             estimator,
@@ -118,6 +126,19 @@ impl<const D: usize> Run<D> {
             e.catch_up(step, rows)?;
         }
         Ok(())
+    }
+
+    /// `f` of the simulation in the run's pool (measurements between steps with the run's
+    /// threads, the bench's products).
+    pub fn in_pool<R: Send>(&self, f: impl FnOnce(&Simulation<D>) -> R + Send) -> R {
+        let sim = &self.sim;
+        self.threads.install(|| f(sim))
+    }
+
+    /// [`Run::in_pool`] with the simulation mutable.
+    pub fn in_pool_mut<R: Send>(&mut self, f: impl FnOnce(&mut Simulation<D>) -> R + Send) -> R {
+        let sim = &mut self.sim;
+        self.threads.install(|| f(sim))
     }
 
     pub fn sim(&self) -> &Simulation<D> {
@@ -159,15 +180,15 @@ impl<const D: usize> Run<D> {
                 return Ok(ControlFlow::Break(stop));
             }
             let start = Instant::now();
-            let report = self.sim.step()?;
-            let stored = self
-                .sim
-                .problem
-                .output
-                .stores(report.n, self.sim.problem.steps);
-            if let Some(e) = self.estimator.as_mut() {
-                e.after_step(&self.sim, stored)?;
-            }
+            let (sim, estimator) = (&mut self.sim, &mut self.estimator);
+            let (report, stored) = self.threads.install(|| {
+                let report = sim.step()?;
+                let stored = sim.problem.output.stores(report.n, sim.problem.steps);
+                if let Some(e) = estimator.as_mut() {
+                    e.after_step(sim, stored)?;
+                }
+                Ok::<_, SolveError>((report, stored))
+            })?;
             self.last_step_seconds = start.elapsed().as_secs_f64();
             if stored {
                 if let ControlFlow::Break(stop) = hooks.stored_step(self, &report) {

@@ -194,3 +194,118 @@ fn the_driver_is_the_only_time_loop() {
         loops.join("\n")
     );
 }
+
+/// `preset` at h = k = 1/`level` (T shortened to `steps` steps), optionally on the multigrid
+/// path and with a Tresca bound `g` low enough to make Γ3 slip.
+fn threaded_case(
+    preset: &str,
+    level: usize,
+    steps: usize,
+    linear: &str,
+    g: Option<f64>,
+) -> Problem {
+    let mut doc = presets::get(preset).unwrap();
+    let frac = json!(format!("1/{level}"));
+    let h = doc
+        .get("mesh")
+        .and_then(|m| m.get("h"))
+        .is_some()
+        .then(|| frac.clone());
+    scene::apply_overrides(
+        &mut doc,
+        &Overrides {
+            h,
+            k: Some(frac),
+            t_end: Some(json!(format!("{steps}/{level}"))),
+        },
+    );
+    doc["solver"] = json!({ "linear": linear });
+    if let Some(g) = g {
+        doc["friction"] = json!({"law": "tresca", "g": g});
+    }
+    scene::validate(&doc).unwrap()
+}
+
+/// Every step's norms, counts and the final state of a run on `threads` threads, as bits.
+fn fingerprint<const D: usize>(problem: &Problem, threads: usize) -> (Vec<[u64; 5]>, Vec<u64>) {
+    let settings = SolverSettings {
+        threads,
+        ..SolverSettings::default()
+    };
+    let mut run = Run::<D>::new(problem.clone(), settings).unwrap();
+    let ControlFlow::Continue(()) = run.drive(&mut ToEnd).unwrap();
+    let steps = run
+        .reports()
+        .iter()
+        .map(|r| {
+            [
+                r.w_v.to_bits(),
+                r.u_v.to_bits(),
+                r.zeta_l2.to_bits(),
+                r.zeta_min.to_bits(),
+                r.slip_nodes as u64,
+            ]
+        })
+        .collect();
+    let state = run.sim().state.u.iter().chain(&run.sim().state.zeta);
+    (steps, state.map(|v| v.to_bits()).collect())
+}
+
+/// Threads change no bit of a run: 1, 2 and 4 threads, and the same count twice, give the
+/// same norms at every step and the same final state, in 2D and 3D, on the direct and the
+/// multigrid paths, on an imported mesh, sticking and slipping. (The unit-test build splits
+/// vectors every 256 entries and products every 32 rows, so these small meshes run every
+/// kernel's threaded path.)
+#[test]
+fn thread_counts_give_the_same_bits() {
+    let cases: Vec<(&str, Problem)> = vec![
+        (
+            "paper-convergence, direct",
+            threaded_case("paper-convergence", 8, 3, "direct", None),
+        ),
+        (
+            "paper-convergence, multigrid, slip",
+            threaded_case("paper-convergence", 8, 3, "multigrid", Some(0.05)),
+        ),
+        (
+            "arch-on-support (curved Γ3, rotated frames), multigrid",
+            threaded_case("arch-on-support", 8, 2, "multigrid", None),
+        ),
+        (
+            "box-exp3, multigrid",
+            threaded_case("box-exp3", 4, 2, "multigrid", None),
+        ),
+        (
+            "box-exp3, multigrid, slip",
+            threaded_case("box-exp3", 4, 2, "multigrid", Some(0.05)),
+        ),
+        (
+            "standing-cylinder (gmsh), multigrid, slip",
+            threaded_case("standing-cylinder", 16, 2, "multigrid", Some(0.2)),
+        ),
+    ];
+    for (name, problem) in cases {
+        let check = |threads: &[usize]| {
+            let one = match problem.dim() {
+                2 => fingerprint::<2>(&problem, 1),
+                _ => fingerprint::<3>(&problem, 1),
+            };
+            for &t in threads {
+                let other = match problem.dim() {
+                    2 => fingerprint::<2>(&problem, t),
+                    _ => fingerprint::<3>(&problem, t),
+                };
+                assert_eq!(one.0, other.0, "{name}: step norms, 1 against {t} threads");
+                assert_eq!(one.1, other.1, "{name}: final state, 1 against {t} threads");
+            }
+            one
+        };
+        let (steps, _) = check(&[1, 2, 4]);
+        if name.contains("slip") {
+            assert!(
+                steps.iter().any(|s| s[4] > 0),
+                "{name}: the case is meant to slip"
+            );
+        }
+    }
+}

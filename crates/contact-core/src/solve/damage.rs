@@ -32,7 +32,7 @@ pub enum Bound {
 
 /// A solver of the damage step's masked systems, the run backend's: H with the rows and
 /// columns of the active nodes replaced by the identity.
-pub trait MaskedSolver: Send {
+pub trait MaskedSolver: Send + Sync {
     /// Makes its systems those of the active set `active` (a factor refactored; nothing
     /// where the masked H is applied from H's storage).
     fn set_active(&mut self, h: &Csr, active: &[Bound]) -> Result<(), FactorError>;

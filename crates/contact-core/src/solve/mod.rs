@@ -42,6 +42,10 @@ pub struct SolverSettings {
     /// so that the predicted peak fits ([`crate::memory::choose`]).
     #[serde(skip)]
     pub memory_limit: Option<u64>,
+    /// Threads of the run ([`crate::linalg::par`]; at least 1): a setting of the machine,
+    /// not of the computation, whose numbers are the same bits for any count.
+    #[serde(skip)]
+    pub threads: usize,
 }
 
 impl SolverSettings {
@@ -58,6 +62,7 @@ impl Default for SolverSettings {
             tolerance: 1e-10,
             max_iterations: 500,
             memory_limit: None,
+            threads: 1,
         }
     }
 }

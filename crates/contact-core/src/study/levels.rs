@@ -1,6 +1,7 @@
 //! One run of a study: a resolution (h, k) of the scene taken to t = T, keeping w and ζ at
 //! the time nodes the study compares, and the solver figures of the run.
 
+use crate::linalg::par::Threads;
 use crate::mesh::Mesh;
 use crate::problem::Problem;
 use crate::run::{Hooks, Run, RunError};
@@ -105,16 +106,13 @@ pub fn run_level<const D: usize>(
                     p.clone()
                 }
                 None => {
-                    let p = Prepared::<D>::within(&work.problem, settings.memory_limit)
-                        .map_err(RunError::from)?;
+                    let p = prepare::<D>(&work.problem, settings)?;
                     *slot = Some(p.clone());
                     p
                 }
             }
         }
-        None => {
-            Prepared::<D>::within(&work.problem, settings.memory_limit).map_err(RunError::from)?
-        }
+        None => prepare::<D>(&work.problem, settings)?,
     };
     let mut run =
         Run::from_prepared(work.problem.clone(), settings, prepared).map_err(RunError::from)?;
@@ -136,6 +134,16 @@ pub fn run_level<const D: usize>(
         snapshots: keep.snapshots,
         mesh: sim.mesh,
     })
+}
+
+/// The set-up of a level's mesh within the memory limit, on the run's threads.
+fn prepare<const D: usize>(
+    problem: &Problem,
+    settings: SolverSettings,
+) -> Result<Prepared<D>, super::StudyError> {
+    Threads::new(settings.threads)
+        .install(|| Prepared::<D>::within(problem, settings.memory_limit))
+        .map_err(|e| RunError::from(e).into())
 }
 
 /// A level's hooks: its solver figures, w and ζ (and u when asked) at the kept steps, and

@@ -77,8 +77,8 @@ pub enum StudyError {
 #[derive(Debug, Clone, Copy)]
 pub struct Execution {
     pub settings: SolverSettings,
-    /// Runs computed at the same time (the reference and the levels are independent until
-    /// they are compared).
+    /// The study's threads: runs computed at the same time (the reference and the levels
+    /// are independent until they are compared) share them, at most one run per thread.
     pub threads: usize,
 }
 
@@ -86,7 +86,7 @@ impl Default for Execution {
     fn default() -> Self {
         Execution {
             settings: SolverSettings::default(),
-            threads: std::thread::available_parallelism().map_or(1, |n| n.get().min(4)),
+            threads: crate::linalg::par::Threads::available(),
         }
     }
 }

@@ -7,6 +7,7 @@ use super::levels::{self, LevelRun, Work};
 use super::reference::Reference;
 use super::{Execution, StudyError};
 use crate::solve::stepper::Prepared;
+use crate::solve::SolverSettings;
 use std::collections::HashMap;
 use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -52,6 +53,12 @@ pub(crate) fn run_all<const D: usize>(
             crate::memory::choose(&j.problem, exec.settings.memory_limit).map_or(0, |(_, b)| b)
         })
         .collect();
+    // The runs computed at once share the study's threads.
+    let at_once = exec.threads.clamp(1, jobs.len().max(1));
+    let settings = SolverSettings {
+        threads: (exec.threads / at_once).max(1),
+        ..exec.settings
+    };
     let worker = || loop {
         let i = next.fetch_add(1, Ordering::SeqCst);
         let Some(&j) = order.get(i) else { break };
@@ -65,7 +72,7 @@ pub(crate) fn run_all<const D: usize>(
         // A reference's norms are computed here, on the computing thread, while the other
         // threads may still be running levels.
         let slot = jobs[j].share.as_ref().and_then(|k| setups.get(k));
-        let r = levels::run_level(&jobs[j], exec.settings, &tick, slot).map(|run| {
+        let r = levels::run_level(&jobs[j], settings, &tick, slot).map(|run| {
             if jobs[j].is_reference {
                 Done::Reference(Reference::new(run))
             } else {
@@ -77,9 +84,8 @@ pub(crate) fn run_all<const D: usize>(
         }
         *results[j].lock().unwrap() = Some(r);
     };
-    let threads = exec.threads.clamp(1, jobs.len().max(1));
     std::thread::scope(|s| {
-        for _ in 1..threads {
+        for _ in 1..at_once {
             s.spawn(worker);
         }
         worker();

@@ -15,6 +15,7 @@ pub mod truncated;
 
 use super::cholesky::{Cholesky, FactorError};
 use super::galerkin::{galerkin, transpose};
+use super::par;
 use super::pcg::Preconditioner;
 use super::Csr;
 use smoother::Chebyshev;
@@ -353,7 +354,7 @@ impl VCycle {
             level.smoother.smooth(level.a.as_ref(), b, x, r, d, t, true);
             // t ← b − A x, restricted into the next level's right-hand side.
             level.a.mul_vec(x, t);
-            t.iter_mut().zip(b.iter()).for_each(|(t, b)| *t = b - *t);
+            par::zip_apply(t, b, |t, b| b - t);
         }
         let (fine, coarse) = self.work.split_at_mut(l + 1);
         level.pt.mul_vec(&fine[l].t, &mut coarse[0].b);
@@ -361,7 +362,7 @@ impl VCycle {
         let (fine, coarse) = self.work.split_at_mut(l + 1);
         let w = &mut fine[l];
         level.p.mul_vec(&coarse[0].x, &mut w.t);
-        w.x.iter_mut().zip(&w.t).for_each(|(x, t)| *x += t);
+        par::zip_apply(&mut w.x, &w.t, |x, t| x + t);
         let LevelWork { b, x, r, d, t } = w;
         level
             .smoother

@@ -14,6 +14,7 @@
 
 use super::Blocks;
 use crate::linalg::dense::tridiagonal_max_eig;
+use crate::linalg::par;
 use crate::linalg::{Csr, LinearOperator};
 use nalgebra::DMatrix;
 
@@ -31,6 +32,39 @@ pub struct BlockJacobi {
     inv: Vec<f64>,
     diag: Vec<f64>,
     offset: Vec<usize>,
+    split: Split,
+}
+
+/// Where the block products split over threads: pieces of whole blocks, `blocks[s]` the first
+/// block of piece s and `dofs[s]` its first DOF (both ending with the totals). Blocks whose
+/// DOFs are consecutive and in order (the node blocks of the fine level, aggregates) split
+/// every [`par::ROW_CHUNK`] DOFs; others make a single piece.
+#[derive(Debug, Clone)]
+struct Split {
+    blocks: Vec<usize>,
+    dofs: Vec<usize>,
+}
+
+impl Split {
+    fn of(blocks: &Blocks) -> Split {
+        let n = blocks.n_dofs();
+        let in_order = blocks.dofs.iter().enumerate().all(|(p, &d)| p == d);
+        let mut split = Split {
+            blocks: vec![0],
+            dofs: vec![0],
+        };
+        if in_order {
+            for b in 1..blocks.len() {
+                if blocks.ptr[b] - split.dofs.last().unwrap() >= par::ROW_CHUNK {
+                    split.blocks.push(b);
+                    split.dofs.push(blocks.ptr[b]);
+                }
+            }
+        }
+        split.blocks.push(blocks.len());
+        split.dofs.push(n);
+        split
+    }
 }
 
 impl BlockJacobi {
@@ -44,6 +78,7 @@ impl BlockJacobi {
         let total = *offset.last().unwrap();
         let (inv, diag) = (vec![0.0; total], vec![0.0; total]);
         let mut jacobi = BlockJacobi {
+            split: Split::of(blocks),
             blocks: blocks.clone(),
             inv,
             diag,
@@ -94,25 +129,33 @@ impl BlockJacobi {
     /// cost about a tenth of the products with A it sits beside.
     fn apply_blocks(&self, values: &[f64], x: &[f64], y: &mut [f64], sign: f64, keep: f64) {
         let Blocks { ptr, dofs } = &self.blocks;
-        for (b, range) in ptr.windows(2).enumerate() {
-            let m = &values[self.offset[b]..self.offset[b + 1]];
-            match (&dofs[range[0]..range[1]], m) {
-                (&[i], &[m]) => y[i] = keep * y[i] + sign * m * x[i],
-                (&[i, j, k], &[m00, m01, m02, m10, m11, m12, m20, m21, m22]) => {
-                    let (a, c, e) = (x[i], x[j], x[k]);
-                    y[i] = keep * y[i] + sign * (m00 * a + m01 * c + m02 * e);
-                    y[j] = keep * y[j] + sign * (m10 * a + m11 * c + m12 * e);
-                    y[k] = keep * y[k] + sign * (m20 * a + m21 * c + m22 * e);
-                }
-                (block, m) => {
-                    let s = block.len();
-                    for (row, &i) in m.chunks_exact(s).zip(block) {
-                        let v: f64 = row.iter().zip(block).map(|(m, &j)| m * x[j]).sum();
-                        y[i] = keep * y[i] + sign * v;
+        par::for_each_segment_mut(y, &self.split.dofs, |seg, y| {
+            // A piece of y holds the DOFs of its blocks, from `base` on (all of y, from 0,
+            // when the blocks are not contiguous and there is one piece).
+            let base = self.split.dofs[seg];
+            for b in self.split.blocks[seg]..self.split.blocks[seg + 1] {
+                let m = &values[self.offset[b]..self.offset[b + 1]];
+                match (&dofs[ptr[b]..ptr[b + 1]], m) {
+                    (&[i], &[m]) => {
+                        let yi = &mut y[i - base];
+                        *yi = keep * *yi + sign * m * x[i];
+                    }
+                    (&[i, j, k], &[m00, m01, m02, m10, m11, m12, m20, m21, m22]) => {
+                        let (a, c, e) = (x[i], x[j], x[k]);
+                        y[i - base] = keep * y[i - base] + sign * (m00 * a + m01 * c + m02 * e);
+                        y[j - base] = keep * y[j - base] + sign * (m10 * a + m11 * c + m12 * e);
+                        y[k - base] = keep * y[k - base] + sign * (m20 * a + m21 * c + m22 * e);
+                    }
+                    (block, m) => {
+                        let s = block.len();
+                        for (row, &i) in m.chunks_exact(s).zip(block) {
+                            let v: f64 = row.iter().zip(block).map(|(m, &j)| m * x[j]).sum();
+                            y[i - base] = keep * y[i - base] + sign * v;
+                        }
                     }
                 }
             }
-        }
+        });
     }
 
     /// D⁻¹ as a sparse (block-diagonal) matrix.
@@ -160,24 +203,20 @@ pub fn lambda_max(a: &impl LinearOperator, d: &BlockJacobi) -> f64 {
     let (mut dv, mut av, mut w) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
     let dnorm = |v: &[f64], dv: &mut [f64]| -> f64 {
         d.mul(v, dv);
-        v.iter()
-            .zip(dv.iter())
-            .map(|(a, b)| a * b)
-            .sum::<f64>()
-            .sqrt()
+        par::dot(v, dv).sqrt()
     };
     let s = dnorm(&v, &mut dv);
-    v.iter_mut().for_each(|x| *x /= s);
+    par::zip_apply(&mut dv, &v, |_, v| v / s);
+    std::mem::swap(&mut v, &mut dv);
     let mut v_prev = vec![0.0; n];
     let (mut alphas, mut betas) = (Vec::new(), Vec::new());
     let mut beta = 0.0;
     for _ in 0..LANCZOS_STEPS.min(n) {
         a.apply(&v, &mut av);
         d.solve(&av, &mut w);
-        let alpha: f64 = av.iter().zip(&v).map(|(a, b)| a * b).sum();
-        for i in 0..n {
-            w[i] -= alpha * v[i] + beta * v_prev[i];
-        }
+        let alpha = par::dot(&av, &v);
+        par::zip_apply(&mut w, &v, |w, v| w - alpha * v);
+        par::zip_apply(&mut w, &v_prev, |w, v| w - beta * v);
         alphas.push(alpha);
         beta = dnorm(&w, &mut dv);
         if beta <= 1e-12 * alpha.abs() {
@@ -185,7 +224,7 @@ pub fn lambda_max(a: &impl LinearOperator, d: &BlockJacobi) -> f64 {
         }
         betas.push(beta);
         std::mem::swap(&mut v_prev, &mut v);
-        v.iter_mut().zip(&w).for_each(|(v, w)| *v = w / beta);
+        par::zip_apply(&mut v, &w, |_, w| w / beta);
     }
     tridiagonal_max_eig(&alphas, &betas)
 }
@@ -252,12 +291,12 @@ impl Chebyshev {
             t.copy_from_slice(b);
         } else {
             a.apply(x, t);
-            t.iter_mut().zip(b).for_each(|(t, b)| *t = b - *t);
+            par::zip_apply(t, b, |t, b| b - t);
         }
         self.jacobi.solve(t, r);
-        d.iter_mut().zip(r.iter()).for_each(|(d, r)| *d = r / theta);
+        par::zip_apply(d, r, |_, r| r / theta);
         for k in 0..self.degree {
-            x.iter_mut().zip(d.iter()).for_each(|(x, d)| *x += d);
+            par::zip_apply(x, d, |x, d| x + d);
             if k + 1 == self.degree {
                 break;
             }
@@ -265,9 +304,7 @@ impl Chebyshev {
             self.jacobi.solve_sub(t, r);
             let rho_next = 1.0 / (2.0 * sigma - rho);
             let (c1, c2) = (rho_next * rho, 2.0 * rho_next / delta);
-            d.iter_mut()
-                .zip(r.iter())
-                .for_each(|(d, r)| *d = c1 * *d + c2 * r);
+            par::zip_apply(d, r, |d, r| c1 * d + c2 * r);
             rho = rho_next;
         }
     }

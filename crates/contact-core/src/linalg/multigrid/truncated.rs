@@ -27,6 +27,7 @@ use super::smoother::Chebyshev;
 use super::{Hierarchy, VCycle};
 use crate::linalg::cholesky::{Cholesky, FactorError};
 use crate::linalg::galerkin::{add, product, transpose};
+use crate::linalg::par;
 use crate::linalg::pcg::Preconditioner;
 use crate::linalg::{Csr, LinearOperator};
 use nalgebra::DMatrix;
@@ -311,11 +312,11 @@ impl Preconditioner for Truncated {
                 x.iter_mut().for_each(|v| *v = 0.0);
                 smoother.smooth(&op, b, x, rr, d, t, true);
                 op.apply(x, t);
-                t.iter_mut().zip(b.iter()).for_each(|(t, b)| *t = b - *t);
+                par::zip_apply(t, b, |t, b| b - t);
                 pt.mul_vec(t, bc);
                 coarse.apply(bc, xc);
                 p.mul_vec(xc, t);
-                x.iter_mut().zip(t.iter()).for_each(|(x, t)| *x += t);
+                par::zip_apply(x, t, |x, t| x + t);
                 smoother.smooth(&op, b, x, rr, d, t, false);
                 z.copy_from_slice(x);
             }

@@ -559,7 +559,7 @@ fn warm_start_scale_and_failure() {
     let tight = SolverSettings {
         tolerance: 1e-13,
         max_iterations: 1,
-        memory_limit: None,
+        ..SolverSettings::default()
     };
     match solve(&d.reduced(), &mut x, &tight, 7) {
         Err(SolveError::NotConverged {

@@ -5,8 +5,9 @@
 //! 3. u_n = u_{n−1} + k w_n (3.12);
 //! 4. the step's norms; σ_n = A ε(w_n) + B_{n−1} (3.8) only when stored ([`Simulation::fields`]).
 //!
-//! The two sub-problems of step 2 are independent and run on two threads for meshes large
-//! enough to pay for it. Physics absent from the scene is not computed: no damage block → ζ ≡ 1
+//! The two sub-problems of step 2 are independent and run beside each other (`rayon::join`
+//! in the run's pool, [`crate::linalg::par`]) when the run has more than one thread and the
+//! mesh is large enough to pay for it. Physics absent from the scene is not computed: no damage block → ζ ≡ 1
 //! and no damage solve; no Γ3 → a single linear solve per step.
 //!
 //! The set-up before the first step (mesh, operators, solvers, the initial state) is in
@@ -27,7 +28,7 @@ use crate::fem::{loads, norms, DofMap, Geometry};
 use crate::laws::constitutive::elastic_stress;
 use crate::laws::damage_source::phi;
 use crate::laws::Tensor;
-use crate::linalg::{Csr, LinearPath};
+use crate::linalg::{par, Csr, LinearPath};
 use crate::mesh::Mesh;
 use crate::problem::Problem;
 use setup::formula_text;
@@ -285,7 +286,7 @@ impl<const D: usize> Simulation<D> {
     }
 
     /// The velocity step (3.13) ∥ the damage step (3.10) of step n: neither reads the other's
-    /// result, so on large meshes the damage step runs on a second thread. A velocity error
+    /// result, so on large meshes they share the run's threads. A velocity error
     /// is reported before a damage error.
     fn solve_sub_problems(
         &mut self,
@@ -293,7 +294,7 @@ impl<const D: usize> Simulation<D> {
         k: f64,
         t: f64,
     ) -> Result<(SolverReport, Option<SolverReport>), SolveError> {
-        let parallel = self.damage.is_some() && self.mesh.n_nodes() >= PARALLEL_MIN_NODES;
+        let parallel = self.mesh.n_nodes() >= PARALLEL_MIN_NODES && par::current_threads() > 1;
         let input = StepInput {
             n,
             k,
@@ -310,11 +311,10 @@ impl<const D: usize> Simulation<D> {
         };
         let velocity = &mut self.velocity;
         let (v, d) = match self.damage.as_mut() {
-            Some(d) if parallel => std::thread::scope(|s| {
-                let h = s.spawn(|| d.step(&input));
-                let v = velocity.step(&input);
-                (v, Some(h.join().expect("damage thread panicked")))
-            }),
+            Some(d) if parallel => {
+                let (v, d) = rayon::join(|| velocity.step(&input), || d.step(&input));
+                (v, Some(d))
+            }
             Some(d) => (velocity.step(&input), Some(d.step(&input))),
             None => (velocity.step(&input), None),
         };

@@ -4,6 +4,7 @@
 
 use super::planner::{frontier, unreachable};
 use super::*;
+use crate::solve::SolverSettings;
 
 /// |I f_c − f_f| / |f_f| at t = T between two runs of nested meshes (f_f on the finer or the
 /// same mesh): w and u in |·|_V (the coarse strain taken on each fine cell's parent, exact),
@@ -87,7 +88,11 @@ fn run_chosen<const D: usize>(
     tick: &(dyn Fn() -> ControlFlow<()> + Sync),
 ) -> Result<(LevelRun<D>, Summary), StudyError> {
     let start = Instant::now();
-    let mut run = Run::<D>::new(problem.clone(), exec.settings).map_err(RunError::from)?;
+    let settings = SolverSettings {
+        threads: exec.threads,
+        ..exec.settings
+    };
+    let mut run = Run::<D>::new(problem.clone(), settings).map_err(RunError::from)?;
     let mut hooks = Chosen {
         stats: StatsAccumulator::new(exec.settings),
         sink,
@@ -377,26 +382,36 @@ pub(super) fn run_in<const D: usize>(
         let problem = planner.problem(level);
         sink.restart().map_err(StudyError::Output)?;
         total_steps.fetch_add(level.1, Ordering::Relaxed);
-        let (run, summary) =
-            if made.contains_key(&companion_level) || runs.contains_key(&companion_level) {
-                run_chosen::<D>(&problem, exec, keep_u, sink, &tick)?
-            } else {
-                total_steps.fetch_add(companion_level.1, Ordering::Relaxed);
-                let work = Work {
-                    problem: planner.problem(companion_level),
-                    keep: BTreeSet::from([companion_level.1]),
-                    is_reference: false,
-                    share: None,
-                    keep_u,
-                };
-                let (chosen, companion) = std::thread::scope(|s| {
-                    let c = s.spawn(|| levels::run_level::<D>(&work, exec.settings, &tick, None));
-                    let chosen = run_chosen::<D>(&problem, exec, keep_u, sink, &tick);
-                    (chosen, c.join().expect("companion run panicked"))
-                });
-                made.insert(companion_level, companion?);
-                chosen?
+        let (run, summary) = if made.contains_key(&companion_level)
+            || runs.contains_key(&companion_level)
+        {
+            run_chosen::<D>(&problem, exec, keep_u, sink, &tick)?
+        } else {
+            total_steps.fetch_add(companion_level.1, Ordering::Relaxed);
+            let work = Work {
+                problem: planner.problem(companion_level),
+                keep: BTreeSet::from([companion_level.1]),
+                is_reference: false,
+                share: None,
+                keep_u,
             };
+            // The two runs share the study's threads.
+            let half = Execution {
+                threads: (exec.threads / 2).max(1),
+                ..exec
+            };
+            let companion_settings = SolverSettings {
+                threads: half.threads,
+                ..exec.settings
+            };
+            let (chosen, companion) = std::thread::scope(|s| {
+                let c = s.spawn(|| levels::run_level::<D>(&work, companion_settings, &tick, None));
+                let chosen = run_chosen::<D>(&problem, half, keep_u, sink, &tick);
+                (chosen, c.join().expect("companion run panicked"))
+            });
+            made.insert(companion_level, companion?);
+            chosen?
+        };
         let companion = made
             .get(&companion_level)
             .or_else(|| runs.get(&companion_level))
