@@ -149,8 +149,9 @@ fn block_matrix(n: usize, blocks: &[NodeBlock]) -> Csr {
 #[derive(Clone)]
 struct Levels {
     smoother: Chebyshev,
-    p: Csr,
-    pt: Csr,
+    /// A's hierarchy, whose first prolongator P (and Pᵀ) is applied with F's rows masked:
+    /// P̃ x = mask(P x), P̃ᵀ t = Pᵀ mask(t), without a copy of P.
+    fine: Arc<Hierarchy>,
     coarse: VCycle,
     work: [Vec<f64>; 7],
 }
@@ -178,7 +179,7 @@ impl Truncated {
     /// The preconditioner for M with fixed DOFs `fixed` and blocks `blocks`, from A's
     /// hierarchy `h`.
     pub fn new(
-        h: &Hierarchy,
+        h: &Arc<Hierarchy>,
         fixed: Vec<usize>,
         blocks: &[NodeBlock],
     ) -> Result<Truncated, FactorError> {
@@ -188,7 +189,7 @@ impl Truncated {
 
     /// As [`Truncated::new`], with A given (shared with the caller, which holds it anyway).
     pub fn with_operator(
-        h: &Hierarchy,
+        h: &Arc<Hierarchy>,
         a: Arc<Csr>,
         fixed: Vec<usize>,
         blocks: &[NodeBlock],
@@ -261,8 +262,7 @@ impl Truncated {
                 let nc = p.ncols;
                 Cycle::Levels(Box::new(Levels {
                     smoother,
-                    p: p_trunc,
-                    pt,
+                    fine: h.clone(),
                     coarse: coarse.vcycle(),
                     work: [
                         vec![0.0; n],
@@ -302,20 +302,26 @@ impl Preconditioner for Truncated {
             Cycle::Levels(levels) => {
                 let Levels {
                     smoother,
-                    p,
-                    pt,
+                    fine,
                     coarse,
                     work,
                 } = &mut **levels;
+                let (p, pt) = fine.transfer(0).expect("A's hierarchy has a first level");
                 let [b, x, rr, d, t, bc, xc] = work;
                 b.copy_from_slice(r);
                 x.iter_mut().for_each(|v| *v = 0.0);
                 smoother.smooth(&op, b, x, rr, d, t, true);
                 op.apply(x, t);
                 par::zip_apply(t, b, |t, b| b - t);
+                for &s in &self.fixed {
+                    t[s] = 0.0;
+                }
                 pt.mul_vec(t, bc);
                 coarse.apply(bc, xc);
                 p.mul_vec(xc, t);
+                for &s in &self.fixed {
+                    t[s] = 0.0;
+                }
                 par::zip_apply(x, t, |x, t| x + t);
                 smoother.smooth(&op, b, x, rr, d, t, false);
                 z.copy_from_slice(x);

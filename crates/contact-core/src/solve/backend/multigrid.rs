@@ -19,7 +19,7 @@ use crate::linalg::dense::tridiagonal_max_eig;
 use crate::linalg::multigrid::{Hierarchy, Params, VCycle};
 use crate::linalg::pcg::{self, PcgWork, Preconditioner};
 use crate::linalg::solver::{NotConverged, MAX_KRYLOV_ITERATIONS};
-use crate::linalg::{Csr, LinearOperator, LinearPath, LinearSolver};
+use crate::linalg::{par, Csr, LinearOperator, LinearPath, LinearSolver};
 use crate::mesh::Mesh;
 use crate::problem::FrictionLaw;
 use crate::solve::damage::{Bound, DamageStep, MaskedSolver};
@@ -244,19 +244,22 @@ impl LinearOperator for Masked<'_> {
 
     fn apply(&self, x: &[f64], y: &mut [f64]) {
         let h = self.h;
-        for (r, yr) in y.iter_mut().enumerate() {
-            *yr = if self.active[r] != Bound::Free {
-                x[r]
-            } else {
-                let row = h.indptr[r]..h.indptr[r + 1];
-                h.indices[row.clone()]
-                    .iter()
-                    .zip(&h.values[row])
-                    .filter(|(&c, _)| self.active[c as usize] == Bound::Free)
-                    .map(|(&c, &v)| v * x[c as usize])
-                    .sum()
-            };
-        }
+        par::for_each_chunk_mut(y, par::ROW_CHUNK, |first, y| {
+            for (i, yr) in y.iter_mut().enumerate() {
+                let r = first + i;
+                *yr = if self.active[r] != Bound::Free {
+                    x[r]
+                } else {
+                    let row = h.indptr[r]..h.indptr[r + 1];
+                    h.indices[row.clone()]
+                        .iter()
+                        .zip(&h.values[row])
+                        .filter(|(&c, _)| self.active[c as usize] == Bound::Free)
+                        .map(|(&c, &v)| v * x[c as usize])
+                        .sum()
+                };
+            }
+        });
     }
 }
 

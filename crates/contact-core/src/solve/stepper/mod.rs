@@ -345,12 +345,18 @@ impl<const D: usize> Simulation<D> {
         damage: Option<SolverReport>,
     ) -> Result<StepReport, SolveError> {
         // Both in one pass: ε(u_n) = ε(u_{n−1}) + k ε(w_n) per element.
-        let (mut w2, mut u2) = (0.0, 0.0);
-        for (e, eps) in self.eps.iter().enumerate() {
-            let ew = self.geo.strain(&self.mesh, e, &self.w);
-            w2 += self.geo.measure[e] * ew.norm_squared();
-            u2 += self.geo.measure[e] * (eps + ew * k).norm_squared();
-        }
+        // Chunk partials added in chunk order: the same bits for any thread count.
+        let (w2, u2) = par::map_ranges(self.eps.len(), par::VECTOR_CHUNK, |cells| {
+            let (mut w2, mut u2) = (0.0, 0.0);
+            for e in cells {
+                let ew = self.geo.strain(&self.mesh, e, &self.w);
+                w2 += self.geo.measure[e] * ew.norm_squared();
+                u2 += self.geo.measure[e] * (self.eps[e] + ew * k).norm_squared();
+            }
+            (w2, u2)
+        })
+        .into_iter()
+        .fold((0.0, 0.0), |(a, b), (w, u)| (a + w, b + u));
         let mut scratch = vec![0.0; self.mesh.n_nodes()];
         let report = StepReport {
             n,
@@ -392,14 +398,20 @@ fn history_stress<const D: usize>(
     eps: &mut [Tensor<D>],
     b: &mut [Tensor<D>],
 ) {
-    for (e, eps) in eps.iter_mut().enumerate() {
-        *eps = geo.strain(mesh, e, u);
-    }
     let elasticity = problem.material.elasticity;
-    for (e, cell) in mesh.cells().enumerate() {
-        let zbar = cell.iter().map(|&n| zeta[n]).sum::<f64>() / (D + 1) as f64;
-        b[e] = elastic_stress(&elasticity, &eps[e], zbar);
-    }
+    par::for_each_chunk_mut(eps, par::ROW_CHUNK, |first, eps| {
+        for (i, eps) in eps.iter_mut().enumerate() {
+            *eps = geo.strain(mesh, first + i, u);
+        }
+    });
+    let eps = &*eps;
+    par::for_each_chunk_mut(b, par::ROW_CHUNK, |first, b| {
+        for (i, b) in b.iter_mut().enumerate() {
+            let e = first + i;
+            let zbar = mesh.cell(e).iter().map(|&n| zeta[n]).sum::<f64>() / (D + 1) as f64;
+            *b = elastic_stress(&elasticity, &eps[e], zbar);
+        }
+    });
 }
 
 /// The error for a non-finite load vector at step n: the field and point responsible.
