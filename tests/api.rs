@@ -326,6 +326,44 @@ fn whole_lifecycle_over_http() {
     );
     assert_eq!(again.status, 200);
     assert_eq!(again.json()["id"], id.as_str());
+    // So is the same computation written out as a scene under another name: a name changes
+    // no number, and the answer is the first job (with its name).
+    let mut renamed = contact_core::scene::presets::get("paper-exp2").unwrap();
+    contact_core::scene::apply_overrides(
+        &mut renamed,
+        &contact_core::scene::Overrides {
+            h: Some(json!("1/8")),
+            k: Some(json!("1/8")),
+            t_end: None,
+        },
+    );
+    renamed["name"] = json!("the same bracket under another name");
+    renamed["$schema"] = json!("/scene.schema.json");
+    let named = post_json(a, "/jobs", &renamed);
+    assert_eq!(
+        named.status,
+        200,
+        "{}",
+        String::from_utf8_lossy(&named.body)
+    );
+    assert_eq!(named.json()["id"], id.as_str());
+    assert_eq!(named.json()["scene"], "paper-exp2");
+    // A changed number is another computation.
+    renamed["damage"]["kappa"] = json!(0.25);
+    let other = post_json(a, "/jobs", &renamed);
+    assert_eq!(
+        other.status,
+        202,
+        "{}",
+        String::from_utf8_lossy(&other.body)
+    );
+    assert_ne!(other.json()["id"], id.as_str());
+    let other_id = other.json()["id"].as_str().unwrap().to_string();
+    wait_status(a, &other_id, &["succeeded"], Duration::from_secs(120));
+    assert_eq!(
+        http(a, "DELETE", &format!("/jobs/{other_id}"), &[], b"").status,
+        204
+    );
 
     let list = get(a, "/jobs?status=succeeded").json();
     assert_eq!(list["jobs"].as_array().unwrap().len(), 1);

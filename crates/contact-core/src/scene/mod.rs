@@ -46,7 +46,7 @@ mod read;
 mod tests;
 mod time;
 
-pub use canonical::{canonical, content_hash, hex_sha256};
+pub use canonical::{canonical, computation, content_hash, hex_sha256, LABEL_FIELDS};
 pub use damage::DEFAULT_SOURCE;
 pub use errors::{FieldError, ValidationErrors};
 pub use friction::DEFAULT_FRICTION;
