@@ -371,6 +371,61 @@ fn piped_stderr_carries_no_progress_bar() {
     assert!(report["cases"].as_array().is_some_and(|c| !c.is_empty()));
 }
 
+/// `contact-sim … | head`: a reader that takes what it wants and closes the pipe ends the
+/// writer quietly (status 0, nothing on stderr), not with a panic. Two readers: one that reads
+/// one line of a summary larger than a pipe's buffer (so the rest is written after it has
+/// gone), one that has gone before the run prints anything.
+#[test]
+fn a_closed_pipe_on_stdout_ends_the_command_quietly() {
+    use std::io::BufRead;
+    use std::process::Stdio;
+    let run = |k: &str| {
+        let mut cmd = bin();
+        cmd.args([
+            "run",
+            "--preset",
+            "paper-convergence",
+            "--h",
+            "1/4",
+            "--k",
+            k,
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+        cmd
+    };
+    // Linux pipes hold 64 KiB: a summary of 512 steps is larger.
+    let mut child = run("1/512").spawn().unwrap();
+    let mut first = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    assert_eq!(first, "{\n", "the summary JSON begins");
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && err.is_empty(),
+        "{:?}: {err}",
+        out.status
+    );
+    let whole = run("1/512").output().unwrap();
+    assert!(
+        whole.stdout.len() > 1 << 16,
+        "the summary ({} bytes) outgrows the pipe's buffer",
+        whole.stdout.len()
+    );
+
+    let mut child = run("1/16").spawn().unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && !err.contains("panicked"),
+        "{:?}: {err}",
+        out.status
+    );
+}
+
 /// On a terminal `run` draws its bar (steps and ETA) on stderr. The terminal is the
 /// pseudo-terminal of util-linux's `script`; without it the test has nothing to run.
 #[test]

@@ -46,7 +46,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         let threads = study::Execution::default().threads;
         return match bench::tables(repeat, threads) {
             Ok(r) => {
-                println!("{}", pretty(&r));
+                outln!("{}", pretty(&r));
                 ExitCode::SUCCESS
             }
             Err(e) => fail(1, &e.to_string()),
@@ -55,7 +55,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
     if args.orderings {
         return match bench::orderings(&args.preset, &args.levels, repeat) {
             Ok(r) => {
-                println!("{}", pretty(&r));
+                outln!("{}", pretty(&r));
                 ExitCode::SUCCESS
             }
             Err(e) => fail(1, &e.to_string()),
@@ -64,7 +64,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
     if args.schur {
         return match bench::schur(&args.preset, &args.levels, repeat) {
             Ok(r) => {
-                println!("{}", pretty(&r));
+                outln!("{}", pretty(&r));
                 ExitCode::SUCCESS
             }
             Err(e) => fail(1, &e.to_string()),
@@ -77,7 +77,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
     match bench::run(&args.preset, &args.levels, repeat, linear, &args.friction_g) {
         Ok(report) => {
             eprintln!("{}", report.table());
-            println!("{}", pretty(&report));
+            outln!("{}", pretty(&report));
             ExitCode::SUCCESS
         }
         Err(e) => fail(1, &e.to_string()),

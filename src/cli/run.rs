@@ -128,7 +128,7 @@ pub fn main(args: RunArgs) -> ExitCode {
                     return fail(1, &format!("cannot write summary.json: {e}"));
                 }
             }
-            println!("{text}");
+            outln!("{text}");
             ExitCode::SUCCESS
         }
         Err(RunError::Solve(SolveError::Memory(e))) => refused(e.pointer(), &e.to_string()),
