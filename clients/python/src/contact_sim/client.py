@@ -541,9 +541,13 @@ class Job:
             self._dim = int(self.summary()["mesh"]["dim"])
         return self._dim
 
-    def vtu(self, step: Union[int, str] = "last") -> bytes:
-        """Step ``step`` as a VTK UnstructuredGrid (.vtu) file's bytes."""
-        return self.client._send("GET", self._path(f"/fields/{step}.vtu")).content
+    def vtu(self, step: Union[int, str] = "last", compression: str = "zlib") -> bytes:
+        """Step ``step`` as a VTK UnstructuredGrid (.vtu) file's bytes, its arrays
+        zlib-compressed (``compression="zlib"``, what ParaView, VTK and meshio read) or raw
+        (``"none"``)."""
+        return self.client._send(
+            "GET", self._path(f"/fields/{step}.vtu"), params={"compression": compression}
+        ).content
 
     def to_meshio(self, step: Union[int, str] = "last") -> "meshio.Mesh":
         """Step ``step`` as a meshio Mesh, read from the service's VTU: 3D points (z = 0 in
@@ -557,15 +561,20 @@ class Job:
             path.write_bytes(self.vtu(step))
             return meshio.read(path)
 
-    def download(self, path: Union[str, "os.PathLike[str]"] = ".") -> Path:
+    def download(
+        self, path: Union[str, "os.PathLike[str]"] = ".", compression: str = "zlib"
+    ) -> Path:
         """Saves the whole result as one tar archive (scene, summary, PVD, the VTU of every
         step, in one folder named after the job) and returns its path; a directory gets
         ``contact-sim-<id>.tar`` inside it (a path ending in a slash is a directory, created
-        if need be)."""
+        if need be). ``compression`` is the VTU files' (``"zlib"`` or ``"none"``, as in
+        :meth:`vtu`)."""
         dest = Path(path)
         if dest.is_dir() or str(path).endswith(("/", os.sep)):
             dest = dest / f"contact-sim-{self.id}.tar"
-        return self.client._download(self._path("/archive.tar"), dest)
+        return self.client._download(
+            self._path(f"/archive.tar?compression={compression}"), dest
+        )
 
     # -- control ------------------------------------------------------------------------
 
