@@ -204,7 +204,7 @@ export class MeshUpload {
     const form = el('form', { id: 'mesh-form', novalidate: true, onsubmit: (ev) => { ev.preventDefault(); this.build(); } },
       groups.length
         ? el('div', { class: 'table-wrap' }, el('table', { id: 'mesh-groups', class: 'mesh-groups' },
-          el('caption', {}, 'Boundary conditions on the physical groups (free: traction-free)'),
+          el('caption', {}, 'Boundary conditions on the physical groups (free: traction-free, left out of the scene)'),
           el('thead', {}, el('tr', {}, el('th', {}, 'group'), el('th', {}, 'condition'), el('th', {}, `f2 (${dim === 3 ? 'x, y, z' : 'x, y'})`))),
           el('tbody', {}, this.rows.map((r) => r.tr))))
         : el('p', { class: 'warning' }, 'The mesh has no physical groups of facets: bind the boundary in the scene editor with "from"/"to" segments or "on" formulas.'),
@@ -223,7 +223,7 @@ export class MeshUpload {
     if (!hint) return;
     try {
       const { name } = await this.baseScene();
-      hint.textContent = `Material, time, loads, damage, friction and output are taken from the preset ${name} (chosen above); unbound groups are traction-free.`;
+      hint.textContent = `Material, time, loads, damage, friction and output are taken from the preset ${name} (chosen above). A group set to free is not written into the scene: the scene format has no "free" part, and every boundary no part names is traction-free.`;
     } catch {
       hint.textContent = '';
     }
