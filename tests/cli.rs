@@ -471,6 +471,8 @@ fn a_mesh_file_is_read_next_to_the_scene() {
     let out = bin()
         .arg("run")
         .arg(&path)
+        .arg("--out")
+        .arg(dir.join("out"))
         .current_dir(std::env::temp_dir())
         .output()
         .unwrap();
@@ -497,6 +499,49 @@ fn a_mesh_file_is_read_next_to_the_scene() {
     );
     assert!((a - b).abs() <= 1e-12 * b, "{a} vs {b}");
     assert_eq!(s["mesh"]["source"], "mesh meshes/plate.msh");
+    // A given mesh has no n = 1/h: its summary gives the cells' diameters (longest edges),
+    // here recomputed from the mesh the run wrote.
+    assert!(s["mesh"].get("cells_per_unit").is_none() && s["mesh"].get("h").is_none());
+    let mesh: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("out/mesh.json")).unwrap()).unwrap();
+    let point = |i: &Value| -> Vec<f64> {
+        mesh["nodes"][i.as_u64().unwrap() as usize]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let diameters: Vec<f64> = mesh["triangles"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| {
+            let p: Vec<Vec<f64>> = t.as_array().unwrap().iter().map(point).collect();
+            [(0, 1), (1, 2), (0, 2)]
+                .iter()
+                .map(|&(a, b)| ((p[a][0] - p[b][0]).powi(2) + (p[a][1] - p[b][1]).powi(2)).sqrt())
+                .fold(0.0, f64::max)
+        })
+        .collect();
+    let size = &s["mesh"]["cell_size"];
+    let close = |key: &str, v: f64| {
+        let got = size[key].as_f64().unwrap();
+        assert!(
+            (got - v).abs() <= 1e-12 * v,
+            "cell_size.{key}: {got} vs {v}"
+        );
+    };
+    close(
+        "min",
+        diameters.iter().copied().fold(f64::INFINITY, f64::min),
+    );
+    close("max", diameters.iter().copied().fold(0.0, f64::max));
+    close(
+        "mean",
+        diameters.iter().sum::<f64>() / diameters.len() as f64,
+    );
+    assert!(size["min"].as_f64() < size["mean"].as_f64());
 
     doc["domain"]["mesh"] = Value::from("meshes/missing.msh");
     std::fs::write(&path, doc.to_string()).unwrap();

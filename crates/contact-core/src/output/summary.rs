@@ -19,10 +19,15 @@ pub struct MeshInfo {
     pub triangles: Option<usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tetrahedra: Option<usize>,
-    /// Rectangle or box: n = round(1/h); 0 for a given mesh.
-    pub cells_per_unit: usize,
-    /// Rectangle: 1/n; a given mesh: its longest cell edge.
-    pub h: f64,
+    /// Rectangle or box: n = round(1/h); absent for a given mesh, which has no such n.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cells_per_unit: Option<usize>,
+    /// Rectangle or box: h = 1/n; absent for a given mesh (see `cell_size`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub h: Option<f64>,
+    /// A given mesh: its cells' diameters (longest edges), which vary from cell to cell.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cell_size: Option<CellSizes>,
     /// Rectangle: the diagonal pattern; box: "kuhn"; a given mesh: "unstructured".
     pub pattern: &'static str,
     /// A given mesh: where it came from ("mesh <id or file>", "polygon").
@@ -46,6 +51,14 @@ pub struct MeshInfo {
     /// How the linear systems are solved: "direct (Cholesky)", "multigrid (smoothed
     /// aggregation, 4 levels)", "multigrid (geometric, 3 levels)".
     pub linear_solver: String,
+}
+
+/// The shortest, mean and longest cell diameter of a given mesh.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct CellSizes {
+    pub min: f64,
+    pub mean: f64,
+    pub max: f64,
 }
 
 /// The run's memory: predicted before any numeric work ([`crate::memory`]) and measured.
@@ -177,11 +190,16 @@ impl Summary {
                 nodes: sim.mesh.n_nodes(),
                 triangles: (D == 2).then(|| sim.mesh.n_cells()),
                 tetrahedra: (D == 3).then(|| sim.mesh.n_cells()),
-                cells_per_unit: p.cells_per_unit,
-                h: match &p.body {
-                    None => 1.0 / p.cells_per_unit as f64,
-                    Some(_) => crate::mesh::quality::figures(&sim.mesh).max_cell_size,
-                },
+                cells_per_unit: p.body.is_none().then_some(p.cells_per_unit),
+                h: p.body.is_none().then(|| 1.0 / p.cells_per_unit as f64),
+                cell_size: p.body.as_ref().map(|_| {
+                    let f = crate::mesh::quality::figures(&sim.mesh);
+                    CellSizes {
+                        min: f.min_cell_size,
+                        mean: f.mean_cell_size,
+                        max: f.max_cell_size,
+                    }
+                }),
                 pattern: match (&p.body, p.pattern) {
                     (Some(_), _) => "unstructured",
                     (None, _) if D == 3 => "kuhn",
