@@ -173,7 +173,7 @@ export class MeshUpload {
         row('cells', m.dimension === 3 ? 'cells (tetrahedra)' : 'cells (triangles)', String(m.cells)),
         row('boundary_facets', 'boundary facets', String(m.boundary_facets ?? '–')),
         row('bounding_box', 'bounding box', `${point(bb.min)} – ${point(bb.max)}`, el('br'), el('small', {}, size)),
-        row('cell_size', 'cell size', `${fmt(m.min_cell_size)} – ${fmt(m.max_cell_size)} (mean ${fmt(m.mean_cell_size)})`),
+        row('cell_size', 'cell size', `${fmt(m.min_cell_size)} – ${fmt(m.max_cell_size)}${m.mean_cell_size != null ? ` (mean ${fmt(m.mean_cell_size)})` : ''}`),
         row('quality', 'quality (1 = equilateral)', `min ${fmt(m.min_quality, 3)}, mean ${fmt(m.mean_quality, 3)}`)));
 
     const groups = m.groups || [];
