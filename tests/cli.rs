@@ -342,6 +342,60 @@ fn study_file_prints_the_table_as_json_or_text() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The summary's `initial` is step 0, the state at t = 0 the norms over time start from:
+/// w_0 = 0, and for u_0 = (a x, 0) on the 2 × 1 plate with ζ_0 = 1, ε(u_0) = diag(a, 0), so
+/// |u_0|_V = a √2, |ζ_0|_Z0 = (∫ 1)^½ = √2 and min ζ_0 = 1.
+#[test]
+fn the_summary_starts_at_the_initial_state() {
+    let dir = std::env::temp_dir().join(format!("contact-sim-initial-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut doc: Value = serde_json::from_slice(
+        &bin()
+            .args(["preset", "paper-exp2"])
+            .output()
+            .unwrap()
+            .stdout,
+    )
+    .unwrap();
+    assert_eq!(
+        (
+            doc["domain"]["width"].as_f64(),
+            doc["domain"]["height"].as_f64()
+        ),
+        (Some(2.0), Some(1.0))
+    );
+    let a = 0.01;
+    doc["initial"] = serde_json::json!({"u0": [format!("{a}*x"), 0]});
+    doc["mesh"]["h"] = Value::from("1/4");
+    doc["time"] = serde_json::json!({"t_end": 1, "k": "1/4"});
+    let path = dir.join("scene.json");
+    std::fs::write(&path, doc.to_string()).unwrap();
+    let out = bin().arg("run").arg(&path).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let s: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let initial = &s["initial"];
+    let close = |key: &str, want: f64| {
+        let got = initial[key].as_f64().unwrap();
+        assert!(
+            (got - want).abs() <= 1e-12,
+            "initial.{key}: {got} vs {want}"
+        );
+    };
+    close("t", 0.0);
+    close("w_V", 0.0);
+    close("u_V", a * 2f64.sqrt());
+    close("zeta_L2", 2f64.sqrt());
+    close("zeta_min", 1.0);
+    // steps[] holds the solved steps 1 to N, from t = k.
+    assert_eq!(s["steps"][0]["n"], 1);
+    assert_eq!(s["steps"].as_array().unwrap().len(), 4);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Scripts read stdout and may log stderr: piped, the long commands draw no progress bar
 /// (no escape sequences, no carriage returns).
 #[test]

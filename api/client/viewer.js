@@ -148,7 +148,8 @@ export class SimulationView {
 
   /** The norms over time from the summary, in `root`; `onPick(t)`: a click shows that time. */
   normPlots(root, summary, onPick) {
-    const s = summary.steps || [];
+    // From t = 0: step 0 (the summary's `initial`) and the solved steps.
+    const s = [...(summary.initial ? [summary.initial] : []), ...(summary.steps || [])];
     const ts = s.map((r) => r.t);
     return [
       ['|w|_V', 'w_V', '#1864ab'],

@@ -1,6 +1,7 @@
 //! The summary of a run (the CLI's stdout and `summary.json`; a stable contract):
-//! `mesh.{nodes, triangles}`, `time.steps`, `final.{t, w_V, u_V, zeta_L2, zeta_min}`,
-//! `steps[]` (the same per step plus `velocity` and `damage` solver reports), `timing`.
+//! `mesh.{nodes, triangles}`, `time.steps`, `initial` and `final` `{t, w_V, u_V, zeta_L2,
+//! zeta_min}` (step 0 and the last step), `steps[]` (the same per solved step, 1 to N, plus
+//! `velocity` and `damage` solver reports), `timing`.
 
 use crate::estimate::ErrorEstimate;
 use crate::problem::{FrictionLaw, MeshPattern, Problem};
@@ -85,6 +86,7 @@ pub struct Physics {
     pub elasticity: &'static str,
 }
 
+/// The norms of one state: t, |w|_V, |u|_V, |ζ|_Z0 and min ζ.
 #[derive(Debug, Clone, Serialize)]
 pub struct FinalNorms {
     pub t: f64,
@@ -130,6 +132,9 @@ pub struct Summary {
     pub physics: Physics,
     pub smallness: SmallnessReport,
     pub solver: SolverSettings,
+    /// Step 0, the initial state at t = 0 (u_0, w_0 = 0, ζ_0): where the norms over time
+    /// start; `steps` holds the solved steps 1 to N.
+    pub initial: FinalNorms,
     #[serde(rename = "final")]
     pub final_: Option<FinalNorms>,
     pub stats: SolverStats,
@@ -140,6 +145,26 @@ pub struct Summary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error_estimate: Option<ErrorEstimate>,
     pub steps: Vec<StepReport>,
+}
+
+/// The norms of step 0: the nodal interpolants of the scene's u_0 and ζ_0 (1 without damage)
+/// at t = 0, the state the stepper starts from (3.11), with w_0 = 0.
+fn initial_norms<const D: usize>(sim: &Simulation<D>) -> FinalNorms {
+    let (p, mesh) = (&sim.problem, &sim.mesh);
+    let u0: Vec<f64> = mesh.nodes.iter().flat_map(|x| p.u0.at(x, 0.0)).collect();
+    let zeta0: Vec<f64> = match &p.damage {
+        Some(d) => mesh.nodes.iter().map(|x| d.zeta0.at(x, 0.0)).collect(),
+        None => vec![1.0; mesh.n_nodes()],
+    };
+    let mass = crate::fem::assembly::mass(mesh, &sim.geo);
+    let mut scratch = vec![0.0; mesh.n_nodes()];
+    FinalNorms {
+        t: 0.0,
+        w_v: 0.0,
+        u_v: crate::fem::norms::strain_norm(mesh, &sim.geo, &u0),
+        zeta_l2: crate::fem::norms::mass_norm(&mass, &zeta0, &mut scratch),
+        zeta_min: zeta0.iter().copied().fold(f64::INFINITY, f64::min),
+    }
 }
 
 impl Summary {
@@ -243,6 +268,7 @@ impl Summary {
             },
             smallness: sim.smallness.clone(),
             solver: sim.settings,
+            initial: initial_norms(sim),
             final_: steps.last().map(|s| FinalNorms {
                 t: s.t,
                 w_v: s.w_v,
