@@ -3,6 +3,7 @@
 //! and names the offending field.
 
 use serde_json::Value;
+use std::path::Path;
 use std::process::Command;
 
 fn bin() -> Command {
@@ -681,4 +682,138 @@ fn a_run_over_the_memory_limit_is_refused_and_auto_takes_what_fits() {
             .unwrap()
             > 0
     );
+}
+
+/// `run --continue DIR --t-end T2` goes on from the last state a finished run's --out kept: the
+/// same steps as one run to T2 — bit for bit on the direct path (every field of the last step
+/// and every step's report), to the solver tolerance on the multigrid path, whose CG starting
+/// guesses are not kept — in 2D and 3D, with slip. Its summary numbers the steps from the
+/// parent's start and names the parent.
+#[test]
+fn a_continued_run_is_one_long_run() {
+    let dir = std::env::temp_dir().join(format!("contact-sim-continue-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let preset = |name: &str| -> Value {
+        serde_json::from_slice(&bin().args(["preset", name]).output().unwrap().stdout).unwrap()
+    };
+    let mut plane = preset("paper-exp3");
+    plane["friction"] =
+        serde_json::json!({"law": "slip_weakening", "mu0": 1.2, "mu1": 0.4, "alpha": 2});
+    plane["mesh"]["h"] = Value::from("1/8");
+    plane["time"] = serde_json::json!({"t_end": 0.25, "k": "1/16"});
+    let mut solid = preset("box-exp3");
+    solid["friction"] = serde_json::json!({"law": "tresca", "g": 2});
+    solid["mesh"]["h"] = Value::from("1/4");
+    solid["time"] = serde_json::json!({"t_end": 0.25, "N": 2});
+    let run = |args: &[&str], out: &Path| -> Value {
+        let o = bin().args(args).arg("--out").arg(out).output().unwrap();
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let last = |out: &Path, n: usize| -> Value {
+        serde_json::from_slice(
+            &std::fs::read(out.join(format!("fields/step_{n:05}.json"))).unwrap(),
+        )
+        .unwrap()
+    };
+    // The box's scene gives N: its continuation keeps k = T/N, not N.
+    for (name, scene, path, k, steps) in [
+        ("plane", &plane, "direct", "1/16", 8),
+        ("solid", &solid, "direct", "1/8", 4),
+        ("solid-mg", &solid, "multigrid", "1/8", 4),
+    ] {
+        let file = dir.join(format!("{name}.json"));
+        std::fs::write(&file, scene.to_string()).unwrap();
+        let file = file.to_str().unwrap();
+        let (first, rest, long) = (
+            dir.join(format!("{name}-1")),
+            dir.join(format!("{name}-2")),
+            dir.join(format!("{name}-long")),
+        );
+        run(&["run", file, "--linear-solver", path], &first);
+        let continued = run(
+            &[
+                "run",
+                "--continue",
+                first.to_str().unwrap(),
+                "--t-end",
+                "0.5",
+                "--linear-solver",
+                path,
+            ],
+            &rest,
+        );
+        let straight = run(
+            &[
+                "run",
+                file,
+                "--t-end",
+                "0.5",
+                "--k",
+                k,
+                "--linear-solver",
+                path,
+            ],
+            &long,
+        );
+        assert_eq!(continued["continued_from"]["step"], steps / 2, "{name}");
+        assert_eq!(
+            continued["steps"].as_array().unwrap().len(),
+            steps,
+            "{name}"
+        );
+        assert!(
+            continued["stats"]["steps_with_slip"].as_u64().unwrap() > 0,
+            "{name} slips"
+        );
+        assert!(
+            !rest
+                .join(format!("fields/step_{:05}.json", steps / 2))
+                .exists(),
+            "{name}: the parent's steps are the parent's"
+        );
+        let (a, b) = (last(&rest, steps), last(&long, steps));
+        assert_eq!(a["t"], b["t"]);
+        if path == "direct" {
+            assert_eq!(a, b, "{name}: the last step, bit for bit");
+            assert_eq!(
+                continued["steps"], straight["steps"],
+                "{name}: every step's norms and solver reports"
+            );
+        } else {
+            let u = |f: &Value| -> Vec<f64> {
+                f["u"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.as_f64().unwrap())
+                    .collect()
+            };
+            let (ua, ub) = (u(&a), u(&b));
+            let max = ub.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            let diff = ua
+                .iter()
+                .zip(&ub)
+                .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+            assert!(
+                max > 0.0 && diff <= 1e-9 * max,
+                "{name}: u differs by {diff} of {max}"
+            );
+        }
+    }
+    // Refused: a final time before the parent's, or between two of its steps.
+    let first = dir.join("plane-1");
+    for t in ["0.125", "0.3"] {
+        let o = bin()
+            .args(["run", "--continue", first.to_str().unwrap(), "--t-end", t])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "--t-end {t}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
 }
