@@ -206,8 +206,8 @@ class Client:
         in ``.json`` or holds a ``/`` (no preset name does); a missing file raises
         ``FileNotFoundError`` naming it.
 
-        A scene identical to one already computed is answered with that job (already
-        succeeded). With ``idempotency_key``, the same key and body give the same job, so a
+        The same computation as one already computed (the same scene but for its name) is
+        answered with that job (already succeeded). With ``idempotency_key``, the same key and body give the same job, so a
         submission can be retried safely after a lost answer."""
         body: Dict[str, Any]
         if isinstance(scene_or_preset, str) and _is_path(scene_or_preset):
