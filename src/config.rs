@@ -52,8 +52,9 @@ pub struct Config {
     pub header_timeout: std::time::Duration,
     /// Certificate and key of HTTPS (`--tls-cert`, `--tls-key`); None: plain HTTP.
     pub tls: Option<crate::tls::ServerTls>,
-    /// Whether requests need an API key (see `crate::auth`); with `Required`, the node
-    /// refuses to start while the store has no active key.
+    /// Whether requests need an API key (see `crate::auth`); with `Required` and no active
+    /// key in the store yet, the node starts but `/healthz` is 503 and everything else 401
+    /// until one is added.
     pub auth: crate::auth::AuthMode,
     /// Free space of the data directory below which the node takes no new work
     /// (`--min-free-disk`, see `crate::disk`).

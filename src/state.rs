@@ -80,18 +80,13 @@ pub fn open_runtime(config: Config) -> Result<Arc<Runtime>, String> {
             MeshBlobs::shared(&config.data_dir).map_err(|e| e.to_string())?,
         ),
     };
+    // A first start (a fresh container) has no key yet: the node starts all the same, so
+    // that `contact-sim keys add` can be run beside it; until then /healthz says why it is
+    // not ready and every other request is 401.
     if config.auth == crate::auth::AuthMode::Required
-        && !store
-            .keys()
-            .map_err(|e| e.to_string())?
-            .iter()
-            .any(|k| k.revoked_at.is_none())
+        && !crate::auth::has_active_key(store.as_ref()).map_err(|e| e.to_string())?
     {
-        return Err(
-            "--auth required, but the store has no active API key: create one with \
-                    contact-sim keys add NAME --admin (same --data-dir or --store)"
-                .into(),
-        );
+        tracing::warn!("{}", crate::auth::NO_KEY_YET);
     }
     let meshes = Arc::new(Meshes::new(store.clone(), blobs));
     store

@@ -14,10 +14,12 @@ use contact_core::study;
 use contact_core::study::presets as study_presets;
 use serde_json::{json, Value};
 
-/// Content hash of a result: scene (canonical JSON), crate version, solver settings.
+/// Content hash of a result: the computation the stored document asks for (canonical JSON,
+/// without the labels that change no number: the same computation under another name is the
+/// same result), crate version, solver settings.
 pub fn scene_hash(scene: &Value) -> String {
     let key = json!({
-        "scene": canonical(scene),
+        "scene": canonical(&scene::computation(scene)),
         "version": env!("CARGO_PKG_VERSION"),
         "solver": SolverSettings::default(),
     });

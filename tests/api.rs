@@ -226,6 +226,24 @@ fn whole_lifecycle_over_http() {
         assert_eq!(s6, [s3[0], s3[1], 0.0, s3[2], 0.0, 0.0]);
     }
     assert!(sigma.iter().any(|&s| s != 0.0));
+    // zlib is the default; ?compression=none is the same arrays raw, in a larger file.
+    assert!(common::vtu::is_compressed(&vtu));
+    let raw = get(a, &format!("/jobs/{id}/fields/8.vtu?compression=none"));
+    assert_eq!(raw.status, 200);
+    let raw = String::from_utf8(raw.body).unwrap();
+    assert!(!common::vtu::is_compressed(&raw) && raw.len() > vtu.len());
+    let raw_xml = roxmltree::Document::parse(&raw).expect("the raw VTU is well-formed XML");
+    for name in ["Points", "connectivity", "u", "w", "zeta", "sigma", "types"] {
+        assert_eq!(
+            vtu_array(&xml, name).1,
+            vtu_array(&raw_xml, name).1,
+            "{name}"
+        );
+    }
+    assert_problem(
+        &get(a, &format!("/jobs/{id}/fields/8.vtu?compression=gzip")),
+        400,
+    );
 
     // PVD: step 0 (the initial state, t = 0) and the 8 stored steps, each a VTU that is there.
     let pvd = String::from_utf8(get(a, &format!("/jobs/{id}/result.pvd")).body).unwrap();
@@ -257,6 +275,9 @@ fn whole_lifecycle_over_http() {
     assert!(vtu_f64s(&xml, "u").iter().all(|&u| u == 0.0));
     assert!(vtu_f64s(&xml, "zeta").iter().all(|&z| z == 1.0));
     assert_eq!(vtu_f64s(&xml, "sigma"), vec![0.0; 6 * triangles]);
+    // The contact arrays every other step has, with no state yet (w_0 = 0): all 0.
+    assert_eq!(vtu_f64s(&xml, "slip_velocity"), vec![0.0; nodes]);
+    assert_eq!(vtu_array(&xml, "contact_state").1, vec![0u8; nodes]);
     let tar = get(a, &format!("/jobs/{id}/archive.tar")).body;
     let names = tar_names(&tar);
     assert!(
@@ -296,6 +317,18 @@ fn whole_lifecycle_over_http() {
         }
     }
     assert_eq!(vtus, 9);
+    // ?compression=none: the same archive with raw VTU files.
+    let raw_tar = get(a, &format!("/jobs/{id}/archive.tar?compression=none")).body;
+    let mut raw_archive = tar::Archive::new(raw_tar.as_slice());
+    let last = raw_archive
+        .entries()
+        .unwrap()
+        .map(|e| e.unwrap())
+        .find(|e| e.path().unwrap().ends_with("fields/step_000008.vtu"));
+    let mut member = String::new();
+    std::io::Read::read_to_string(&mut last.expect("step 8 in the raw archive"), &mut member)
+        .unwrap();
+    assert_eq!(member, raw);
     let xml = roxmltree::Document::parse(&member_pvd).expect("the archive's PVD is XML");
     let files: Vec<&str> = xml
         .descendants()
@@ -326,6 +359,44 @@ fn whole_lifecycle_over_http() {
     );
     assert_eq!(again.status, 200);
     assert_eq!(again.json()["id"], id.as_str());
+    // So is the same computation written out as a scene under another name: a name changes
+    // no number, and the answer is the first job (with its name).
+    let mut renamed = contact_core::scene::presets::get("paper-exp2").unwrap();
+    contact_core::scene::apply_overrides(
+        &mut renamed,
+        &contact_core::scene::Overrides {
+            h: Some(json!("1/8")),
+            k: Some(json!("1/8")),
+            t_end: None,
+        },
+    );
+    renamed["name"] = json!("the same bracket under another name");
+    renamed["$schema"] = json!("/scene.schema.json");
+    let named = post_json(a, "/jobs", &renamed);
+    assert_eq!(
+        named.status,
+        200,
+        "{}",
+        String::from_utf8_lossy(&named.body)
+    );
+    assert_eq!(named.json()["id"], id.as_str());
+    assert_eq!(named.json()["scene"], "paper-exp2");
+    // A changed number is another computation.
+    renamed["damage"]["kappa"] = json!(0.25);
+    let other = post_json(a, "/jobs", &renamed);
+    assert_eq!(
+        other.status,
+        202,
+        "{}",
+        String::from_utf8_lossy(&other.body)
+    );
+    assert_ne!(other.json()["id"], id.as_str());
+    let other_id = other.json()["id"].as_str().unwrap().to_string();
+    wait_status(a, &other_id, &["succeeded"], Duration::from_secs(120));
+    assert_eq!(
+        http(a, "DELETE", &format!("/jobs/{other_id}"), &[], b"").status,
+        204
+    );
 
     let list = get(a, "/jobs?status=succeeded").json();
     assert_eq!(list["jobs"].as_array().unwrap().len(), 1);
@@ -338,9 +409,9 @@ fn whole_lifecycle_over_http() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// Decodes every DataArray (base64, UInt64 byte-count header) and checks its length.
+/// Decodes every DataArray (either encoding, its headers checked) and checks its length.
 fn check_vtu_arrays(vtu: &str, nodes: usize, cells: usize) {
-    use base64::Engine;
+    let compressed = common::vtu::is_compressed(vtu);
     let mut seen = 0;
     for part in vtu.split("<DataArray").skip(1) {
         let (attrs, rest) = part.split_once('>').unwrap();
@@ -358,12 +429,7 @@ fn check_vtu_arrays(vtu: &str, nodes: usize, cells: usize) {
             "UInt8" => 1,
             t => panic!("type {t}"),
         };
-        let bytes = base64::engine::general_purpose::STANDARD
-            .decode(data)
-            .unwrap();
-        let len = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
-        assert_eq!(len, bytes.len() - 8, "{name}");
-        let count = len / width / comps;
+        let count = common::vtu::decode(data, compressed).len() / width / comps;
         let expect = match name.as_str() {
             "Points" | "u" | "w" | "zeta" | "contact_state" | "slip_velocity" => nodes,
             "connectivity" => 3 * cells,
@@ -378,24 +444,16 @@ fn check_vtu_arrays(vtu: &str, nodes: usize, cells: usize) {
 }
 
 /// The `<DataArray Name="name">` of a VTU: its element (checked to be unique) and its
-/// decoded payload (after the UInt64 byte count, which is checked).
+/// decoded payload (its headers checked).
 fn vtu_array<'a>(xml: &'a roxmltree::Document, name: &str) -> (roxmltree::Node<'a, 'a>, Vec<u8>) {
-    use base64::Engine;
     let found: Vec<_> = xml
         .descendants()
         .filter(|n| n.has_tag_name("DataArray") && n.attribute("Name") == Some(name))
         .collect();
     assert_eq!(found.len(), 1, "arrays named {name}");
     let text: String = found[0].children().filter_map(|c| c.text()).collect();
-    let raw = base64::engine::general_purpose::STANDARD
-        .decode(text.trim())
-        .unwrap();
-    let (head, data) = raw.split_at(8);
-    assert_eq!(
-        u64::from_le_bytes(head.try_into().unwrap()) as usize,
-        data.len()
-    );
-    (found[0], data.to_vec())
+    let compressed = xml.root_element().attribute("compressor") == Some("vtkZLibDataCompressor");
+    (found[0], common::vtu::decode(&text, compressed))
 }
 
 /// A Float64 array of a VTU; for `sigma`, also checks that it is the cells' symmetric tensor.

@@ -12,7 +12,10 @@
 //!   answer their problem types; with one worker, an owner who floods 200 jobs does not
 //!   delay another owner's single job by more than the one job running.
 //! * `serve_refuses_to_start_exposed_without_a_decision`: a non-loopback address needs
-//!   `--auth`, and `--auth required` a key.
+//!   `--auth`.
+//! * `a_first_start_without_a_key_waits_for_one`: `--auth required` on an empty store (a
+//!   fresh container) starts, answers 503 on `/healthz` and 401 elsewhere, and serves once
+//!   `contact-sim keys add` has run beside it.
 
 mod service_support;
 
@@ -802,43 +805,12 @@ fn serve_refuses_to_start_exposed_without_a_decision() {
     let out = serve(&["--addr", "0.0.0.0:0"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--auth required"));
-    let out = serve(&["--addr", "127.0.0.1:0", "--auth", "required"]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("no active API key"));
     // --auth off on every address: served, with the warning at start and on /healthz.
-    let mut child = binary()
-        .args([
-            "serve",
-            "--data-dir",
-            d,
-            "--addr",
-            "0.0.0.0:0",
-            "--auth",
-            "off",
-        ])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = std::io::BufRead::lines(std::io::BufReader::new(child.stderr.take().unwrap()));
-    let mut head = String::new();
-    let port = loop {
-        let line = lines.next().expect("serve --auth off started").unwrap();
-        head += &line;
-        if let Some(rest) = line.split("listening on http://0.0.0.0:").nth(1) {
-            break rest
-                .split_whitespace()
-                .next()
-                .unwrap()
-                .parse::<u16>()
-                .unwrap();
-        }
-    };
+    let (mut child, addr, head) = spawn_serve(d, "0.0.0.0:0", "off");
     assert!(
         head.contains("authentication is off on a non-loopback address"),
         "{head}"
     );
-    let addr: SocketAddr = ([127, 0, 0, 1], port).into();
     let h = get(addr, "/healthz").json();
     assert!(
         h["warning"]
@@ -849,6 +821,76 @@ fn serve_refuses_to_start_exposed_without_a_decision() {
     );
     // Anonymous use as on a laptop: no key.
     assert_eq!(get(addr, "/jobs").status, 200);
+    let _ = child.kill();
+    let _ = child.wait();
+}
+
+/// `serve --data-dir d --addr addr --auth auth` in the background: the child, the address it
+/// listens on (its port read from the log on stderr) and the log up to that line.
+fn spawn_serve(d: &str, addr: &str, auth: &str) -> (std::process::Child, SocketAddr, String) {
+    let mut child = binary()
+        .args(["serve", "--data-dir", d, "--addr", addr, "--auth", auth])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufRead::lines(std::io::BufReader::new(child.stderr.take().unwrap()));
+    let mut head = String::new();
+    let host = addr.rsplit_once(':').unwrap().0;
+    let port = loop {
+        let line = lines.next().expect("serve started").unwrap();
+        head += &line;
+        head.push('\n');
+        if let Some(rest) = line.split(&format!("listening on http://{host}:")).nth(1) {
+            break rest
+                .split_whitespace()
+                .next()
+                .unwrap()
+                .parse::<u16>()
+                .unwrap();
+        }
+    };
+    // The rest of the log is not read: drained, so the node never blocks on a full pipe.
+    std::thread::spawn(move || lines.for_each(drop));
+    (child, ([127, 0, 0, 1], port).into(), head)
+}
+
+/// The documented first start of the image (`docker run … contact-sim` with `--auth
+/// required` and an empty volume), without Docker: the node starts, says on its log and on
+/// `/healthz` (503) that it waits for a key, refuses every non-public request (401), and
+/// once `contact-sim keys add` has run on the same data directory beside it, is healthy and
+/// serves the key.
+#[test]
+fn a_first_start_without_a_key_waits_for_one() {
+    let dir = TempDir::new("auth-first-start");
+    let d = dir.0.to_str().unwrap();
+    let (mut child, addr, head) = spawn_serve(d, "127.0.0.1:0", "required");
+    assert!(head.contains("no active API key yet"), "{head}");
+    let h = get(addr, "/healthz");
+    assert_eq!(h.status, 503);
+    let detail = h.json()["detail"].as_str().unwrap().to_string();
+    assert!(detail.contains("contact-sim keys add"), "{detail}");
+    assert_eq!(get(addr, "/jobs").status, 401);
+    assert_eq!(
+        get(addr, "/presets").status,
+        200,
+        "public routes are served"
+    );
+
+    let out = binary()
+        .args(["keys", "add", "admin", "--admin", "--data-dir", d])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let token = String::from_utf8(out.stdout).unwrap().trim().to_string();
+    assert_eq!(get(addr, "/healthz").status, 200);
+    let jobs = call(addr, "GET", "/jobs", Some(&token), &[], b"");
+    assert_eq!(jobs.status, 200, "{}", jobs.text());
+    assert_eq!(get(addr, "/jobs").status, 401, "still no anonymous use");
     let _ = child.kill();
     let _ = child.wait();
 }

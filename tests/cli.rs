@@ -3,6 +3,7 @@
 //! and names the offending field.
 
 use serde_json::Value;
+use std::path::Path;
 use std::process::Command;
 
 fn bin() -> Command {
@@ -342,6 +343,60 @@ fn study_file_prints_the_table_as_json_or_text() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The summary's `initial` is step 0, the state at t = 0 the norms over time start from:
+/// w_0 = 0, and for u_0 = (a x, 0) on the 2 × 1 plate with ζ_0 = 1, ε(u_0) = diag(a, 0), so
+/// |u_0|_V = a √2, |ζ_0|_Z0 = (∫ 1)^½ = √2 and min ζ_0 = 1.
+#[test]
+fn the_summary_starts_at_the_initial_state() {
+    let dir = std::env::temp_dir().join(format!("contact-sim-initial-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut doc: Value = serde_json::from_slice(
+        &bin()
+            .args(["preset", "paper-exp2"])
+            .output()
+            .unwrap()
+            .stdout,
+    )
+    .unwrap();
+    assert_eq!(
+        (
+            doc["domain"]["width"].as_f64(),
+            doc["domain"]["height"].as_f64()
+        ),
+        (Some(2.0), Some(1.0))
+    );
+    let a = 0.01;
+    doc["initial"] = serde_json::json!({"u0": [format!("{a}*x"), 0]});
+    doc["mesh"]["h"] = Value::from("1/4");
+    doc["time"] = serde_json::json!({"t_end": 1, "k": "1/4"});
+    let path = dir.join("scene.json");
+    std::fs::write(&path, doc.to_string()).unwrap();
+    let out = bin().arg("run").arg(&path).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let s: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let initial = &s["initial"];
+    let close = |key: &str, want: f64| {
+        let got = initial[key].as_f64().unwrap();
+        assert!(
+            (got - want).abs() <= 1e-12,
+            "initial.{key}: {got} vs {want}"
+        );
+    };
+    close("t", 0.0);
+    close("w_V", 0.0);
+    close("u_V", a * 2f64.sqrt());
+    close("zeta_L2", 2f64.sqrt());
+    close("zeta_min", 1.0);
+    // steps[] holds the solved steps 1 to N, from t = k.
+    assert_eq!(s["steps"][0]["n"], 1);
+    assert_eq!(s["steps"].as_array().unwrap().len(), 4);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Scripts read stdout and may log stderr: piped, the long commands draw no progress bar
 /// (no escape sequences, no carriage returns).
 #[test]
@@ -369,6 +424,61 @@ fn piped_stderr_carries_no_progress_bar() {
     assert!(!err.contains(['\x1b', '\r']), "{err:?}");
     let report: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(report["cases"].as_array().is_some_and(|c| !c.is_empty()));
+}
+
+/// `contact-sim … | head`: a reader that takes what it wants and closes the pipe ends the
+/// writer quietly (status 0, nothing on stderr), not with a panic. Two readers: one that reads
+/// one line of a summary larger than a pipe's buffer (so the rest is written after it has
+/// gone), one that has gone before the run prints anything.
+#[test]
+fn a_closed_pipe_on_stdout_ends_the_command_quietly() {
+    use std::io::BufRead;
+    use std::process::Stdio;
+    let run = |k: &str| {
+        let mut cmd = bin();
+        cmd.args([
+            "run",
+            "--preset",
+            "paper-convergence",
+            "--h",
+            "1/4",
+            "--k",
+            k,
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+        cmd
+    };
+    // Linux pipes hold 64 KiB: a summary of 512 steps is larger.
+    let mut child = run("1/512").spawn().unwrap();
+    let mut first = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    assert_eq!(first, "{\n", "the summary JSON begins");
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && err.is_empty(),
+        "{:?}: {err}",
+        out.status
+    );
+    let whole = run("1/512").output().unwrap();
+    assert!(
+        whole.stdout.len() > 1 << 16,
+        "the summary ({} bytes) outgrows the pipe's buffer",
+        whole.stdout.len()
+    );
+
+    let mut child = run("1/16").spawn().unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && !err.contains("panicked"),
+        "{:?}: {err}",
+        out.status
+    );
 }
 
 /// On a terminal `run` draws its bar (steps and ETA) on stderr. The terminal is the
@@ -416,6 +526,8 @@ fn a_mesh_file_is_read_next_to_the_scene() {
     let out = bin()
         .arg("run")
         .arg(&path)
+        .arg("--out")
+        .arg(dir.join("out"))
         .current_dir(std::env::temp_dir())
         .output()
         .unwrap();
@@ -442,6 +554,49 @@ fn a_mesh_file_is_read_next_to_the_scene() {
     );
     assert!((a - b).abs() <= 1e-12 * b, "{a} vs {b}");
     assert_eq!(s["mesh"]["source"], "mesh meshes/plate.msh");
+    // A given mesh has no n = 1/h: its summary gives the cells' diameters (longest edges),
+    // here recomputed from the mesh the run wrote.
+    assert!(s["mesh"].get("cells_per_unit").is_none() && s["mesh"].get("h").is_none());
+    let mesh: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("out/mesh.json")).unwrap()).unwrap();
+    let point = |i: &Value| -> Vec<f64> {
+        mesh["nodes"][i.as_u64().unwrap() as usize]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let diameters: Vec<f64> = mesh["triangles"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| {
+            let p: Vec<Vec<f64>> = t.as_array().unwrap().iter().map(point).collect();
+            [(0, 1), (1, 2), (0, 2)]
+                .iter()
+                .map(|&(a, b)| ((p[a][0] - p[b][0]).powi(2) + (p[a][1] - p[b][1]).powi(2)).sqrt())
+                .fold(0.0, f64::max)
+        })
+        .collect();
+    let size = &s["mesh"]["cell_size"];
+    let close = |key: &str, v: f64| {
+        let got = size[key].as_f64().unwrap();
+        assert!(
+            (got - v).abs() <= 1e-12 * v,
+            "cell_size.{key}: {got} vs {v}"
+        );
+    };
+    close(
+        "min",
+        diameters.iter().copied().fold(f64::INFINITY, f64::min),
+    );
+    close("max", diameters.iter().copied().fold(0.0, f64::max));
+    close(
+        "mean",
+        diameters.iter().sum::<f64>() / diameters.len() as f64,
+    );
+    assert!(size["min"].as_f64() < size["mean"].as_f64());
 
     doc["domain"]["mesh"] = Value::from("meshes/missing.msh");
     std::fs::write(&path, doc.to_string()).unwrap();
@@ -527,4 +682,138 @@ fn a_run_over_the_memory_limit_is_refused_and_auto_takes_what_fits() {
             .unwrap()
             > 0
     );
+}
+
+/// `run --continue DIR --t-end T2` goes on from the last state a finished run's --out kept: the
+/// same steps as one run to T2 — bit for bit on the direct path (every field of the last step
+/// and every step's report), to the solver tolerance on the multigrid path, whose CG starting
+/// guesses are not kept — in 2D and 3D, with slip. Its summary numbers the steps from the
+/// parent's start and names the parent.
+#[test]
+fn a_continued_run_is_one_long_run() {
+    let dir = std::env::temp_dir().join(format!("contact-sim-continue-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let preset = |name: &str| -> Value {
+        serde_json::from_slice(&bin().args(["preset", name]).output().unwrap().stdout).unwrap()
+    };
+    let mut plane = preset("paper-exp3");
+    plane["friction"] =
+        serde_json::json!({"law": "slip_weakening", "mu0": 1.2, "mu1": 0.4, "alpha": 2});
+    plane["mesh"]["h"] = Value::from("1/8");
+    plane["time"] = serde_json::json!({"t_end": 0.25, "k": "1/16"});
+    let mut solid = preset("box-exp3");
+    solid["friction"] = serde_json::json!({"law": "tresca", "g": 2});
+    solid["mesh"]["h"] = Value::from("1/4");
+    solid["time"] = serde_json::json!({"t_end": 0.25, "N": 2});
+    let run = |args: &[&str], out: &Path| -> Value {
+        let o = bin().args(args).arg("--out").arg(out).output().unwrap();
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let last = |out: &Path, n: usize| -> Value {
+        serde_json::from_slice(
+            &std::fs::read(out.join(format!("fields/step_{n:05}.json"))).unwrap(),
+        )
+        .unwrap()
+    };
+    // The box's scene gives N: its continuation keeps k = T/N, not N.
+    for (name, scene, path, k, steps) in [
+        ("plane", &plane, "direct", "1/16", 8),
+        ("solid", &solid, "direct", "1/8", 4),
+        ("solid-mg", &solid, "multigrid", "1/8", 4),
+    ] {
+        let file = dir.join(format!("{name}.json"));
+        std::fs::write(&file, scene.to_string()).unwrap();
+        let file = file.to_str().unwrap();
+        let (first, rest, long) = (
+            dir.join(format!("{name}-1")),
+            dir.join(format!("{name}-2")),
+            dir.join(format!("{name}-long")),
+        );
+        run(&["run", file, "--linear-solver", path], &first);
+        let continued = run(
+            &[
+                "run",
+                "--continue",
+                first.to_str().unwrap(),
+                "--t-end",
+                "0.5",
+                "--linear-solver",
+                path,
+            ],
+            &rest,
+        );
+        let straight = run(
+            &[
+                "run",
+                file,
+                "--t-end",
+                "0.5",
+                "--k",
+                k,
+                "--linear-solver",
+                path,
+            ],
+            &long,
+        );
+        assert_eq!(continued["continued_from"]["step"], steps / 2, "{name}");
+        assert_eq!(
+            continued["steps"].as_array().unwrap().len(),
+            steps,
+            "{name}"
+        );
+        assert!(
+            continued["stats"]["steps_with_slip"].as_u64().unwrap() > 0,
+            "{name} slips"
+        );
+        assert!(
+            !rest
+                .join(format!("fields/step_{:05}.json", steps / 2))
+                .exists(),
+            "{name}: the parent's steps are the parent's"
+        );
+        let (a, b) = (last(&rest, steps), last(&long, steps));
+        assert_eq!(a["t"], b["t"]);
+        if path == "direct" {
+            assert_eq!(a, b, "{name}: the last step, bit for bit");
+            assert_eq!(
+                continued["steps"], straight["steps"],
+                "{name}: every step's norms and solver reports"
+            );
+        } else {
+            let u = |f: &Value| -> Vec<f64> {
+                f["u"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.as_f64().unwrap())
+                    .collect()
+            };
+            let (ua, ub) = (u(&a), u(&b));
+            let max = ub.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            let diff = ua
+                .iter()
+                .zip(&ub)
+                .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+            assert!(
+                max > 0.0 && diff <= 1e-9 * max,
+                "{name}: u differs by {diff} of {max}"
+            );
+        }
+    }
+    // Refused: a final time before the parent's, or between two of its steps.
+    let first = dir.join("plane-1");
+    for t in ["0.125", "0.3"] {
+        let o = bin()
+            .args(["run", "--continue", first.to_str().unwrap(), "--t-end", t])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "--t-end {t}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
 }

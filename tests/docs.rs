@@ -10,6 +10,7 @@ mod common;
 
 use common::server::Server;
 use contact_sim::Config;
+use serde_json::Value;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -292,21 +293,48 @@ fn named_paths_exist() {
     );
 }
 
-/// The ```sh blocks of a Markdown text, in order; with `section`, only those under that
-/// heading (up to the next heading of the same or a higher level).
-fn shell_blocks(text: &str, section: Option<&str>) -> Vec<String> {
-    let mut blocks = Vec::new();
+/// A ```sh block of the guide and the output it shows: the ```text block that follows it
+/// with only blank lines between, if any.
+struct Block {
+    code: String,
+    expected: Option<String>,
+}
+
+/// The ```sh blocks of a Markdown text, in order, with the output each shows; with
+/// `section`, only those under that heading (up to the next heading of the same or a higher
+/// level).
+fn blocks(text: &str, section: Option<&str>) -> Vec<Block> {
+    let mut blocks: Vec<Block> = Vec::new();
     let mut inside = section.is_none();
     let level = section.map_or(0, |s| s.chars().take_while(|&c| c == '#').count());
-    let mut current: Option<String> = None;
+    // The fence being read: its language and text so far.
+    let mut current: Option<(&str, String)> = None;
+    // Whether the last thing read was a shell block (blank lines aside).
+    let mut after_shell = false;
     for line in text.lines() {
-        if let Some(b) = current.as_mut() {
+        if let Some((_, b)) = current.as_mut() {
             if line.trim_start().starts_with("```") {
-                blocks.push(current.take().unwrap());
+                let (lang, b) = current.take().unwrap();
+                match lang {
+                    "sh" => {
+                        blocks.push(Block {
+                            code: b,
+                            expected: None,
+                        });
+                        after_shell = true;
+                        continue;
+                    }
+                    "text" if after_shell => blocks.last_mut().unwrap().expected = Some(b),
+                    _ => {}
+                }
+                after_shell = false;
             } else {
                 b.push_str(line);
                 b.push('\n');
             }
+            continue;
+        }
+        if line.trim().is_empty() {
             continue;
         }
         if line.starts_with('#') {
@@ -317,11 +345,38 @@ fn shell_blocks(text: &str, section: Option<&str>) -> Vec<String> {
                 inside = false;
             }
         }
-        if inside && line.trim_start() == "```sh" {
-            current = Some(String::new());
+        match line.trim_start() {
+            "```sh" if inside => current = Some(("sh", String::new())),
+            "```text" if inside => current = Some(("text", String::new())),
+            l if l.starts_with("```") => current = Some(("", String::new())),
+            _ => after_shell = false,
         }
     }
     blocks
+}
+
+/// What a block printed says about itself: no value of the JSON it printed is `null` alone
+/// or an object of nulls only (a jq filter that names fields at the wrong level), and no line
+/// of other output is `null`.
+fn check_printed(name: &str, code: &str, printed: &str) {
+    let values: Result<Vec<Value>, _> = serde_json::Deserializer::from_str(printed)
+        .into_iter::<Value>()
+        .collect();
+    let all_null = |v: &Value| match v {
+        Value::Null => true,
+        Value::Object(o) => !o.is_empty() && o.values().all(Value::is_null),
+        _ => false,
+    };
+    match values {
+        Ok(values) => assert!(
+            !values.iter().any(all_null),
+            "{name}: a block printed nothing but null:\n{code}\n--- printed\n{printed}"
+        ),
+        Err(_) => assert!(
+            !printed.lines().any(|l| l.trim() == "null"),
+            "{name}: a block printed a line of null:\n{code}\n--- printed\n{printed}"
+        ),
+    }
 }
 
 /// Whether bash, curl and jq are here; with `CI` set they must be.
@@ -353,10 +408,14 @@ fn server(tag: &str) -> (Server, PathBuf) {
     (srv, data)
 }
 
+/// The line a script prints between two blocks, to tell their outputs apart.
+const BLOCK_END: &str = "@@ end of block @@";
+
 /// Runs shell blocks in one bash (`set -euo pipefail`), in a fresh folder where `crates`
 /// leads to the repository's (the meshes it ships), with localhost:8080 replaced by the
-/// server's address. Returns the folder.
-fn run_blocks(name: &str, blocks: &[String], srv: &Server, scratch: &Path) -> PathBuf {
+/// server's address; checks what each printed ([`check_printed`], and the output the guide
+/// shows for it, if any). Returns the folder.
+fn run_blocks(name: &str, blocks: &[Block], srv: &Server, scratch: &Path) -> PathBuf {
     let dir = scratch.join(name.replace('/', "-"));
     std::fs::create_dir_all(&dir).unwrap();
     let link = dir.join("crates");
@@ -367,11 +426,14 @@ fn run_blocks(name: &str, blocks: &[String], srv: &Server, scratch: &Path) -> Pa
     let script = blocks
         .iter()
         .map(|b| {
-            b.replace("localhost:8080", &addr)
-                .replace("127.0.0.1:8080", &addr)
+            let code = b
+                .code
+                .replace("localhost:8080", &addr)
+                .replace("127.0.0.1:8080", &addr);
+            format!("{code}printf '\\n{BLOCK_END}\\n'\n")
         })
         .collect::<Vec<_>>()
-        .join("\n");
+        .join("");
     let t0 = std::time::Instant::now();
     let out = Command::new("bash")
         .arg("-c")
@@ -391,6 +453,19 @@ fn run_blocks(name: &str, blocks: &[String], srv: &Server, scratch: &Path) -> Pa
         !stdout.contains("\"status\":5") && !stdout.contains("\"title\":\"internal"),
         "{name}: a server error:\n{stdout}"
     );
+    let printed: Vec<&str> = stdout.split(&format!("\n{BLOCK_END}\n")).collect();
+    assert_eq!(printed.len(), blocks.len() + 1, "{name}: {stdout}");
+    for (b, printed) in blocks.iter().zip(&printed) {
+        check_printed(name, &b.code, printed);
+        if let Some(expected) = &b.expected {
+            assert_eq!(
+                printed.trim(),
+                expected.trim(),
+                "{name}: the block prints other than the guide shows:\n{}",
+                b.code
+            );
+        }
+    }
     eprintln!(
         "{name}: {} blocks ran in {:.1} s",
         blocks.len(),
@@ -405,7 +480,7 @@ fn quick_start_runs_as_written() {
         return;
     }
     let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
-    let blocks = shell_blocks(&readme, Some("### By curl"));
+    let blocks = blocks(&readme, Some("### By curl"));
     assert!(
         blocks.len() >= 2,
         "README's quick start has its curl blocks"
@@ -447,9 +522,10 @@ fn tutorials_and_how_tos_run_as_written() {
         let text = std::fs::read_to_string(root().join("docs/src").join(chapter)).unwrap();
         // Blocks that talk to the service; building, installing and other machines' set-up
         // are not run here.
-        let blocks: Vec<String> = shell_blocks(&text, None)
+        let blocks: Vec<Block> = blocks(&text, None)
             .into_iter()
             .filter(|b| {
+                let b = &b.code;
                 b.contains("localhost:8080") && !b.contains("cargo ") && !b.contains("pip ")
             })
             .collect();

@@ -269,6 +269,7 @@ fn upload_summaries_listing_and_files() {
     );
     for k in [
         "min_cell_size",
+        "mean_cell_size",
         "max_cell_size",
         "min_quality",
         "mean_quality",

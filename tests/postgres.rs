@@ -410,8 +410,8 @@ fn kill_9_worker_mid_job() {
         resumed_at >= checkpoint,
         "resumed at {resumed_at} < {checkpoint}"
     );
-    // Bit for bit equal to an uninterrupted run: the same scene under another name (no
-    // deduplication), run by the survivor alone, and an in-process run.
+    // Bit for bit equal to an uninterrupted run: the same scene under another idempotency key
+    // (no deduplication), run by the survivor alone, and an in-process run.
     let mut straight_scene = scene.clone();
     straight_scene["name"] = json!("straight");
     let straight = submit(api.addr, &straight_scene, "straight");

@@ -380,7 +380,7 @@ $('#format-scene').addEventListener('click', () => {
 });
 
 // A scene on an uploaded mesh starts from the selected preset (an imported mesh has no h).
-new MeshUpload($('#mesh-upload'), {
+const meshUpload = new MeshUpload($('#mesh-upload'), {
   baseScene: async () => {
     // A study preset starts from the scene it studies.
     if (isStudy()) {
@@ -458,6 +458,8 @@ presetSelect.addEventListener('change', () => {
   describePreset();
   editorFollowsForm();
   saveForm();
+  // The mesh form's note names the preset its scene starts from: the one now selected.
+  meshUpload.updateBaseHint();
 });
 for (const k of ['h', 'k', 't_end']) {
   $(`#ov-${k}`).addEventListener('input', () => {

@@ -5,7 +5,7 @@
 //
 // The summary's figures may come at the top level of the answer or under "summary":
 //   {id, bytes, created_at, dimension, nodes, cells, boundary_facets, groups: [{name, facets,
-//    measure}], bounding_box: {min, max}, min_cell_size, max_cell_size, min_quality,
+//    measure}], bounding_box: {min, max}, min_cell_size, mean_cell_size, max_cell_size, min_quality,
 //    mean_quality}
 
 import * as api from './api.js';
@@ -173,7 +173,7 @@ export class MeshUpload {
         row('cells', m.dimension === 3 ? 'cells (tetrahedra)' : 'cells (triangles)', String(m.cells)),
         row('boundary_facets', 'boundary facets', String(m.boundary_facets ?? '–')),
         row('bounding_box', 'bounding box', `${point(bb.min)} – ${point(bb.max)}`, el('br'), el('small', {}, size)),
-        row('cell_size', 'cell size', `${fmt(m.min_cell_size)} – ${fmt(m.max_cell_size)}`),
+        row('cell_size', 'cell size', `${fmt(m.min_cell_size)} – ${fmt(m.max_cell_size)}${m.mean_cell_size != null ? ` (mean ${fmt(m.mean_cell_size)})` : ''}`),
         row('quality', 'quality (1 = equilateral)', `min ${fmt(m.min_quality, 3)}, mean ${fmt(m.mean_quality, 3)}`)));
 
     const groups = m.groups || [];
@@ -204,7 +204,7 @@ export class MeshUpload {
     const form = el('form', { id: 'mesh-form', novalidate: true, onsubmit: (ev) => { ev.preventDefault(); this.build(); } },
       groups.length
         ? el('div', { class: 'table-wrap' }, el('table', { id: 'mesh-groups', class: 'mesh-groups' },
-          el('caption', {}, 'Boundary conditions on the physical groups (free: traction-free)'),
+          el('caption', {}, 'Boundary conditions on the physical groups (free: traction-free, left out of the scene)'),
           el('thead', {}, el('tr', {}, el('th', {}, 'group'), el('th', {}, 'condition'), el('th', {}, `f2 (${dim === 3 ? 'x, y, z' : 'x, y'})`))),
           el('tbody', {}, this.rows.map((r) => r.tr))))
         : el('p', { class: 'warning' }, 'The mesh has no physical groups of facets: bind the boundary in the scene editor with "from"/"to" segments or "on" formulas.'),
@@ -223,7 +223,7 @@ export class MeshUpload {
     if (!hint) return;
     try {
       const { name } = await this.baseScene();
-      hint.textContent = `Material, time, loads, damage, friction and output are taken from the preset ${name} (chosen above); unbound groups are traction-free.`;
+      hint.textContent = `Material, time, loads, damage, friction and output are taken from the preset ${name} (chosen above). A group set to free is not written into the scene: the scene format has no "free" part, and every boundary no part names is traction-free.`;
     } catch {
       hint.textContent = '';
     }

@@ -138,14 +138,18 @@ export class SimulationView {
     }
     else if (tets != null) cells = `${m.nodes} nodes · ${tets} tetrahedra`;
     else cells = `${m.nodes} nodes · ${m.triangles} triangles`;
+    // A given mesh has no one h: its cells' sizes range from min to max.
+    const h = m.h != null ? `h = ${fmtStep(m.h)}`
+      : m.cell_size ? `cell size ${fmt(m.cell_size.min)} – ${fmt(m.cell_size.max)} (mean ${fmt(m.cell_size.mean)})` : 'h = ?';
     return el('p', { class: 'run-info' },
-      `${cells} · h = ${fmtStep(m.h)} · k = ${fmtStep(t.k)} · ${t.steps} steps · `,
+      `${cells} · ${h} · k = ${fmtStep(t.k)} · ${t.steps} steps · `,
       `solved in ${fmtSeconds(summary.timing?.solve_s)} · ${summary.stats?.steps_with_slip ?? 0} steps with slip`);
   }
 
   /** The norms over time from the summary, in `root`; `onPick(t)`: a click shows that time. */
   normPlots(root, summary, onPick) {
-    const s = summary.steps || [];
+    // From t = 0: step 0 (the summary's `initial`) and the solved steps.
+    const s = [...(summary.initial ? [summary.initial] : []), ...(summary.steps || [])];
     const ts = s.map((r) => r.t);
     return [
       ['|w|_V', 'w_V', '#1864ab'],

@@ -57,6 +57,18 @@ impl AuthMode {
     }
 }
 
+/// Why a node with `--auth required` is not ready while its store has no active key (its
+/// start-up log, its `/healthz`).
+pub const NO_KEY_YET: &str = "--auth required, but the store has no active API key yet: \
+    every request but the public ones is 401 until one is created with \
+    contact-sim keys add NAME --admin (same --data-dir or --store; in a container, \
+    docker exec CONTAINER contact-sim keys add NAME --admin --data-dir /data)";
+
+/// Whether the store has a key that is not revoked.
+pub fn has_active_key(store: &dyn crate::store::Store) -> Result<bool, crate::store::StoreError> {
+    Ok(store.keys()?.iter().any(|k| k.revoked_at.is_none()))
+}
+
 /// Who is asking, as the middleware resolved it (a request extension every handler of a
 /// non-public route finds).
 #[derive(Debug, Clone)]

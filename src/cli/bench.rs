@@ -50,7 +50,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         let threads = study::Execution::default().threads;
         return match bench::tables(repeat, threads) {
             Ok(r) => {
-                println!("{}", pretty(&r));
+                outln!("{}", pretty(&r));
                 ExitCode::SUCCESS
             }
             Err(e) => fail(1, &e.to_string()),
@@ -59,7 +59,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
     if args.orderings {
         return match bench::orderings(&args.preset, &args.levels, repeat) {
             Ok(r) => {
-                println!("{}", pretty(&r));
+                outln!("{}", pretty(&r));
                 ExitCode::SUCCESS
             }
             Err(e) => fail(1, &e.to_string()),
@@ -68,7 +68,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
     if args.schur {
         return match bench::schur(&args.preset, &args.levels, repeat) {
             Ok(r) => {
-                println!("{}", pretty(&r));
+                outln!("{}", pretty(&r));
                 ExitCode::SUCCESS
             }
             Err(e) => fail(1, &e.to_string()),
@@ -93,7 +93,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
     ) {
         Ok(report) => {
             eprintln!("{}", report.table());
-            println!("{}", pretty(&report));
+            outln!("{}", pretty(&report));
             ExitCode::SUCCESS
         }
         Err(e) => fail(1, &e.to_string()),

@@ -172,7 +172,7 @@ fn run(args: &KeysArgs) -> Result<ExitCode, String> {
                         "contact-sim: key {name:?} created ({}); its token follows, shown this once: keep it secret",
                         if rec.admin { "admin" } else { "user" }
                     );
-                    println!("{token}");
+                    outln!("{token}");
                     Ok(ExitCode::SUCCESS)
                 }
             }
@@ -180,7 +180,7 @@ fn run(args: &KeysArgs) -> Result<ExitCode, String> {
         KeysCommand::List => {
             let keys = store.keys().map_err(|e| e.to_string())?;
             let list: Vec<_> = keys.iter().map(view).collect();
-            println!("{}", pretty(&json!({ "keys": list })));
+            outln!("{}", pretty(&json!({ "keys": list })));
             Ok(ExitCode::SUCCESS)
         }
         KeysCommand::Revoke { name } => {
@@ -203,7 +203,7 @@ fn run(args: &KeysArgs) -> Result<ExitCode, String> {
                 quotas: new,
                 ..key.clone()
             };
-            println!("{}", pretty(&view(&updated)));
+            outln!("{}", pretty(&view(&updated)));
             Ok(ExitCode::SUCCESS)
         }
     }

@@ -1,6 +1,21 @@
 //! The command line's parts: the argument types ([`Cli`], [`Command`]) and one module per
 //! command, each with its flags and what it does. `main.rs` parses and dispatches.
 
+/// `println!` for a command's output on stdout: a reader that has gone away (`contact-sim … |
+/// head`) ends the program quietly, see [`write_stdout`].
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::cli::write_stdout(format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+
+/// `print!` for a command's output on stdout, see [`outln!`].
+macro_rules! out {
+    ($($arg:tt)*) => {
+        $crate::cli::write_stdout(format_args!($($arg)*))
+    };
+}
+
 pub mod bench;
 pub mod keys;
 pub mod logging;
@@ -77,6 +92,23 @@ pub fn fail(code: u8, msg: &str) -> ExitCode {
 pub fn fatal(msg: &str) -> ExitCode {
     tracing::error!("{msg}");
     ExitCode::FAILURE
+}
+
+/// Writes a command's output to stdout and flushes it. When the reader has closed the pipe
+/// (`contact-sim presets | head -1`) nobody wants the rest: the program ends at once with
+/// status 0 and no message, as `head` expects of its writer (Rust ignores SIGPIPE, so without
+/// this `println!` would panic). Any other write error ends it with status 1 and the reason.
+pub fn write_stdout(args: std::fmt::Arguments) {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    match stdout.write_fmt(args).and_then(|()| stdout.flush()) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
+        Err(e) => {
+            eprintln!("contact-sim: cannot write to stdout: {e}");
+            std::process::exit(1)
+        }
+    }
 }
 
 /// The indented JSON every command prints.

@@ -13,7 +13,7 @@ pub struct PresetArgs {
 /// `presets`: one line per preset, its name and what it shows.
 pub fn list() -> ExitCode {
     for name in presets::names() {
-        println!("{name:20} {}", presets::description(name).unwrap_or(""));
+        outln!("{name:20} {}", presets::description(name).unwrap_or(""));
     }
     ExitCode::SUCCESS
 }
@@ -22,7 +22,7 @@ pub fn list() -> ExitCode {
 pub fn main(args: PresetArgs) -> ExitCode {
     match presets::get(&args.name) {
         Some(doc) => {
-            println!("{}", pretty(&doc));
+            outln!("{}", pretty(&doc));
             ExitCode::SUCCESS
         }
         None => fail(2, &unknown(&args.name)),

@@ -1,4 +1,5 @@
-//! `contact-sim run`: one simulation, its summary on stdout, its files with --out.
+//! `contact-sim run`: one simulation, its summary on stdout, its files with --out; or the
+//! continuation of a finished run (`--continue DIR --t-end T2`) from the state its --out kept.
 
 use super::mesh_files::SceneDir;
 use super::{fail, preset, pretty, progress};
@@ -6,12 +7,14 @@ use clap::Args;
 use contact_core::admission::{self, Limits, Pointers};
 use contact_core::mesh::AnyMesh;
 use contact_core::output::fields::MeshJson;
+use contact_core::output::stored::{decode_state, encode_state};
 use contact_core::output::Summary;
 use contact_core::problem::Problem;
-use contact_core::run::RunError;
+use contact_core::run::{Hooks, Run, RunError};
 use contact_core::scene::{self, presets, Overrides};
+use contact_core::solve::stepper::{State, StepReport};
 use contact_core::solve::{SolveError, SolverSettings};
-use serde_json::Value;
+use serde_json::{json, Value};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -32,9 +35,20 @@ pub struct RunArgs {
     /// Final time T.
     #[arg(long = "t-end")]
     pub t_end: Option<String>,
-    /// Directory for summary.json, mesh.json and fields/step_NNNNN.json.
+    /// Directory for summary.json, mesh.json and fields/step_NNNNN.json, and what a
+    /// continuation needs: scene.json (the scene as run) and state.bin (the last state).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Continue the finished run whose --out folder is DIR to --t-end, with its step k: the
+    /// same steps as one run to --t-end (bit for bit on the direct path), numbered from the
+    /// parent's start. Takes no scene, --preset, --h or --k.
+    #[arg(
+        long = "continue",
+        value_name = "DIR",
+        conflicts_with_all = ["scene", "preset", "h", "k"],
+        requires = "t_end"
+    )]
+    pub continue_from: Option<PathBuf>,
     /// Relative optimality residual of the sub-problem solvers.
     #[arg(long, default_value_t = SolverSettings::default().tolerance)]
     pub tol: f64,
@@ -52,7 +66,16 @@ pub struct RunArgs {
 }
 
 pub fn main(args: RunArgs) -> ExitCode {
-    let mut doc = match load_scene(args.scene.as_deref(), args.preset.as_deref()) {
+    let parent = match args.continue_from.as_deref().map(Parent::read) {
+        None => None,
+        Some(Ok(p)) => Some(p),
+        Some(Err(e)) => return fail(2, &e),
+    };
+    let loaded = match &parent {
+        Some(p) => Ok(p.scene.clone()),
+        None => load_scene(args.scene.as_deref(), args.preset.as_deref()),
+    };
+    let mut doc = match loaded {
         Ok(d) => d,
         Err(e) => return fail(2, &e),
     };
@@ -70,19 +93,25 @@ pub fn main(args: RunArgs) -> ExitCode {
         t_end: to_value(args.t_end),
     };
     scene::apply_overrides(&mut doc, &overrides);
+    if let (Some(p), Some(time)) = (&parent, doc.get_mut("time")) {
+        // The parent's step k, exactly: the number of steps follows from --t-end.
+        *time = json!({"t_end": time["t_end"], "k": p.k});
+    }
     if let (Some(path), Some(top)) = (&args.linear_solver, doc.as_object_mut()) {
         let solver = top.entry("solver").or_insert_with(|| serde_json::json!({}));
         if let Some(s) = solver.as_object_mut() {
             s.insert("linear".into(), Value::String(path.clone()));
         }
     }
-    // Mesh files are looked up next to the scene file (the working directory for a preset).
+    // Mesh files are looked up next to the scene file (the working directory for a preset; a
+    // continued run's scene names its mesh file by an absolute path).
     let dir = args
         .scene
         .as_deref()
         .and_then(Path::parent)
         .map(Path::to_path_buf)
         .unwrap_or_default();
+    let scene_as_run = with_absolute_mesh(&doc, &dir);
     let problem = match scene::validate_with(&doc, &SceneDir(dir)) {
         Ok(p) => p,
         Err(errors) => {
@@ -93,6 +122,11 @@ pub fn main(args: RunArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    if let Some(p) = &parent {
+        if let Err(e) = p.check(&problem) {
+            return fail(2, &e);
+        }
+    }
     let fields_dir = args.out.as_ref().map(|d| d.join("fields"));
     if let Some(dir) = &fields_dir {
         if let Err(e) = std::fs::create_dir_all(dir) {
@@ -123,21 +157,35 @@ pub fn main(args: RunArgs) -> ExitCode {
     if let Err(e) = admission::check_run(&problem, &limits, &at) {
         return refused(&e.pointer, &e.message);
     }
-    let bar = progress::bar(problem.steps as u64, "steps");
+    let done = parent.as_ref().map_or(0, |p| p.state.step);
+    let bar = progress::bar((problem.steps - done) as u64, "steps");
+    let start = parent.map(|p| (p.state, p.reports));
     let (result, io_error) = match problem.dim() {
-        2 => run_writing::<2>(problem, settings, fields_dir.as_deref(), &bar),
-        _ => run_writing::<3>(problem, settings, fields_dir.as_deref(), &bar),
+        2 => run_writing::<2>(problem, settings, start, fields_dir.as_deref(), &bar),
+        _ => run_writing::<3>(problem, settings, start, fields_dir.as_deref(), &bar),
     };
     bar.finish_and_clear();
     match result {
-        Ok(summary) => {
+        Ok((summary, state)) => {
+            let mut summary = serde_json::to_value(&summary).expect("JSON");
+            if let Some(from) = &args.continue_from {
+                summary["continued_from"] =
+                    json!({"dir": from.display().to_string(), "step": done});
+            }
             let text = pretty(&summary);
             if let Some(dir) = &args.out {
-                if let Err(e) = std::fs::write(dir.join("summary.json"), &text) {
-                    return fail(1, &format!("cannot write summary.json: {e}"));
+                let files = [
+                    ("summary.json", text.clone().into_bytes()),
+                    (SCENE_FILE, pretty(&scene_as_run).into_bytes()),
+                    (STATE_FILE, encode_state(&state)),
+                ];
+                for (name, bytes) in files {
+                    if let Err(e) = std::fs::write(dir.join(name), bytes) {
+                        return fail(1, &format!("cannot write {name}: {e}"));
+                    }
                 }
             }
-            println!("{text}");
+            outln!("{text}");
             ExitCode::SUCCESS
         }
         Err(RunError::Solve(SolveError::Memory(e))) => refused(e.pointer(), &e.to_string()),
@@ -157,35 +205,124 @@ fn refused(pointer: &str, message: &str) -> ExitCode {
     ExitCode::from(2)
 }
 
-/// Runs the problem (of dimension D), writing `mesh.json` and the stored steps' JSON into
-/// `fields_dir`'s parent and `fields_dir` when given; the error of a failed write, if any.
-fn run_writing<const D: usize>(
-    problem: Problem,
-    settings: SolverSettings,
-    fields_dir: Option<&Path>,
-    bar: &indicatif::ProgressBar,
-) -> (Result<Summary, RunError>, Option<String>) {
-    let mut io_error = None;
-    let mut wrote_mesh = false;
-    let result = contact_core::run::run::<D>(problem, settings, |sim, r| {
-        bar.inc(1);
-        let Some(dir) = fields_dir else {
+/// What `--out` keeps for a continuation: the scene as run and the state after its last step.
+const SCENE_FILE: &str = "scene.json";
+const STATE_FILE: &str = "state.bin";
+
+/// A finished run to continue, read from its --out folder: its scene, its last state (with
+/// the solvers' warm starts, as a checkpoint carries them), the reports of its steps and its
+/// step k.
+struct Parent {
+    scene: Value,
+    state: State,
+    reports: Vec<StepReport>,
+    k: f64,
+}
+
+impl Parent {
+    fn read(dir: &Path) -> Result<Parent, String> {
+        let read = |name: &str| {
+            std::fs::read(dir.join(name)).map_err(|e| {
+                format!(
+                    "cannot continue from {}: {name}: {e} (the folder a finished `contact-sim run --out` wrote)",
+                    dir.display()
+                )
+            })
+        };
+        let scene = contact_sim::json_body::parse(&read(SCENE_FILE)?)
+            .map_err(|e| format!("{}: {e}", dir.join(SCENE_FILE).display()))?;
+        let state = decode_state(&read(STATE_FILE)?)
+            .map_err(|e| format!("{}: {e}", dir.join(STATE_FILE).display()))?;
+        let summary: Value = serde_json::from_slice(&read("summary.json")?)
+            .map_err(|e| format!("{}: {e}", dir.join("summary.json").display()))?;
+        let reports: Vec<StepReport> = serde_json::from_value(summary["steps"].clone())
+            .map_err(|e| format!("{}: steps: {e}", dir.join("summary.json").display()))?;
+        let problem = scene::validate_with(&scene, &SceneDir(dir.to_path_buf()))
+            .map_err(|e| format!("{}: {e}", dir.join(SCENE_FILE).display()))?;
+        if problem.error_estimate {
+            return Err("a run with an error estimate cannot be continued: its (2h, 2k) companion runs are not kept".into());
+        }
+        if state.step != problem.steps || reports.len() != problem.steps {
+            return Err(format!(
+                "{}: the run did not finish (state after step {} of {})",
+                dir.display(),
+                state.step,
+                problem.steps
+            ));
+        }
+        Ok(Parent {
+            scene,
+            state,
+            reports,
+            k: problem.k(),
+        })
+    }
+
+    /// The continuation `child` goes on from this run's last step with its very step k.
+    fn check(&self, child: &Problem) -> Result<(), String> {
+        let t1 = self.state.step as f64 * self.k;
+        if child.k().to_bits() != self.k.to_bits() {
+            return Err(format!(
+                "--t-end {} is not a whole number of the parent's steps k = {} from t = 0",
+                child.t_end, self.k
+            ));
+        }
+        if child.steps <= self.state.step {
+            return Err(format!(
+                "--t-end {} must come after the parent's final time {t1}",
+                child.t_end
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The scene document as it ran, to be continued from anywhere: a mesh file named relative
+/// to the scene's folder is named by its absolute path.
+fn with_absolute_mesh(doc: &Value, dir: &Path) -> Value {
+    let mut doc = doc.clone();
+    if let Some(mesh) = doc.pointer_mut("/domain/mesh") {
+        if let Some(path) = mesh
+            .as_str()
+            .and_then(|name| std::fs::canonicalize(dir.join(name)).ok())
+        {
+            *mesh = Value::String(path.display().to_string());
+        }
+    }
+    doc
+}
+
+/// [`run_writing`]'s hooks: the progress bar, and `mesh.json` and the stored steps' JSON.
+struct Writer<'a> {
+    fields_dir: Option<&'a Path>,
+    bar: &'a indicatif::ProgressBar,
+    wrote_mesh: bool,
+    io_error: Option<String>,
+}
+
+impl<const D: usize> Hooks<D> for Writer<'_> {
+    type Stop = usize;
+
+    fn after_step(&mut self, run: &Run<D>, r: &StepReport) -> ControlFlow<usize> {
+        self.bar.inc(1);
+        let Some(dir) = self.fields_dir else {
             return ControlFlow::Continue(());
         };
+        let sim = run.sim();
         let mut write = |path: PathBuf, json: String| match std::fs::write(&path, json) {
             Ok(()) => ControlFlow::Continue(()),
             Err(e) => {
-                io_error = Some(format!("cannot write {}: {e}", path.display()));
-                ControlFlow::Break(())
+                self.io_error = Some(format!("cannot write {}: {e}", path.display()));
+                ControlFlow::Break(r.n)
             }
         };
-        if !wrote_mesh {
-            wrote_mesh = true;
+        if !self.wrote_mesh {
             let mesh = AnyMesh::from_mesh(sim.mesh.clone());
             write(
                 dir.parent().unwrap().join("mesh.json"),
                 to_json(&MeshJson::new(&mesh, &sim.problem.boundary)),
             )?;
+            self.wrote_mesh = true;
         }
         if sim.problem.output.stores(r.n, sim.problem.steps) {
             write(
@@ -194,8 +331,45 @@ fn run_writing<const D: usize>(
             )?;
         }
         ControlFlow::Continue(())
-    });
-    (result, io_error)
+    }
+}
+
+/// Runs the problem (of dimension D), from `start` (a parent's last state and its steps'
+/// reports) when given, writing `mesh.json` and the stored steps' JSON into `fields_dir`'s
+/// parent and `fields_dir` when given; the summary and the last state, and the error of a
+/// failed write, if any.
+fn run_writing<const D: usize>(
+    problem: Problem,
+    settings: SolverSettings,
+    start: Option<(State, Vec<StepReport>)>,
+    fields_dir: Option<&Path>,
+    bar: &indicatif::ProgressBar,
+) -> (Result<(Summary, State), RunError>, Option<String>) {
+    let mut writer = Writer {
+        fields_dir,
+        bar,
+        wrote_mesh: false,
+        io_error: None,
+    };
+    let result = (|| {
+        let mut run = Run::<D>::new(problem, settings)?;
+        if let Some((state, reports)) = start {
+            let now = &run.sim().state;
+            if (state.u.len(), state.zeta.len()) != (now.u.len(), now.zeta.len()) {
+                return Err(RunError::Solve(SolveError::Data {
+                    pointer: "/domain".into(),
+                    message: "the parent's state does not fit the scene's mesh".into(),
+                }));
+            }
+            run.resume(state, reports, Vec::new())?;
+        }
+        if let ControlFlow::Break(n) = run.drive(&mut writer)? {
+            return Err(RunError::Cancelled(n));
+        }
+        let state = run.sim().checkpoint_state();
+        Ok((run.summary(), state))
+    })();
+    (result, writer.io_error)
 }
 
 /// The scene document of a file or a preset (exactly one of them).

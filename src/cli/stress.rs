@@ -29,8 +29,8 @@ pub fn main(args: StressArgs) -> ExitCode {
     });
     bar.finish_and_clear();
     match args.format {
-        StressFormat::Json => println!("{}", pretty(&report)),
-        StressFormat::Text => print!("{}", report.text_table()),
+        StressFormat::Json => outln!("{}", pretty(&report)),
+        StressFormat::Text => out!("{}", report.text_table()),
     }
     if report.all_as_expected {
         ExitCode::SUCCESS

@@ -137,13 +137,13 @@ fn report(args: &StudyArgs, results: &[Outcome]) -> ExitCode {
     match (args.format, results) {
         (StudyFormat::Text, _) => {
             for r in results {
-                println!("{}", r.text_table());
+                outln!("{}", r.text_table());
             }
         }
-        (StudyFormat::Json, [one]) => println!("{}", pretty(&one.to_json())),
+        (StudyFormat::Json, [one]) => outln!("{}", pretty(&one.to_json())),
         (StudyFormat::Json, _) => {
             let all: Vec<Value> = results.iter().map(Outcome::to_json).collect();
-            println!("{}", pretty(&all))
+            outln!("{}", pretty(&all))
         }
     }
     ExitCode::SUCCESS

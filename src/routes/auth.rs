@@ -93,9 +93,18 @@ pub async fn layer(State(state): State<AppState>, mut req: Request, next: Next) 
     if !caller.sees_all() {
         if path == "/healthz" {
             // Liveness for load balancers (ok, or degraded with its status code); the node's
-            // details and the reason are for admins.
-            if next.run(req).await.status().is_success() {
+            // details and the reason are for admins — but before the first key exists there
+            // is no admin to tell, and the reason (create a key) is what the operator of a
+            // fresh container needs to read.
+            let resp = next.run(req).await;
+            if resp.status().is_success() {
                 return axum::Json(serde_json::json!({"status": "ok"})).into_response();
+            }
+            let store = state.store().clone();
+            let keyless =
+                super::blocking(move || Ok(!crate::auth::has_active_key(store.as_ref())?)).await;
+            if keyless.unwrap_or(false) {
+                return resp;
             }
             return super::misc::degraded("the node cannot take work now".into()).into_response();
         }

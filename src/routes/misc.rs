@@ -62,11 +62,19 @@ pub fn degraded(reason: String) -> Problem {
 }
 
 /// 200 `ok`; 503 problem+json of type `/problems/degraded` with the reason when the node
-/// cannot take work (its disk below `--min-free-disk`); a store that cannot be read is the
-/// 503 problem of the store.
+/// cannot take work (its disk below `--min-free-disk`, or `--auth required` and no API key
+/// yet); a store that cannot be read is the 503 problem of the store.
 pub async fn healthz(State(state): State<AppState>) -> Result<Response, Problem> {
     let store = state.store().clone();
-    super::blocking(move || Ok(store.counts()?)).await?;
+    let required = state.auth == crate::auth::AuthMode::Required;
+    let keyless = super::blocking(move || {
+        store.counts()?;
+        Ok(required && !crate::auth::has_active_key(store.as_ref())?)
+    })
+    .await?;
+    if keyless {
+        return Err(degraded(crate::auth::NO_KEY_YET.to_string()));
+    }
     let rt = state.rt.clone();
     let (low, space) =
         super::blocking(move || Ok((rt.disk.check().err(), rt.disk.space().ok()))).await?;

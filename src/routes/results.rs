@@ -25,7 +25,7 @@ use contact_core::mesh::AnyMesh;
 use contact_core::output::fields::MeshJson;
 use contact_core::output::stored::decode_step;
 use contact_core::output::surface::Surface;
-use contact_core::output::vtk::{write_mesh_vtu, write_pvd};
+use contact_core::output::vtk::{write_mesh_vtu, write_pvd, Compression};
 use contact_core::solve::stepper::{initial_fields_of, StepFields};
 use std::io::Write as _;
 use uuid::Uuid;
@@ -462,12 +462,58 @@ pub async fn fields(
     }))
 }
 
-/// `/jobs/{id}/fields/{N|last}.vtu` (0.vtu: the initial state); HEAD answers its length.
+/// A step as its VTU shows it. Step 0, the initial state, has no contact state (stick and slip
+/// are decided by the first step); for a job that stores the contact state its VTU still has
+/// the arrays, every node with `contact_state` 0 and `slip_velocity` 0 (w_0 = 0), so that all
+/// files of the time series have the same arrays (ParaView keeps an array over time only when
+/// every step has it).
+fn vtu_step(mut f: StepFields, p: &contact_core::problem::Problem) -> StepFields {
+    if f.n == 0 && f.contact.is_none() && p.output.fields.contact {
+        f.contact = Some(Vec::new());
+    }
+    f
+}
+
+/// The query of the routes that write VTU files (`/jobs/{id}/fields/N.vtu`,
+/// `/jobs/{id}/archive.tar`).
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VtuQuery {
+    /// `zlib` (the default) or `none`: the data arrays' encoding.
+    compression: Option<CompressionParam>,
+}
+
+impl VtuQuery {
+    fn compression(&self) -> Compression {
+        self.compression.map_or_else(Compression::default, |c| c.0)
+    }
+}
+
+/// `?compression=zlib|none`.
+#[derive(Clone, Copy, serde::Deserialize)]
+#[serde(try_from = "String")]
+struct CompressionParam(Compression);
+
+impl TryFrom<String> for CompressionParam {
+    type Error = String;
+    fn try_from(c: String) -> Result<Self, String> {
+        match c.as_str() {
+            "zlib" => Ok(CompressionParam(Compression::Zlib)),
+            "none" => Ok(CompressionParam(Compression::None)),
+            _ => Err(format!("compression must be zlib or none, not {c:?}")),
+        }
+    }
+}
+
+/// `/jobs/{id}/fields/{N|last}.vtu` (0.vtu: the initial state), its arrays zlib-compressed
+/// unless `?compression=none`; HEAD answers its length.
 pub async fn vtu(
     State(state): State<AppState>,
     Path((id, file)): Path<(String, String)>,
+    Params(q): Params<VtuQuery>,
     method: Method,
 ) -> Result<Response, Problem> {
+    let compression = q.compression();
     let spec = file
         .strip_suffix(".vtu")
         .ok_or_else(|| {
@@ -481,12 +527,13 @@ pub async fn vtu(
     let id = rec.id;
     let (f, mesh) = blocking(move || {
         let n = pick_step(&available_steps(&st, id)?, &spec)?;
-        Ok((load_step(&st, &rec, n)?, mesh_of(&st.rt.meshes, &rec)?.0))
+        let (p, mesh) = scene_of(&st.rt.meshes, &rec)?;
+        Ok((vtu_step(load_step(&st, &rec, n)?, &p), mesh))
     })
     .await?;
     // HEAD says the file's length (the browser shows it beside the link).
     blocking_body_or_length(&method, "application/xml", move |w| {
-        write_mesh_vtu(w, &mesh, &f)
+        write_mesh_vtu(w, &mesh, &f, compression)
     })
     .await
 }
@@ -521,18 +568,22 @@ pub async fn pvd(
 /// archive is streamed, never held whole, and so is each VTU member: a tar header states its
 /// member's length, so a VTU is rendered twice, once into a byte counter for the header and
 /// once into the body (a 1/64 box's VTU is some hundreds of MB; held in memory it would come
-/// on top of the job's own peak).
+/// on top of the job's own peak). The VTU files' arrays are zlib-compressed unless
+/// `?compression=none`.
 pub async fn archive(
     State(state): State<AppState>,
     Path(id): Path<String>,
+    Params(q): Params<VtuQuery>,
 ) -> Result<Response, Problem> {
+    let compression = q.compression();
     let rec = simulation(&state, &id).await?;
     let st = state.clone();
-    let (mesh, k, rec) = blocking(move || {
-        let (mesh, k) = mesh_of(&st.rt.meshes, &rec)?;
-        Ok((mesh, k, rec))
+    let (p, mesh, rec) = blocking(move || {
+        let (p, mesh) = scene_of(&st.rt.meshes, &rec)?;
+        Ok((p, mesh, rec))
     })
     .await?;
+    let k = p.k();
     let st = state.clone();
     let mut resp = blocking_body("application/x-tar", move |w| {
         let io = |e: Problem| std::io::Error::other(e.detail);
@@ -567,8 +618,8 @@ pub async fn archive(
         )?;
         member("result.pvd", &pvd)?;
         for n in steps {
-            let f = load_step(&st, &rec, n).map_err(io)?;
-            let size = rendered_len(|w| write_mesh_vtu(w, &mesh, &f))?;
+            let f = vtu_step(load_step(&st, &rec, n).map_err(io)?, &p);
+            let size = rendered_len(|w| write_mesh_vtu(w, &mesh, &f, compression))?;
             let mut h = tar::Header::new_ustar();
             h.set_entry_type(tar::EntryType::Regular);
             h.set_mode(0o644);
@@ -583,7 +634,7 @@ pub async fn archive(
             let out = tar.get_mut();
             out.write_all(h.as_bytes())?;
             let mut body = Counted(&mut *out, 0);
-            write_mesh_vtu(&mut body, &mesh, &f)?;
+            write_mesh_vtu(&mut body, &mesh, &f, compression)?;
             if body.1 != size {
                 return Err(std::io::Error::other(format!(
                     "step {n}: the VTU rendered {} bytes, then {size}",

@@ -925,7 +925,7 @@ function fakeMesh(nested) {
       { name: 'hole', facets: 32, measure: 1.2533 },
     ],
     bounding_box: { min: [0, 0], max: [2, 1] },
-    min_cell_size: 0.0491, max_cell_size: 0.1395, min_quality: 0.6213, mean_quality: 0.9312,
+    min_cell_size: 0.0491, mean_cell_size: 0.0827, max_cell_size: 0.1395, min_quality: 0.6213, mean_quality: 0.9312,
   };
   const head = { id: 'ab'.repeat(32), bytes: 30138, created: '2026-01-01T00:00:00Z' };
   return nested ? { ...head, summary: s } : { ...head, ...s };
@@ -962,7 +962,7 @@ async function testMeshUpload() {
     `the file's bytes are posted as application/octet-stream (${posted?.bytes} bytes)`);
   let rows = await summaryRows(page);
   check(rows.nodes === '406' && rows.cells === '724' && rows.dimension === '2' && rows.boundary_facets === '88', `summary (nested): ${JSON.stringify(rows)}`);
-  check(rows.bounding_box.includes('(0, 0) – (2, 1)') && rows.cell_size === '0.0491 – 0.1395' && rows.quality.includes('min 0.621') && rows.quality.includes('mean 0.931'),
+  check(rows.bounding_box.includes('(0, 0) – (2, 1)') && rows.cell_size === '0.0491 – 0.1395 (mean 0.0827)' && rows.quality.includes('min 0.621') && rows.quality.includes('mean 0.931'),
     'bounding box, cell sizes and quality shown');
   const groups = await page.$$eval('#mesh-groups tbody tr', (trs) => trs.map((tr) => [tr.dataset.group, tr.dataset.facets, tr.querySelector('select').value]));
   check(JSON.stringify(groups) === JSON.stringify([['clamped', '8', 'clamped'], ['contact', '20', 'contact'], ['traction', '20', 'traction'], ['free', '8', 'free'], ['hole', '32', 'free']]),

@@ -131,12 +131,25 @@ def test_invalid_requests_raise_problems_with_pointers(client: Client) -> None:
         client.submit("no-such-preset")
     assert e.value.status == 422 and dict(e.value.errors).keys() == {"/preset"}
 
+    # A file name is a file, not a preset: a missing one says so.
+    for missing in ("missing.json", "scenes/missing", "MISSING.JSON"):
+        with pytest.raises(FileNotFoundError, match=f"no such file: {missing}"):
+            client.submit(missing)
+
     with pytest.raises(ApiError) as e:
         client.job("00000000-0000-0000-0000-000000000000")
     assert e.value.status == 404 and e.value.errors == []
 
     with pytest.raises(ValueError):
         client.submit({"domain": {}}, overrides={"h": "1/8"})
+
+
+def test_a_scene_file_is_submitted_by_its_path(client: Client, tmp_path: Path) -> None:
+    path = tmp_path / "exp2.json"
+    path.write_text(json.dumps({"preset": "paper-exp2", "overrides": {"h": "1/4", "k": "1/4"}}))
+    by_path = client.submit(str(path)).wait(progress=False)
+    by_name = client.submit("paper-exp2", overrides={"h": "1/4", "k": "1/4"})
+    assert by_path.status == "succeeded" and by_name.id == by_path.id
 
 
 def test_problem_of_a_response_that_is_not_json() -> None:

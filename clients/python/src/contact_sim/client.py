@@ -45,6 +45,12 @@ Ratio = Union[int, float, str, Fraction]
 FINISHED = frozenset({"succeeded", "failed", "cancelled"})
 
 
+def _is_path(s: str) -> bool:
+    """Whether a submitted string names a file rather than a preset: preset names are words
+    with hyphens, never ``.json`` names or paths."""
+    return s.lower().endswith(".json") or "/" in s or os.sep in s
+
+
 def _ratio(v: Ratio) -> Union[int, float, str]:
     if isinstance(v, Fraction):
         return f"{v.numerator}/{v.denominator}"
@@ -196,12 +202,16 @@ class Client:
         """Submits a preset by name (with ``overrides`` of ``h``, ``k``, ``T`` or ``t_end``;
         a study preset's name, e.g. "paper-table-1", submits that study), or a document: a scene,
         ``{"preset": ..., "overrides": ...}`` or a study ``{"study": {...}}``. A path reads
-        the document from a JSON file.
+        the document from a JSON file: a ``Path`` (any ``os.PathLike``), or a string that ends
+        in ``.json`` or holds a ``/`` (no preset name does); a missing file raises
+        ``FileNotFoundError`` naming it.
 
-        A scene identical to one already computed is answered with that job (already
-        succeeded). With ``idempotency_key``, the same key and body give the same job, so a
+        The same computation as one already computed (the same scene but for its name) is
+        answered with that job (already succeeded). With ``idempotency_key``, the same key and body give the same job, so a
         submission can be retried safely after a lost answer."""
         body: Dict[str, Any]
+        if isinstance(scene_or_preset, str) and _is_path(scene_or_preset):
+            scene_or_preset = Path(scene_or_preset)
         if isinstance(scene_or_preset, str):
             if scene_or_preset in self._study_presets():
                 if overrides:
@@ -210,7 +220,12 @@ class Client:
             else:
                 body = {"preset": scene_or_preset}
         elif isinstance(scene_or_preset, os.PathLike):
-            body = json.loads(Path(scene_or_preset).read_text(encoding="utf-8"))
+            path = Path(scene_or_preset)
+            try:
+                text = path.read_text(encoding="utf-8")
+            except FileNotFoundError:
+                raise FileNotFoundError(f"no such file: {path}") from None
+            body = json.loads(text)
         else:
             body = dict(scene_or_preset)
         if overrides:
@@ -541,9 +556,13 @@ class Job:
             self._dim = int(self.summary()["mesh"]["dim"])
         return self._dim
 
-    def vtu(self, step: Union[int, str] = "last") -> bytes:
-        """Step ``step`` as a VTK UnstructuredGrid (.vtu) file's bytes."""
-        return self.client._send("GET", self._path(f"/fields/{step}.vtu")).content
+    def vtu(self, step: Union[int, str] = "last", compression: str = "zlib") -> bytes:
+        """Step ``step`` as a VTK UnstructuredGrid (.vtu) file's bytes, its arrays
+        zlib-compressed (``compression="zlib"``, what ParaView, VTK and meshio read) or raw
+        (``"none"``)."""
+        return self.client._send(
+            "GET", self._path(f"/fields/{step}.vtu"), params={"compression": compression}
+        ).content
 
     def to_meshio(self, step: Union[int, str] = "last") -> "meshio.Mesh":
         """Step ``step`` as a meshio Mesh, read from the service's VTU: 3D points (z = 0 in
@@ -557,15 +576,20 @@ class Job:
             path.write_bytes(self.vtu(step))
             return meshio.read(path)
 
-    def download(self, path: Union[str, "os.PathLike[str]"] = ".") -> Path:
+    def download(
+        self, path: Union[str, "os.PathLike[str]"] = ".", compression: str = "zlib"
+    ) -> Path:
         """Saves the whole result as one tar archive (scene, summary, PVD, the VTU of every
         step, in one folder named after the job) and returns its path; a directory gets
         ``contact-sim-<id>.tar`` inside it (a path ending in a slash is a directory, created
-        if need be)."""
+        if need be). ``compression`` is the VTU files' (``"zlib"`` or ``"none"``, as in
+        :meth:`vtu`)."""
         dest = Path(path)
         if dest.is_dir() or str(path).endswith(("/", os.sep)):
             dest = dest / f"contact-sim-{self.id}.tar"
-        return self.client._download(self._path("/archive.tar"), dest)
+        return self.client._download(
+            self._path(f"/archive.tar?compression={compression}"), dest
+        )
 
     # -- control ------------------------------------------------------------------------
 

@@ -324,8 +324,9 @@ pub fn build<const D: usize>(
 /// Quality figures of a mesh, for its summary.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Figures {
-    /// Shortest and longest cell diameter (longest edge).
+    /// Shortest, mean and longest cell diameter (longest edge).
     pub min_cell_size: f64,
+    pub mean_cell_size: f64,
     pub max_cell_size: f64,
     /// The shape ratio q ∈ (0, 1] (1 for the equilateral triangle or regular tetrahedron):
     /// 4√3 |T| / Σ l² in 2D, 12 (3|T|)^(2/3) / Σ l² in 3D; minimum and mean over the cells.
@@ -337,6 +338,7 @@ pub struct Figures {
 pub fn figures<const D: usize>(mesh: &Mesh<D>) -> Figures {
     let mut f = Figures {
         min_cell_size: f64::INFINITY,
+        mean_cell_size: 0.0,
         max_cell_size: 0.0,
         min_quality: f64::INFINITY,
         mean_quality: 0.0,
@@ -359,9 +361,11 @@ pub fn figures<const D: usize>(mesh: &Mesh<D>) -> Figures {
         };
         f.min_cell_size = f.min_cell_size.min(longest);
         f.max_cell_size = f.max_cell_size.max(longest);
+        f.mean_cell_size += longest;
         f.min_quality = f.min_quality.min(q);
         f.mean_quality += q;
     }
     f.mean_quality /= mesh.n_cells().max(1) as f64;
+    f.mean_cell_size /= mesh.n_cells().max(1) as f64;
     f
 }

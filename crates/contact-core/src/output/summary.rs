@@ -1,6 +1,7 @@
 //! The summary of a run (the CLI's stdout and `summary.json`; a stable contract):
-//! `mesh.{nodes, triangles}`, `time.steps`, `final.{t, w_V, u_V, zeta_L2, zeta_min}`,
-//! `steps[]` (the same per step plus `velocity` and `damage` solver reports), `timing`.
+//! `mesh.{nodes, triangles}`, `time.steps`, `initial` and `final` `{t, w_V, u_V, zeta_L2,
+//! zeta_min}` (step 0 and the last step), `steps[]` (the same per solved step, 1 to N, plus
+//! `velocity` and `damage` solver reports), `timing`.
 
 use crate::estimate::ErrorEstimate;
 use crate::problem::{FrictionLaw, MeshPattern, Problem};
@@ -19,10 +20,15 @@ pub struct MeshInfo {
     pub triangles: Option<usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tetrahedra: Option<usize>,
-    /// Rectangle or box: n = round(1/h); 0 for a given mesh.
-    pub cells_per_unit: usize,
-    /// Rectangle: 1/n; a given mesh: its longest cell edge.
-    pub h: f64,
+    /// Rectangle or box: n = round(1/h); absent for a given mesh, which has no such n.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cells_per_unit: Option<usize>,
+    /// Rectangle or box: h = 1/n; absent for a given mesh (see `cell_size`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub h: Option<f64>,
+    /// A given mesh: its cells' diameters (longest edges), which vary from cell to cell.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cell_size: Option<CellSizes>,
     /// Rectangle: the diagonal pattern; box: "kuhn"; a given mesh: "unstructured".
     pub pattern: &'static str,
     /// A given mesh: where it came from ("mesh <id or file>", "polygon").
@@ -46,6 +52,14 @@ pub struct MeshInfo {
     /// How the linear systems are solved: "direct (Cholesky)", "multigrid (smoothed
     /// aggregation, 4 levels)", "multigrid (geometric, 3 levels)".
     pub linear_solver: String,
+}
+
+/// The shortest, mean and longest cell diameter of a given mesh.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct CellSizes {
+    pub min: f64,
+    pub mean: f64,
+    pub max: f64,
 }
 
 /// The run's memory: predicted before any numeric work ([`crate::memory`]) and measured.
@@ -72,6 +86,7 @@ pub struct Physics {
     pub elasticity: &'static str,
 }
 
+/// The norms of one state: t, |w|_V, |u|_V, |ζ|_Z0 and min ζ.
 #[derive(Debug, Clone, Serialize)]
 pub struct FinalNorms {
     pub t: f64,
@@ -117,6 +132,9 @@ pub struct Summary {
     pub physics: Physics,
     pub smallness: SmallnessReport,
     pub solver: SolverSettings,
+    /// Step 0, the initial state at t = 0 (u_0, w_0 = 0, ζ_0): where the norms over time
+    /// start; `steps` holds the solved steps 1 to N.
+    pub initial: FinalNorms,
     #[serde(rename = "final")]
     pub final_: Option<FinalNorms>,
     pub stats: SolverStats,
@@ -127,6 +145,26 @@ pub struct Summary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error_estimate: Option<ErrorEstimate>,
     pub steps: Vec<StepReport>,
+}
+
+/// The norms of step 0: the nodal interpolants of the scene's u_0 and ζ_0 (1 without damage)
+/// at t = 0, the state the stepper starts from (3.11), with w_0 = 0.
+fn initial_norms<const D: usize>(sim: &Simulation<D>) -> FinalNorms {
+    let (p, mesh) = (&sim.problem, &sim.mesh);
+    let u0: Vec<f64> = mesh.nodes.iter().flat_map(|x| p.u0.at(x, 0.0)).collect();
+    let zeta0: Vec<f64> = match &p.damage {
+        Some(d) => mesh.nodes.iter().map(|x| d.zeta0.at(x, 0.0)).collect(),
+        None => vec![1.0; mesh.n_nodes()],
+    };
+    let mass = crate::fem::assembly::mass(mesh, &sim.geo);
+    let mut scratch = vec![0.0; mesh.n_nodes()];
+    FinalNorms {
+        t: 0.0,
+        w_v: 0.0,
+        u_v: crate::fem::norms::strain_norm(mesh, &sim.geo, &u0),
+        zeta_l2: crate::fem::norms::mass_norm(&mass, &zeta0, &mut scratch),
+        zeta_min: zeta0.iter().copied().fold(f64::INFINITY, f64::min),
+    }
 }
 
 impl Summary {
@@ -177,11 +215,16 @@ impl Summary {
                 nodes: sim.mesh.n_nodes(),
                 triangles: (D == 2).then(|| sim.mesh.n_cells()),
                 tetrahedra: (D == 3).then(|| sim.mesh.n_cells()),
-                cells_per_unit: p.cells_per_unit,
-                h: match &p.body {
-                    None => 1.0 / p.cells_per_unit as f64,
-                    Some(_) => crate::mesh::quality::figures(&sim.mesh).max_cell_size,
-                },
+                cells_per_unit: p.body.is_none().then_some(p.cells_per_unit),
+                h: p.body.is_none().then(|| 1.0 / p.cells_per_unit as f64),
+                cell_size: p.body.as_ref().map(|_| {
+                    let f = crate::mesh::quality::figures(&sim.mesh);
+                    CellSizes {
+                        min: f.min_cell_size,
+                        mean: f.mean_cell_size,
+                        max: f.max_cell_size,
+                    }
+                }),
                 pattern: match (&p.body, p.pattern) {
                     (Some(_), _) => "unstructured",
                     (None, _) if D == 3 => "kuhn",
@@ -225,6 +268,7 @@ impl Summary {
             },
             smallness: sim.smallness.clone(),
             solver: sim.settings,
+            initial: initial_norms(sim),
             final_: steps.last().map(|s| FinalNorms {
                 t: s.t,
                 w_v: s.w_v,

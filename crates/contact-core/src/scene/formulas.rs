@@ -93,7 +93,7 @@ pub(super) fn vector_field(
         let shape = if dim == 3 {
             "[x, y, z components] (the body is 3D)"
         } else {
-            "[x component, y component]"
+            "[x component, y component] (the body is 2D)"
         };
         cx.err(
             ptr,

@@ -46,7 +46,7 @@ mod read;
 mod tests;
 mod time;
 
-pub use canonical::{canonical, content_hash, hex_sha256};
+pub use canonical::{canonical, computation, content_hash, hex_sha256, LABEL_FIELDS};
 pub use damage::DEFAULT_SOURCE;
 pub use errors::{FieldError, ValidationErrors};
 pub use friction::DEFAULT_FRICTION;
@@ -152,6 +152,11 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
     )
     .and_then(|v| domain(cx, v, "/domain", files));
     cx.solid = shape.as_ref().is_some_and(|s| s.dim() == 3);
+    // A mesh that could not be loaded (a wrong id, say) leaves the body unknown, its
+    // dimension and groups included: the sections read against it — the mesh section, the
+    // boundary parts, the vectors — are not read, since their errors would all follow from
+    // the one at /domain/mesh. (Other domain errors leave the dimension known.)
+    let body_known = shape.is_some() || top.get("domain").and_then(|d| d.get("mesh")).is_none();
     let time = required(
         cx,
         top,
@@ -160,17 +165,25 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
         "t_end and the step k or the number of steps N",
     )
     .and_then(|v| time(cx, v, "/time"));
-    let mesh = mesh_section(cx, top.get("mesh"), "/mesh", shape.as_ref());
-    let boundary = required(
-        cx,
-        top,
-        "",
-        "boundary",
-        "the clamped, traction and contact segments",
-    )
-    .and_then(|v| boundary(cx, v, "/boundary", shape.as_ref(), &mut sampled));
+    let mesh = body_known
+        .then(|| mesh_section(cx, top.get("mesh"), "/mesh", shape.as_ref()))
+        .flatten();
+    let boundary = body_known
+        .then(|| {
+            required(
+                cx,
+                top,
+                "",
+                "boundary",
+                "the clamped, traction and contact segments",
+            )
+            .and_then(|v| boundary(cx, v, "/boundary", shape.as_ref(), &mut sampled))
+        })
+        .flatten();
     let dim = shape.as_ref().map_or(2, Shape::dim);
-    let body_force = vector_section(cx, top, &LOADS, &mut sampled, dim);
+    let body_force = body_known
+        .then(|| vector_section(cx, top, &LOADS, &mut sampled, dim))
+        .flatten();
     let material = required(cx, top, "", "material", "viscosity and elasticity")
         .and_then(|v| material(cx, v, "/material"));
     let friction = match top.get("friction") {
@@ -194,7 +207,9 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
         None => Some(None),
         Some(v) => damage(cx, v, "/damage", &mut sampled).map(Some),
     };
-    let u0 = vector_section(cx, top, &INITIAL, &mut sampled, dim);
+    let u0 = body_known
+        .then(|| vector_section(cx, top, &INITIAL, &mut sampled, dim))
+        .flatten();
     let output = match top.get("output") {
         None => Some(OutputSpec {
             every: 1,

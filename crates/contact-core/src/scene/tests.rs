@@ -1018,3 +1018,43 @@ fn body_forms_and_part_selections_are_checked() {
         );
     }
 }
+
+/// A mesh that cannot be loaded is one error, at /domain/mesh: the boundary groups, the mesh
+/// section and the vectors, all read against the body, are not read (before, a 3D scene on a
+/// wrong id had 8 errors, 7 of them about 3-vectors on a "2D" body and groups of no mesh).
+#[test]
+fn a_mesh_that_cannot_be_loaded_is_the_only_error() {
+    let mut doc = presets::get("standing-cylinder").unwrap();
+    set(&mut doc, "/domain", json!({"mesh": "no-such-mesh"}));
+    set(&mut doc, "/mesh", json!({"refine": 1}));
+    let errs = errors(&doc);
+    assert_eq!(errs.len(), 1, "{errs:#?}");
+    assert_eq!(errs[0].pointer, "/domain/mesh");
+    assert!(errs[0].message.contains("no-such-mesh"), "{errs:#?}");
+    // Errors elsewhere than the body's sections are still reported beside it.
+    set(&mut doc, "/material/viscosity/eta", json!(-1));
+    let pointers: Vec<String> = errors(&doc).into_iter().map(|e| e.pointer).collect();
+    assert_eq!(pointers.len(), 2, "{pointers:?}");
+    assert!(pointers.contains(&"/domain/mesh".to_string()));
+}
+
+/// A 3D scene's vectors on a 2D mesh say that the body is 2D, as a 2D scene's on a 3D mesh
+/// say that it is 3D.
+#[test]
+fn vectors_of_the_wrong_dimension_name_the_body_dimension() {
+    let mut solid_on_plane = presets::get("standing-cylinder").unwrap();
+    set(
+        &mut solid_on_plane,
+        "/domain",
+        json!({"mesh": "plate-with-hole.msh"}),
+    );
+    assert_error(&solid_on_plane, "/loads/f0", "(the body is 2D)");
+    assert_error(&solid_on_plane, "/initial/u0", "(the body is 2D)");
+    let mut plane_on_solid = presets::get("plate-with-hole").unwrap();
+    set(
+        &mut plane_on_solid,
+        "/domain",
+        json!({"mesh": "standing-cylinder.msh"}),
+    );
+    assert_error(&plane_on_solid, "/loads/f0", "(the body is 3D)");
+}

@@ -287,15 +287,11 @@ pub fn parse_with(
     }
     let mut physics = scene_doc.clone();
     if let Some(o) = physics.as_object_mut() {
-        for k in [
-            "$schema",
-            "name",
-            "output",
-            "error_estimate",
-            "mesh",
-            "time",
-        ] {
-            o.remove(k);
+        for k in scene::LABEL_FIELDS
+            .iter()
+            .chain(&["output", "error_estimate", "mesh", "time"])
+        {
+            o.remove(*k);
         }
     }
     // What determines the reference run: the scene's physics (not its name or outputs), the

@@ -5,6 +5,7 @@ use super::*;
 use crate::mesh::Mesh;
 use crate::problem::MeshPattern;
 use crate::solve::stepper::{ContactNode, Stress};
+use base64::engine::general_purpose::STANDARD;
 use base64::Engine;
 use roxmltree::{Document, Node};
 
@@ -87,9 +88,10 @@ fn parse_xml(doc: &str) -> Document<'_> {
     Document::parse(doc).unwrap_or_else(|e| panic!("not well-formed XML: {e}"))
 }
 
-/// Decodes an inline binary array: checks the format, the type, the UInt64 byte-count
-/// header against the payload and the payload against tuples × components; returns the
-/// payload.
+/// Decodes an inline binary array: checks the format, the type, the header against the
+/// payload (the UInt64 byte count of a raw file; the zlib header of a file with
+/// `compressor="vtkZLibDataCompressor"`, each block inflated) and the payload against
+/// tuples × components; returns the payload.
 fn payload(a: Node, vtk_type: &str, size: usize, tuples: usize, comps: usize) -> Vec<u8> {
     assert_eq!(a.attr("format"), "binary");
     assert_eq!(a.attr("type"), vtk_type, "array {}", a.attr("Name"));
@@ -99,25 +101,71 @@ fn payload(a: Node, vtk_type: &str, size: usize, tuples: usize, comps: usize) ->
     };
     assert_eq!(declared, comps, "components of {}", a.attr("Name"));
     assert!(a.elements().is_empty());
-    let raw = base64::engine::general_purpose::STANDARD
-        .decode(a.text_content().trim())
-        .expect("valid base64");
-    assert!(raw.len() >= 8);
-    let (head, data) = raw.split_at(8);
-    let count = u64::from_le_bytes(head.try_into().unwrap());
-    assert_eq!(
-        count as usize,
-        data.len(),
-        "byte-count header of {}",
-        a.attr("Name")
-    );
+    let text = a.text_content();
+    let data = match a.document().root_element().attribute("compressor") {
+        None => raw_data(text.trim()),
+        Some("vtkZLibDataCompressor") => zlib_data(text.trim()),
+        Some(other) => panic!("unknown compressor {other}"),
+    };
     assert_eq!(
         data.len(),
         tuples * comps * size,
         "length of {}",
         a.attr("Name")
     );
+    data
+}
+
+/// A raw array: one base64 text, the UInt64 byte count, then the bytes.
+fn raw_data(text: &str) -> Vec<u8> {
+    let raw = STANDARD.decode(text).expect("valid base64");
+    assert!(raw.len() >= 8);
+    let (head, data) = raw.split_at(8);
+    let count = u64::from_le_bytes(head.try_into().unwrap());
+    assert_eq!(count as usize, data.len(), "byte-count header");
     data.to_vec()
+}
+
+/// A zlib array, read as VTK reads it: the base64 of the header `[blocks, block size, last
+/// block size, compressed sizes…]` on its own (its length follows from its first number),
+/// then the base64 of the blocks, each inflated to its announced size.
+fn zlib_data(text: &str) -> Vec<u8> {
+    use std::io::Read;
+    let chars = |bytes: usize| bytes.div_ceil(3) * 4;
+    let first = STANDARD.decode(&text[..chars(8)]).expect("valid base64");
+    let blocks = u64::from_le_bytes(first[..8].try_into().unwrap()) as usize;
+    let header_chars = chars(8 * (3 + blocks));
+    let header: Vec<u64> = STANDARD
+        .decode(&text[..header_chars])
+        .expect("valid base64")
+        .chunks_exact(8)
+        .map(|c| u64::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    assert_eq!(header.len(), 3 + blocks);
+    let (block, last) = (header[1] as usize, header[2] as usize);
+    assert_eq!(block, ZLIB_BLOCK);
+    assert!(last <= block && (blocks == 0 || last > 0));
+    let compressed = STANDARD
+        .decode(&text[header_chars..])
+        .expect("valid base64");
+    assert_eq!(
+        compressed.len() as u64,
+        header[3..].iter().sum::<u64>(),
+        "the blocks' sizes add up"
+    );
+    let mut data = Vec::new();
+    let mut at = 0;
+    for (i, &size) in header[3..].iter().enumerate() {
+        let mut inflated = Vec::new();
+        flate2::read::ZlibDecoder::new(&compressed[at..at + size as usize])
+            .read_to_end(&mut inflated)
+            .expect("a zlib stream");
+        let expected = if i + 1 == blocks { last } else { block };
+        assert_eq!(inflated.len(), expected, "block {i}");
+        data.extend(inflated);
+        at += size as usize;
+    }
+    data
 }
 
 fn f64s(a: Node, tuples: usize, comps: usize) -> Vec<f64> {
@@ -191,9 +239,14 @@ fn hand_built(mesh: &Mesh) -> StepFields {
     }
 }
 
+/// The document in the default encoding (zlib).
 fn render(mesh: &Mesh, f: &StepFields) -> String {
+    render_as(mesh, f, Compression::default())
+}
+
+fn render_as(mesh: &Mesh, f: &StepFields, compression: Compression) -> String {
     let mut buf = Vec::new();
-    write_vtu(&mut buf, &mesh.nodes, mesh.cells_flat(), f).unwrap();
+    write_vtu(&mut buf, &mesh.nodes, mesh.cells_flat(), f, compression).unwrap();
     String::from_utf8(buf).expect("UTF-8")
 }
 
@@ -242,11 +295,17 @@ fn check_grid(root: Node, mesh: &Mesh, f: &StepFields) {
 
 #[test]
 fn vtu_of_all_fields_reads_back() {
+    for compression in [Compression::Zlib, Compression::None] {
+        all_fields_read_back(compression);
+    }
+}
+
+fn all_fields_read_back(compression: Compression) {
     let mesh = Mesh::rectangle(2.0, 1.0, 4, 2, MeshPattern::Diagonal);
     let (np, nc) = (mesh.nodes.len(), mesh.n_cells());
     assert_eq!((np, nc), (15, 16));
     let f = hand_built(&mesh);
-    let doc = render(&mesh, &f);
+    let doc = render_as(&mesh, &f, compression);
     let xml = parse_xml(&doc);
     let root = xml.root_element();
     check_grid(root, &mesh, &f);
@@ -316,18 +375,63 @@ fn vtu_writes_only_the_present_fields() {
 
 #[test]
 fn vtu_of_a_larger_mesh_crosses_chunk_boundaries() {
-    // 61 × 41 nodes: every array is larger than one encoder chunk.
+    // 61 × 41 nodes: every array is larger than one encoder chunk and one zlib block.
     let mesh = Mesh::rectangle(3.0, 2.0, 60, 40, MeshPattern::Cross);
     let f = hand_built(&mesh);
     assert!(8 * 3 * 3 * mesh.n_cells() > CHUNK_BYTES * 2);
-    let doc = render(&mesh, &f);
-    let xml = parse_xml(&doc);
-    let root = xml.root_element();
-    check_grid(root, &mesh, &f);
-    let piece = root.child("UnstructuredGrid").child("Piece");
-    let np = mesh.nodes.len();
-    let u = f64s(piece.child("PointData").array("u"), np, 3);
-    assert_eq!(u, vec3(f.u.as_ref().unwrap()));
+    assert!(8 * 3 * mesh.nodes.len() > ZLIB_BLOCK * 2);
+    let mut sizes = Vec::new();
+    for compression in [Compression::Zlib, Compression::None] {
+        let doc = render_as(&mesh, &f, compression);
+        sizes.push(doc.len());
+        let xml = parse_xml(&doc);
+        let root = xml.root_element();
+        check_grid(root, &mesh, &f);
+        let piece = root.child("UnstructuredGrid").child("Piece");
+        let np = mesh.nodes.len();
+        let u = f64s(piece.child("PointData").array("u"), np, 3);
+        assert_eq!(u, vec3(f.u.as_ref().unwrap()));
+    }
+    assert!(
+        sizes[0] < sizes[1],
+        "zlib {} < raw {} bytes",
+        sizes[0],
+        sizes[1]
+    );
+}
+
+/// The two encodings carry the same bytes: every array of a compressed file equals its raw
+/// twin, and only the compressed root names the compressor.
+#[test]
+fn zlib_and_raw_files_hold_the_same_arrays() {
+    let mesh = Mesh::rectangle(3.0, 2.0, 30, 20, MeshPattern::Diagonal);
+    let f = hand_built(&mesh);
+    let (zlib, raw) = (
+        render_as(&mesh, &f, Compression::Zlib),
+        render_as(&mesh, &f, Compression::None),
+    );
+    let (zx, rx) = (parse_xml(&zlib), parse_xml(&raw));
+    assert_eq!(
+        zx.root_element().attr("compressor"),
+        "vtkZLibDataCompressor"
+    );
+    assert!(rx.root_element().attribute("compressor").is_none());
+    let arrays = |d: &Document| -> Vec<(String, String, Vec<u8>)> {
+        d.descendants()
+            .filter(|n| n.has_tag_name("DataArray"))
+            .map(|a| {
+                let text = a.text_content();
+                let data = match a.document().root_element().attribute("compressor") {
+                    Some(_) => zlib_data(text.trim()),
+                    None => raw_data(text.trim()),
+                };
+                (a.attr("Name").to_string(), a.attr("type").to_string(), data)
+            })
+            .collect()
+    };
+    let (za, ra) = (arrays(&zx), arrays(&rx));
+    assert_eq!(za.len(), 13);
+    assert_eq!(za, ra);
 }
 
 /// σ of a known constant-strain field, written and read back: the initial state of a scene
@@ -432,14 +536,21 @@ fn vtu_rejects_fields_that_do_not_match_the_mesh() {
     bad.push(vm);
     for f in &bad {
         let mut buf = Vec::new();
-        let err = write_vtu(&mut buf, &mesh.nodes, mesh.cells_flat(), f).unwrap_err();
+        let err = write_vtu(
+            &mut buf,
+            &mesh.nodes,
+            mesh.cells_flat(),
+            f,
+            Compression::Zlib,
+        )
+        .unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::InvalidInput, "{err}");
         assert!(buf.is_empty(), "nothing is written for invalid input");
     }
     let mut triangles = mesh.cells_flat().to_vec();
     triangles[3 * 3 + 1] = mesh.nodes.len();
     let mut buf = Vec::new();
-    let err = write_vtu(&mut buf, &mesh.nodes, &triangles, &good).unwrap_err();
+    let err = write_vtu(&mut buf, &mesh.nodes, &triangles, &good, Compression::Zlib).unwrap_err();
     assert_eq!(err.kind(), io::ErrorKind::InvalidInput);
     assert!(err.to_string().contains("triangle 3"), "{err}");
     assert!(buf.is_empty());
