@@ -51,12 +51,7 @@ pub fn viscous_stiffness_in_pattern<const D: usize>(
     add_by_rows(&mut k, |r, add| {
         let (node, c) = owner[r];
         let mut ke = Vec::new();
-        for &e in &cells_of[start[node]..start[node + 1]] {
-            let cell = mesh.cell(e);
-            let a = cell
-                .iter()
-                .position(|&v| v == node)
-                .expect("a node of its cell");
+        for (e, cell, a) in around(mesh, &start, &cells_of, node) {
             let (g, m) = (geo.grads(e), geo.measure[e]);
             if cell.iter().all(|&v| dofs.frame(v).is_none()) {
                 for b in 0..=D {
@@ -165,40 +160,18 @@ pub fn free_pattern<const D: usize>(mesh: &Mesh<D>, dofs: &DofMap<D>) -> Csr {
     rows.sort_unstable();
     pattern_by_rows(n, |r, cols| {
         let i = rows[r].1;
-        let mut near: Vec<usize> = cells_of[start[i]..start[i + 1]]
-            .iter()
-            .flat_map(|&e| mesh.cell(e).iter().copied())
-            .collect();
-        near.sort_unstable();
-        near.dedup();
-        for &j in &near {
-            cols.extend(free_of(j).map(|c| c as u32));
+        for &e in &cells_of[start[i]..start[i + 1]] {
+            for &j in mesh.cell(e) {
+                cols.extend(free_of(j).map(|c| c as u32));
+            }
         }
     })
 }
 
-/// The square pattern (values zero) whose row r `row(r, cols)` appends to `cols` (sorted
-/// afterwards); blocks of rows are formed on the pool's threads and joined in order.
+/// The square pattern (values zero) whose row r is what `row(r, cols)` appends to `cols`
+/// ([`par::sorted_rows`]).
 fn pattern_by_rows(n: usize, row: impl Fn(usize, &mut Vec<u32>) + Sync + Send) -> Csr {
-    let blocks = par::map_ranges(n, par::ROW_CHUNK, |rows| {
-        let (mut lengths, mut indices) = (Vec::with_capacity(rows.len()), Vec::new());
-        for r in rows {
-            let first = indices.len();
-            row(r, &mut indices);
-            indices[first..].sort_unstable();
-            lengths.push(indices.len() - first);
-        }
-        (lengths, indices)
-    });
-    let mut indptr = Vec::with_capacity(n + 1);
-    indptr.push(0);
-    let mut indices = Vec::with_capacity(blocks.iter().map(|b| b.1.len()).sum());
-    for (lengths, cols) in blocks {
-        for l in lengths {
-            indptr.push(indptr.last().unwrap() + l);
-        }
-        indices.extend_from_slice(&cols);
-    }
+    let (indptr, indices) = par::sorted_rows(n, row);
     Csr {
         nrows: n,
         ncols: n,
@@ -206,6 +179,26 @@ fn pattern_by_rows(n: usize, row: impl Fn(usize, &mut Vec<u32>) + Sync + Send) -
         values: vec![0.0; indices.len()],
         indices,
     }
+}
+
+/// The cells around `node` in cell order, from [`cells_of_nodes`]'s (start, cells_of): each
+/// as (cell index, its vertices, the node's place among them).
+fn around<'a, const D: usize>(
+    mesh: &'a Mesh<D>,
+    start: &'a [usize],
+    cells_of: &'a [usize],
+    node: usize,
+) -> impl Iterator<Item = (usize, &'a [usize], usize)> + 'a {
+    cells_of[start[node]..start[node + 1]]
+        .iter()
+        .map(move |&e| {
+            let cell = mesh.cell(e);
+            let a = cell
+                .iter()
+                .position(|&v| v == node)
+                .expect("a node of its cell");
+            (e, cell, a)
+        })
 }
 
 /// The cells of each node as CSR (offsets, cell indices), in cell order.
@@ -237,19 +230,9 @@ pub fn node_pattern<const D: usize>(mesh: &Mesh<D>) -> Csr {
     let nn = mesh.n_nodes();
     let (start, cells_of) = cells_of_nodes(mesh);
     pattern_by_rows(nn, |i, cols| {
-        let first = cols.len();
         for &e in &cells_of[start[i]..start[i + 1]] {
             cols.extend(mesh.cell(e).iter().map(|&v| v as u32));
         }
-        cols[first..].sort_unstable();
-        let mut kept = first;
-        for p in first..cols.len() {
-            if p == first || cols[p] != cols[kept - 1] {
-                cols[kept] = cols[p];
-                kept += 1;
-            }
-        }
-        cols.truncate(kept);
     })
 }
 
@@ -411,12 +394,7 @@ fn scalar_in_pattern<const D: usize>(
 ) -> Csr {
     let (start, cells_of) = cells_of_nodes(mesh);
     add_by_rows(&mut pattern, |node, add| {
-        for &e in &cells_of[start[node]..start[node + 1]] {
-            let cell = mesh.cell(e);
-            let a = cell
-                .iter()
-                .position(|&v| v == node)
-                .expect("a node of its cell");
+        for (e, cell, a) in around(mesh, &start, &cells_of, node) {
             for b in 0..=D {
                 add(cell[b], entry(e, a, b));
             }

@@ -150,6 +150,43 @@ pub fn map_ranges<R: Send>(
     }
 }
 
+/// The rows of a sparse pattern formed on the pool's threads: row r holds what `row(r, out)`
+/// appends to `out`, sorted and without duplicates. Returns (ptr, entries), row r being
+/// `entries[ptr[r]..ptr[r + 1]]`; blocks of rows are joined in order.
+pub fn sorted_rows<T: Ord + Copy + Send>(
+    n: usize,
+    row: impl Fn(usize, &mut Vec<T>) + Sync + Send,
+) -> (Vec<usize>, Vec<T>) {
+    let blocks = map_ranges(n, ROW_CHUNK, |rows| {
+        let (mut lengths, mut out) = (Vec::with_capacity(rows.len()), Vec::new());
+        for r in rows {
+            let first = out.len();
+            row(r, &mut out);
+            out[first..].sort_unstable();
+            let mut kept = first;
+            for q in first..out.len() {
+                if q == first || out[q] != out[kept - 1] {
+                    out[kept] = out[q];
+                    kept += 1;
+                }
+            }
+            out.truncate(kept);
+            lengths.push(kept - first);
+        }
+        (lengths, out)
+    });
+    let mut ptr = Vec::with_capacity(n + 1);
+    ptr.push(0);
+    let mut entries = Vec::with_capacity(blocks.iter().map(|b| b.1.len()).sum());
+    for (lengths, out) in blocks {
+        for l in lengths {
+            ptr.push(ptr.last().unwrap() + l);
+        }
+        entries.extend_from_slice(&out);
+    }
+    (ptr, entries)
+}
+
 /// Σ f(range) over the chunks of 0..n, added in chunk order: the same bits for any thread
 /// count.
 pub fn sum(n: usize, f: impl Fn(Range<usize>) -> f64 + Sync + Send) -> f64 {

@@ -79,39 +79,12 @@ pub fn strength(a: &Csr, blocks: &Blocks, theta: f64) -> (Vec<usize>, Vec<usize>
 /// about 14 neighbours, aggregates of the plain graph are small and the smoothed
 /// prolongator makes the first coarse operator nearly as large as the fine one.
 pub fn squared(ptr: &[usize], list: &[usize]) -> (Vec<usize>, Vec<usize>) {
-    let nb = ptr.len() - 1;
-    let rows = par::map_ranges(nb, par::ROW_CHUNK, |blocks| {
-        let mut out = Vec::new();
-        let mut lengths = Vec::with_capacity(blocks.len());
-        for b in blocks {
-            let first = out.len();
-            for &c in &list[ptr[b]..ptr[b + 1]] {
-                out.push(c);
-                out.extend(list[ptr[c]..ptr[c + 1]].iter().filter(|&&d| d != b));
-            }
-            out[first..].sort_unstable();
-            let mut kept = first;
-            for q in first..out.len() {
-                if q == first || out[q] != out[kept - 1] {
-                    out[kept] = out[q];
-                    kept += 1;
-                }
-            }
-            out.truncate(kept);
-            lengths.push(kept - first);
+    par::sorted_rows(ptr.len() - 1, |b, out| {
+        for &c in &list[ptr[b]..ptr[b + 1]] {
+            out.push(c);
+            out.extend(list[ptr[c]..ptr[c + 1]].iter().filter(|&&d| d != b));
         }
-        (lengths, out)
-    });
-    let mut ptr2 = Vec::with_capacity(nb + 1);
-    ptr2.push(0);
-    let mut list2 = Vec::new();
-    for (lengths, l) in rows {
-        for n in lengths {
-            ptr2.push(ptr2.last().unwrap() + n);
-        }
-        list2.extend_from_slice(&l);
-    }
-    (ptr2, list2)
+    })
 }
 
 /// The aggregate of every block (numbered 0..count) and the count.

@@ -293,6 +293,14 @@ pub(super) fn run_in<const D: usize>(
     let mut level = (n0 << 1, s0 << 1);
     let mut previous: Option<(usize, usize)> = None;
     let (mut h_points, mut k_points) = (model.h.points.clone(), model.k.points.clone());
+    // The (2h, 2k) companion run of a level, keeping its last step.
+    let companion_work = |companion: (usize, usize)| Work {
+        problem: planner.problem(companion),
+        keep: BTreeSet::from([companion.1]),
+        is_reference: false,
+        share: None,
+        keep_u,
+    };
     let summary = loop {
         let companion_level = (level.0 / 2, level.1 / 2);
         let companion_reused =
@@ -300,13 +308,7 @@ pub(super) fn run_in<const D: usize>(
         let pilot = runs.contains_key(&level);
         if !companion_reused && (pilot || exec.threads < 2) {
             total_steps.fetch_add(companion_level.1, Ordering::Relaxed);
-            let work = Work {
-                problem: planner.problem(companion_level),
-                keep: BTreeSet::from([companion_level.1]),
-                is_reference: false,
-                share: None,
-                keep_u,
-            };
+            let work = companion_work(companion_level);
             let c = levels::run_level::<D>(&work, exec.settings, &tick, None)?;
             made.insert(companion_level, c);
         }
@@ -388,13 +390,7 @@ pub(super) fn run_in<const D: usize>(
             run_chosen::<D>(&problem, exec, keep_u, sink, &tick)?
         } else {
             total_steps.fetch_add(companion_level.1, Ordering::Relaxed);
-            let work = Work {
-                problem: planner.problem(companion_level),
-                keep: BTreeSet::from([companion_level.1]),
-                is_reference: false,
-                share: None,
-                keep_u,
-            };
+            let work = companion_work(companion_level);
             // The two runs share the study's threads.
             let half = Execution {
                 threads: (exec.threads / 2).max(1),
