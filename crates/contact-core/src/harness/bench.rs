@@ -62,6 +62,10 @@ pub struct BenchLevel {
     pub predicted_mib: f64,
     /// Peak resident memory of this run (VmHWM, reset before it), MiB; None off Linux.
     pub peak_rss_mib: Option<f64>,
+    /// `peak_rss_mib` in bytes per velocity unknown.
+    pub bytes_per_unknown: Option<f64>,
+    /// The velocity hierarchy's operator complexity (multigrid path only).
+    pub operator_complexity: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -74,10 +78,10 @@ pub struct BenchReport {
 impl BenchReport {
     /// A plain-text table for humans.
     pub fn table(&self) -> String {
-        let mut s = String::from("  1/h       g thr speedup   nodes  unknowns steps  setup_s  solve_s  total_s  vs_g0  step_ms  subst_ms  step/subst  matvec_ms  step/matvec  slip_steps  slip_max  newton  its_v  its_v_mean  its_d  pred_MiB  peak_MiB  solver\n");
+        let mut s = String::from("  1/h       g thr speedup   nodes  unknowns steps  setup_s  solve_s  total_s  vs_g0  step_ms  subst_ms  step/subst  matvec_ms  step/matvec  slip_steps  slip_max  newton  its_v  its_v_mean  its_d  pred_MiB  peak_MiB  B/unknown  op_cx  solver\n");
         for l in &self.levels {
             s += &format!(
-                "{:5} {:>7} {:3} {:7.2} {:7} {:9} {:5} {:8.4} {:8.4} {:8.4} {:6.2} {:8.3} {:9.3} {:11.2} {:10.3} {:12.1} {:11} {:9} {:7} {:6} {:11.2} {:6} {:9.0} {:9}  {}\n",
+                "{:5} {:>7} {:3} {:7.2} {:7} {:9} {:5} {:8.4} {:8.4} {:8.4} {:6.2} {:8.3} {:9.3} {:11.2} {:10.3} {:12.1} {:11} {:9} {:7} {:6} {:11.2} {:6} {:9.0} {:9} {:10} {:6}  {}\n",
                 l.level,
                 l.friction_g.map_or("-".into(), |g| format!("{g}")),
                 l.threads,
@@ -102,6 +106,8 @@ impl BenchReport {
                 l.damage_max_krylov_iterations,
                 l.predicted_mib,
                 l.peak_rss_mib.map_or("-".into(), |m| format!("{m:.0}")),
+                l.bytes_per_unknown.map_or("-".into(), |b| format!("{b:.0}")),
+                l.operator_complexity.map_or("-".into(), |c| format!("{c:.2}")),
                 l.linear_solver,
             );
         }
@@ -280,6 +286,7 @@ fn measure<const D: usize>(
     let matvec_s = products[products.len() / 2];
     let steps = sim.problem.steps;
     let last = last.ok_or("no steps")?;
+    let peak = peak_rss_mib();
     Ok(BenchLevel {
         level,
         nodes: sim.mesh.n_nodes(),
@@ -310,7 +317,9 @@ fn measure<const D: usize>(
         w_v: last.w_v,
         zeta_l2: last.zeta_l2,
         predicted_mib: sim.predicted_bytes as f64 / (1u64 << 20) as f64,
-        peak_rss_mib: peak_rss_mib(),
+        peak_rss_mib: peak,
+        bytes_per_unknown: peak.map(|m| m * (1u64 << 20) as f64 / sim.dofs.n_free() as f64),
+        operator_complexity: sim.operator_complexity(),
     })
 }
 

@@ -52,6 +52,10 @@ pub struct MeshInfo {
     /// How the linear systems are solved: "direct (Cholesky)", "multigrid (smoothed
     /// aggregation, 4 levels)", "multigrid (geometric, 3 levels)".
     pub linear_solver: String,
+    /// Multigrid path: Σ nnz of the velocity hierarchy's level operators ÷ nnz of the finest
+    /// (1 would be no coarse levels at all).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub operator_complexity: Option<f64>,
 }
 
 /// The shortest, mean and longest cell diameter of a given mesh.
@@ -69,6 +73,9 @@ pub struct MemoryInfo {
     /// The process's peak resident bytes at the end of the run (VmHWM; on a node running
     /// several jobs at once, an upper bound of this job's own).
     pub peak_bytes: Option<u64>,
+    /// `peak_bytes` ÷ the velocity unknowns.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bytes_per_unknown: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -176,6 +183,7 @@ impl Summary {
         let p: &Problem = &sim.problem;
         let (factor_n, factor_nnz) = sim.velocity_factor_size();
         let contact = sim.dofs.n_contact() > 0;
+        let peak_bytes = crate::memory::peak_bytes();
         let mut stats = SolverStats {
             damage_refactorizations: sim.damage_refactorizations(),
             ..Default::default()
@@ -247,6 +255,7 @@ impl Summary {
                     "none"
                 },
                 linear_solver: sim.linear_solver(),
+                operator_complexity: sim.operator_complexity(),
             },
             time: TimeInfo {
                 t_end: p.t_end,
@@ -288,7 +297,8 @@ impl Summary {
             },
             memory: MemoryInfo {
                 predicted_bytes: sim.predicted_bytes,
-                peak_bytes: crate::memory::peak_bytes(),
+                peak_bytes,
+                bytes_per_unknown: peak_bytes.map(|b| b as f64 / sim.dofs.n_free().max(1) as f64),
             },
             warnings,
             error_estimate: None,

@@ -297,6 +297,18 @@ impl Hierarchy {
             .collect()
     }
 
+    /// Operator complexity Σ_l nnz(A_l) / nnz(A_0): the storage and the work of one
+    /// application of every level's operator, relative to the finest operator's.
+    pub fn operator_complexity(&self) -> f64 {
+        let nnz: Vec<usize> = self
+            .levels
+            .iter()
+            .map(|l| l.a.nnz())
+            .chain(std::iter::once(self.coarse_a.nnz()))
+            .collect();
+        nnz.iter().sum::<usize>() as f64 / nnz[0].max(1) as f64
+    }
+
     /// The coarsest operator.
     pub fn coarsest(&self) -> &Csr {
         &self.coarse_a
@@ -441,5 +453,30 @@ mod tests {
             );
             assert!(dot(&x, &bx) > 0.0 && dot(&y, &by) > 0.0);
         }
+    }
+
+    /// Operator complexity: 1 without coarse levels; on the halved 2D grid each level has
+    /// a quarter of the nodes of the one above and the same stencil, so the sum is below
+    /// 1 + 1/4 + 1/16 + … = 4/3 (plus the boundary's share).
+    #[test]
+    fn operator_complexity_counts_every_level() {
+        let h = hierarchy(MeshPattern::Diagonal);
+        let c = h.operator_complexity();
+        assert!(
+            h.n_levels() >= 2 && c > 1.2 && c < 1.4,
+            "{} levels, {c}",
+            h.n_levels()
+        );
+        let single = Hierarchy::new(
+            Arc::new(h.coarsest().clone()),
+            Blocks::scalar(h.coarsest().nrows),
+            Coarsening::Geometric {
+                prolongators: vec![],
+                blocks: vec![],
+            },
+            Params::default(),
+        )
+        .unwrap();
+        assert_eq!(single.operator_complexity(), 1.0);
     }
 }

@@ -176,6 +176,12 @@ impl<const D: usize> Simulation<D> {
         self.velocity.solver.linear_solver().describe()
     }
 
+    /// The velocity hierarchy's operator complexity (multigrid path only).
+    pub fn operator_complexity(&self) -> Option<f64> {
+        let solver = self.velocity.solver.linear_solver();
+        solver.hierarchy().map(|h| h.operator_complexity())
+    }
+
     /// Krylov iterations of the last step's velocity and damage solves.
     pub fn krylov_iterations(&self) -> (usize, usize) {
         (
