@@ -268,8 +268,13 @@ impl Body {
         refined(self.base.get::<D>(), self.refine)
     }
 
-    /// Its node count, without refining: each refinement adds one node per edge.
+    /// Its node count, without refining: each refinement adds one node per edge. Admission
+    /// and the memory prediction ask for it before any run, so the edges (a sort of the 6
+    /// per tetrahedron) are counted only when there is a refinement to count them for.
     pub fn n_nodes(&self) -> usize {
+        if self.refine == 0 {
+            return self.base.n_nodes();
+        }
         let (mut n, mut e, mut c) = (
             self.base.n_nodes(),
             self.base.n_edges(),

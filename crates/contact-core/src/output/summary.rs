@@ -163,13 +163,11 @@ fn initial_norms<const D: usize>(sim: &Simulation<D>) -> FinalNorms {
         Some(d) => mesh.nodes.iter().map(|x| d.zeta0.at(x, 0.0)).collect(),
         None => vec![1.0; mesh.n_nodes()],
     };
-    let mass = crate::fem::assembly::mass(mesh, &sim.geo);
-    let mut scratch = vec![0.0; mesh.n_nodes()];
     FinalNorms {
         t: 0.0,
         w_v: 0.0,
         u_v: crate::fem::norms::strain_norm(mesh, &sim.geo, &u0),
-        zeta_l2: crate::fem::norms::mass_norm(&mass, &zeta0, &mut scratch),
+        zeta_l2: sim.zeta_l2(&zeta0),
         zeta_min: zeta0.iter().copied().fold(f64::INFINITY, f64::min),
     }
 }

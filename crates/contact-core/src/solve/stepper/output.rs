@@ -176,6 +176,12 @@ impl<const D: usize> Simulation<D> {
         self.velocity.solver.linear_solver().describe()
     }
 
+    /// |ζ|_{L²} = (ζᵀ M ζ)^½ with the run's mass matrix M (n_nodes long).
+    pub fn zeta_l2(&self, zeta: &[f64]) -> f64 {
+        let mut scratch = vec![0.0; zeta.len()];
+        crate::fem::norms::mass_norm(&self.mass, zeta, &mut scratch)
+    }
+
     /// The velocity hierarchy's operator complexity (multigrid path only).
     pub fn operator_complexity(&self) -> Option<f64> {
         let solver = self.velocity.solver.linear_solver();
