@@ -25,7 +25,9 @@
 //!   multiples of the fine operators, fitted to measured peaks of box-exp3: geometric levels
 //!   (refined bodies, generated meshes with even cell counts) at 1/8–1/32, smoothed
 //!   aggregation at 1/15 and 1/31 (odd cell counts) and on an imported gmsh part
-//!   (`benches/part`) at 20k and 82k nodes.
+//!   (`benches/part`) at 20k and 82k nodes; a refined body's levels stop at its base mesh,
+//!   whose factors (K's twice with a Γ3, H's) are sized by the direct path's fill model
+//!   (tests/memory_prediction.rs checks boxes and imported meshes, as given and refined).
 //!
 //! With a Γ3, the multigrid path also builds K's hierarchy on all free DOFs for the
 //! semismooth Newton method of a slipping step (sharing K itself) with its truncated
@@ -59,6 +61,9 @@ struct Counts {
     geometric: bool,
     /// The boundary has a Γ3 part.
     contact: bool,
+    /// Nodes of the coarsest geometric level when it is a given mesh (a refined body's
+    /// base); 0 when the levels go down to a few cells (generated meshes).
+    coarse_nodes: f64,
 }
 
 fn counts(p: &Problem) -> Counts {
@@ -87,6 +92,10 @@ fn counts(p: &Problem) -> Counts {
         cells,
         stencil: if d == 2 { 7.0 } else { 15.0 },
         damage: p.damage.is_some(),
+        coarse_nodes: match &p.body {
+            Some(b) if b.refine > 0 => b.base.n_nodes() as f64,
+            _ => 0.0,
+        },
         contact: p
             .boundary
             .iter()
@@ -216,6 +225,19 @@ pub fn predict(p: &Problem) -> Prediction {
     } else {
         0.0
     };
+    // A refined body's geometric levels stop at its base mesh, whose operators are factored:
+    // K's (a second time with a Γ3, for the truncated cycle of slipping steps) and H's.
+    let coarsest = if c.geometric && c.coarse_nodes > 0.0 {
+        let copies_k = if c.contact { 2.0 } else { 1.0 };
+        let h = if c.damage {
+            factor_entries(c.d, c.coarse_nodes)
+        } else {
+            0.0
+        };
+        8.0 * 1.25 * (copies_k * factor_entries(c.d, c.d * c.coarse_nodes) + h)
+    } else {
+        0.0
+    };
     let full_space = match (c.contact, c.geometric) {
         (false, _) => 0.0,
         (true, true) => FULL_SPACE_GEOMETRIC * csr(nnz_k, n),
@@ -225,8 +247,12 @@ pub fn predict(p: &Problem) -> Prediction {
     let shared_k_ii = if c.contact { csr(nnz_k, n) } else { 0.0 };
     // The earlier steps' solutions whose projection starts each K_II solve.
     let solution_space = 8.0 * SolutionSpace::vectors(CAPACITY) as f64 * n;
-    let multigrid =
-        PROCESS + base - shared_k_ii + hierarchy_k + hierarchy_h + full_space + solution_space;
+    let multigrid = PROCESS + base - shared_k_ii
+        + hierarchy_k
+        + hierarchy_h
+        + coarsest
+        + full_space
+        + solution_space;
     Prediction {
         direct: direct_peak(&t, direct_factors),
         multigrid: multigrid as u64,
