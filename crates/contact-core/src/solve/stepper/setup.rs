@@ -131,6 +131,7 @@ impl<const D: usize> Simulation<D> {
                     g: vec![0.0; nn],
                     f: vec![0.0; nn],
                     next: zeta.clone(),
+                    before: Vec::new(),
                 })
             }
             None => None,

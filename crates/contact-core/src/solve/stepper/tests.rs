@@ -129,3 +129,30 @@ fn a_restored_run_repeats_the_uninterrupted_one() {
     assert_eq!(rest, again);
     assert!(resumed.finished());
 }
+
+/// The damage solve starts from ζ_{n−1} + (ζ_{n−1} − ζ_{n−2}) clipped to [0, 1]: nothing is
+/// predicted before two states are known (the first step, a resumed run), and the state
+/// the prediction reads moves on one step at a time.
+#[test]
+fn the_damage_start_is_the_clipped_linear_extrapolation() {
+    let mut sim =
+        Simulation::<2>::new(problem("multigrid", 1.0), SolverSettings::default()).expect("set-up");
+    let d = sim.damage.as_mut().expect("paper-exp3 has damage");
+    let n = d.next.len();
+    d.before.clear();
+    let first: Vec<f64> = (0..n).map(|i| 0.5 + 0.1 * (i % 3) as f64).collect();
+    d.next.clone_from(&first);
+    d.predict();
+    assert_eq!(d.next, first, "no prediction from one state");
+    // ζ_{n−1} − ζ_{n−2} of 0.3, −0.6 and 0.05 around 0.5, 0.6, 0.7.
+    let last: Vec<f64> = (0..n)
+        .map(|i| first[i] + [0.3, -0.6, 0.05][i % 3])
+        .collect();
+    d.next.clone_from(&last);
+    d.predict();
+    for i in 0..n {
+        let want = [1.0, 0.0, 0.8][i % 3];
+        assert!((d.next[i] - want).abs() < 1e-15, "node {i}: {}", d.next[i]);
+        assert_eq!(d.before[i], last[i]);
+    }
+}
