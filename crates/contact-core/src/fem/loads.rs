@@ -11,6 +11,7 @@
 
 use super::Geometry;
 use crate::laws::Tensor;
+use crate::linalg::par;
 use crate::mesh::Mesh;
 use crate::problem::{BoundaryKind, BoundaryPart, VectorField};
 
@@ -281,29 +282,48 @@ pub fn damage_source<const D: usize>(
     mesh: &Mesh<D>,
     geo: &Geometry<D>,
     zeta: &[f64],
-    phi: impl Fn(usize, f64) -> f64,
+    phi: impl Fn(usize, f64) -> f64 + Sync,
     out: &mut [f64],
 ) {
     out.iter_mut().for_each(|v| *v = 0.0);
-    if D == 2 {
-        for (e, tri) in mesh.cells().enumerate() {
+    // The source values at the points (φ reads the cell's strain) split over the pool's
+    // threads in fixed chunks of cells; the scatter then adds them in cell order, so the sum
+    // at every node is the serial one, bit for bit, whatever the thread count.
+    let rule = cell_rule(D);
+    let q = rule.len();
+    let mut at_points = vec![0.0; mesh.n_cells() * q];
+    par::for_each_chunk_mut(
+        &mut at_points,
+        q * (par::VECTOR_CHUNK / 4),
+        |start, chunk| {
+            for (i, f) in chunk.chunks_mut(q).enumerate() {
+                let e = start / q + i;
+                let cell = mesh.cell(e);
+                for ((l, wq), f) in rule.iter().zip(f) {
+                    let z: f64 = cell.iter().enumerate().map(|(a, &n)| l[a] * zeta[n]).sum();
+                    *f = if D == 2 {
+                        phi(e, z)
+                    } else {
+                        wq * geo.measure[e] * phi(e, z)
+                    };
+                }
+            }
+        },
+    );
+    for (e, (cell, f)) in mesh.cells().zip(at_points.chunks(q)).enumerate() {
+        if D == 2 {
+            // Edge a's midpoint, between vertices a and a + 1.
             let w = geo.measure[e] / 3.0;
-            for a in 0..3 {
-                let (i, j) = (tri[a], tri[(a + 1) % 3]);
-                let f = phi(e, 0.5 * (zeta[i] + zeta[j]));
+            for (a, f) in f.iter().enumerate() {
+                let (i, j) = (cell[a], cell[(a + 1) % 3]);
                 out[i] += 0.5 * w * f;
                 out[j] += 0.5 * w * f;
             }
-        }
-        return;
-    }
-    let rule = cell_rule(D);
-    for (e, cell) in mesh.cells().enumerate() {
-        for (l, wq) in &rule {
-            let z: f64 = cell.iter().enumerate().map(|(a, &n)| l[a] * zeta[n]).sum();
-            let f = wq * geo.measure[e] * phi(e, z);
-            for (a, &n) in cell.iter().enumerate() {
-                out[n] += l[a] * f;
+        } else {
+            for ((l, _), f) in rule.iter().zip(f) {
+                for (a, &n) in cell.iter().enumerate() {
+                    out[n] += l[a] * f;
+                }
             }
         }
     }
