@@ -27,6 +27,8 @@ pub fn app(state: AppState) -> Router {
         .route("/jobs/{id}/result.pvd", get(results::pvd))
         .route("/jobs/{id}/archive.tar", get(results::archive))
         .route("/jobs/{id}/report.svg", get(results::report))
+        .route("/jobs/{id}/table.csv", get(results::table_csv))
+        .route("/jobs/{id}/plot.svg", get(results::plot))
         .route("/meshes", post(meshes::upload).get(meshes::list).layer(big))
         .route("/meshes/{id}", get(meshes::get).delete(meshes::delete))
         .route("/meshes/{id}/file", get(meshes::file))

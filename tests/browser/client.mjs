@@ -2010,9 +2010,45 @@ async function testTargetView() {
   await page.close();
 }
 
+/**
+ * "Continue…" in a finished simulation's view: a final time before the parent's is refused
+ * under the input (422 at /continue/t_end); a later one submits the continuation, whose view
+ * opens, names its parent, and whose summary has the parent's steps and its own.
+ */
+async function testContinue() {
+  console.log('test 11: continue a finished simulation from its view');
+  const id = await runJob({ preset: 'paper-convergence', overrides: { h: '1/4', k: '1/4', T: '1/2' } }, 'the run to continue');
+  const page = await openPage(async () => {}, `#job=${id}`);
+  await page.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 10_000 });
+  check(await page.isHidden('#continue-form'), 'the continue form is hidden until asked for');
+  await page.click('#continue-job');
+  check(await page.isVisible('#continue-t-end'), '"Continue…" shows the final-time input');
+  check((await page.inputValue('#continue-t-end')) === '1', 'the input proposes twice the final time');
+  await page.fill('#continue-t-end', '0.25');
+  await page.click('#continue-submit');
+  await page.waitForFunction(() => document.querySelector('.field-error[data-for="/continue/t_end"]')?.textContent, null, { timeout: 10_000 });
+  const said = await page.textContent('.field-error[data-for="/continue/t_end"]');
+  check(/after the parent's final time/.test(said), `a final time before the parent's is refused under the input: "${said}"`);
+  check((await page.getAttribute('#continue-t-end', 'aria-invalid')) === 'true', 'the input is marked invalid');
+  await page.fill('#continue-t-end', '1');
+  await page.click('#continue-submit');
+  await page.waitForFunction((parent) => /^#job=/.test(location.hash) && location.hash !== `#job=${parent}`, id, { timeout: 10_000 });
+  const child = new URL(page.url()).hash.slice('#job='.length);
+  const job = await finished(child, 'the continuation');
+  check(job.status === 'succeeded' && job.continued_from?.job === id, `the continuation succeeded and links its parent (${job.status})`);
+  await page.waitForSelector(`#viewer[data-state="ready"][data-job="${child}"]`, { timeout: 15_000 });
+  const from = await page.textContent('#continued-from');
+  check(from.includes(id.slice(0, 8)) && from.includes('step 2'), `the view names the parent: "${from}"`);
+  const s = await (await context.request.get(`${base}/jobs/${child}/summary`)).json();
+  check(s.steps.length === 4 && s.steps[3].n === 4 && s.continued_from.step === 2, `its summary numbers steps from the parent's start (${s.steps.map((x) => x.n)})`);
+  await page.screenshot({ path: path.join(outDir, 'client-continue.png'), fullPage: true });
+  await axeCheck(page, 'on a continued job with the continue form');
+  await page.close();
+}
+
 // CLIENT_TESTS=5,7 runs only those sections (while working on one); all by default.
 const only = process.env.CLIENT_TESTS ? new Set(process.env.CLIENT_TESTS.split(',').map(Number)) : null;
-const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys, testNewcomer, testTargetView];
+const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys, testNewcomer, testTargetView, testContinue];
 
 let failed = false;
 try {

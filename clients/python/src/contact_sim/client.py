@@ -264,6 +264,27 @@ class Client:
             study["name"] = name
         return self.submit({"study": study})
 
+    def continue_(
+        self,
+        job: Union[str, "Job"],
+        t_end: Optional[Ratio] = None,
+        scene: Optional[Mapping[str, Any]] = None,
+    ) -> "Job":
+        """Continues a finished simulation ``job`` (a :class:`Job` or its id) from the state
+        after its last step to the final time ``t_end``, with the parent's step k: the same
+        steps as one run to ``t_end``, numbered from the parent's start; the new job's summary
+        has ``continued_from``. ``scene`` changes loads, friction, output or solver for the
+        continuation (the mesh and the body must stay the parent's; its ``time`` may only give
+        ``t_end``). The same continuation twice is answered with the first job. A parent that
+        has not stored its last state (unfinished, failed) is refused: :class:`ApiError` 422
+        at ``/continue/job``."""
+        request: Dict[str, Any] = {"job": job.id if isinstance(job, Job) else str(job)}
+        if t_end is not None:
+            request["t_end"] = _ratio(t_end)
+        if scene is not None:
+            request["scene"] = dict(scene)
+        return Job(self, self._json("POST", "/jobs", json={"continue": request}))
+
     def _study_presets(self) -> List[str]:
         """Names of the server's study presets (asked once per client)."""
         if self._studies is None:
