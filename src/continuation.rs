@@ -163,11 +163,19 @@ pub fn validated(doc: Value, state: &AppState, caller: &Caller) -> Result<Valida
             ));
         }
     }
-    let (t_end, t_pointer) = match (c.get("t_end"), scene_time.and_then(|t| t.get("t_end"))) {
+    // A scene copied from the parent's keeps the parent's final time: not a second one.
+    let parents_t = |v: &Value| {
+        parent_scene["time"].get("t_end") == Some(v)
+            || scene::parse_ratio(v).is_ok_and(|t| t == parent_problem.t_end)
+    };
+    let scene_t_end = scene_time
+        .and_then(|t| t.get("t_end"))
+        .filter(|v| !(c.contains_key("t_end") && parents_t(v)));
+    let (t_end, t_pointer) = match (c.get("t_end"), scene_t_end) {
         (Some(_), Some(_)) => {
             return Err(Problem::invalid_field(
                 "/continue/scene/time/t_end",
-                "give the final time once: continue.t_end, or the scene's time.t_end",
+                "give the final time once: continue.t_end, or the scene's time.t_end (a scene copied from the parent's may keep the parent's)",
             ))
         }
         (Some(t), None) => (t.clone(), "/continue/t_end"),

@@ -457,7 +457,8 @@ pub type Known<'a> = dyn Fn(&Value) -> Option<(Value, State)> + 'a;
 
 /// Runs the members one after another (each on all of `exec`'s threads), taking a member
 /// from `known` or from an equal earlier member when it can; `progress(done, total)` after
-/// every step of a computed member (`Break` cancels the sweep).
+/// every step of a computed member (`Break` cancels the sweep; `done` counts the steps of
+/// the members taken, too).
 pub fn run(
     spec: &SweepSpec,
     exec: Execution,
@@ -502,11 +503,9 @@ pub fn run(
             seen.push((key, i));
         }
         if row.cached {
-            // Its steps count as done.
+            // Its steps count as done (reported with the next computed step: the progress
+            // hook counts computed steps).
             done += m.problem.steps;
-            if progress(done, total).is_break() {
-                return Err(StudyError::Cancelled);
-            }
         }
         row.member = i;
         row.values = spec
