@@ -2046,9 +2046,39 @@ async function testContinue() {
   await page.close();
 }
 
+/**
+ * A parameter sweep's view: a table row per member with its values, and the server's plot of
+ * the quantity and parameter picked in the menus.
+ */
+async function testSweepView() {
+  console.log('test 12: sweep view (a real 3 × 2 sweep)');
+  const scene = await (await context.request.get(`${base}/presets/paper-convergence`)).json();
+  scene.mesh.h = '1/4';
+  scene.time = { t_end: '1/2', k: '1/4' };
+  scene.friction = { law: 'tresca', g: 1 };
+  const id = await runJob({ sweep: { name: 'friction sweep', scene, vary: { '/friction/g': [0.05, 1, 2], '/damage/kappa': [0.1, 0.5] } } }, 'the sweep');
+  const page = await openPage(async () => {}, `#job=${id}`);
+  await page.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 10_000 });
+  check((await page.textContent('#viewer h2')).startsWith('friction sweep'), 'the view is titled with the sweep\'s name');
+  const rows = await page.$$eval('#sweep-table tbody tr', (trs) => trs.map((tr) => [...tr.cells].map((x) => x.textContent)));
+  check(rows.length === 6 && rows[0][0] === '0.05' && rows[0][1] === '0.1' && rows[5][0] === '2' && rows[5][1] === '0.5',
+    `a row per member with its values: ${JSON.stringify(rows.map((r) => r.slice(0, 2)))}`);
+  await page.waitForFunction(() => document.querySelector('#sweep-plot')?.naturalWidth > 0, null, { timeout: 10_000 });
+  await page.selectOption('#sweep-quantity', 'max_slip_speed');
+  await page.selectOption('#sweep-against', '/damage/kappa');
+  await page.waitForFunction(() => /quantity=max_slip_speed&against=%2Fdamage%2Fkappa/.test(document.querySelector('#sweep-plot').src) && document.querySelector('#sweep-plot').complete && document.querySelector('#sweep-plot').naturalWidth > 0, null, { timeout: 10_000 });
+  const svg = await (await context.request.get(`${base}/jobs/${id}/plot.svg?quantity=max_slip_speed&against=/damage/kappa`)).text();
+  check((svg.match(/<g class="line">/g) || []).length === 3, 'the plot the menus ask for has a line per value of g');
+  const csv = await context.request.get(`${base}/jobs/${id}/table.csv`);
+  check(csv.status() === 200 && (await page.getAttribute('#dl-table-csv', 'href')) === `/jobs/${id}/table.csv`, 'the table is offered as CSV');
+  await page.screenshot({ path: path.join(outDir, 'client-sweep.png'), fullPage: true });
+  await axeCheck(page, 'on the sweep view');
+  await page.close();
+}
+
 // CLIENT_TESTS=5,7 runs only those sections (while working on one); all by default.
 const only = process.env.CLIENT_TESTS ? new Set(process.env.CLIENT_TESTS.split(',').map(Number)) : null;
-const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys, testNewcomer, testTargetView, testContinue];
+const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys, testNewcomer, testTargetView, testContinue, testSweepView];
 
 let failed = false;
 try {
