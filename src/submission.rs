@@ -238,6 +238,17 @@ fn validated_sweep(doc: &Value, state: &AppState) -> Result<Validated, Problem> 
             ),
         ));
     }
+    // The body is the scene's: an uploaded mesh is checked against its owner once, before
+    // the sweep is read (members on other meshes are separate jobs).
+    if let Some(pointer) = doc["sweep"]["vary"].as_object().and_then(|v| {
+        v.keys()
+            .find(|p| *p == "/domain" || p.starts_with("/domain/mesh"))
+    }) {
+        return Err(Problem::invalid_field(
+            &format!("/sweep/vary/{}", study::sweep::escape(pointer)),
+            "a sweep runs on its scene's body: vary loads, friction, damage, material, mesh.h or time, not domain.mesh",
+        ));
+    }
     let (request, expanded) =
         study::request::parse_sweep(&doc["sweep"], "/sweep", &*state.rt.meshes).map_err(|e| {
             crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))

@@ -173,6 +173,7 @@ fn a_continued_job_equals_one_long_job() {
     continued_equals_one_run(a, "paper-convergence", 8, (2, 4), "direct", 0.0);
     continued_equals_one_run(a, "paper-convergence", 8, (2, 4), "multigrid", 1e-12);
     continued_equals_one_run(a, "box-exp3", 4, (1, 2), "direct", 0.0);
+    continued_equals_one_run(a, "box-exp3", 4, (1, 2), "multigrid", 1e-12);
     srv.stop();
     std::fs::remove_dir_all(&dir).ok();
 }

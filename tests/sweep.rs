@@ -187,6 +187,10 @@ fn bad_sweeps_are_refused_at_their_member() {
         "/sweep/vary/~1mesh~1h",
     );
     assert_eq!(p["limit"]["name"], "nodes", "{p}");
+    refused(
+        json!({"scene": scene(), "vary": {"/domain/mesh": ["plate-with-hole.msh"]}}),
+        "/sweep/vary/~1domain~1mesh",
+    );
     let many: Vec<u32> = (1..=65).collect();
     refused(
         json!({"scene": scene(), "vary": {"/friction/g": many}}),
@@ -201,6 +205,53 @@ fn bad_sweeps_are_refused_at_their_member() {
         422,
     );
     assert_eq!(p["errors"][0]["pointer"], "/x");
+    srv.stop();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A cancel stops a running sweep within a step of its member.
+#[test]
+fn a_sweep_is_cancelled_with_its_members() {
+    let dir = temp_dir("cancel");
+    let srv = Server::start_with(Config {
+        data_dir: dir.clone(),
+        workers: 1,
+        ..Config::default()
+    });
+    let a = srv.addr;
+    let mut long = scene();
+    long["mesh"]["h"] = json!("1/16");
+    long["time"] = json!({"t_end": 1, "N": 20_000});
+    long["output"] = json!({"every": 20_000, "fields": ["u"]});
+    let r = post_json(
+        a,
+        "/jobs",
+        &json!({"sweep": {"scene": long, "vary": {"/friction/g": [0.5, 1, 2]}}}),
+    );
+    assert_eq!(r.status, 202, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    assert_eq!(
+        r.json()["progress"]["steps"],
+        60_000,
+        "the steps of all members"
+    );
+    let t = std::time::Instant::now();
+    loop {
+        let j = get(a, &format!("/jobs/{id}")).json();
+        if j["status"] == "running" && j["progress"]["step"].as_u64().unwrap_or(0) > 0 {
+            break;
+        }
+        assert!(t.elapsed() < Duration::from_secs(60), "{j}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let c = common::http::http(a, "POST", &format!("/jobs/{id}/cancel"), &[], b"");
+    assert_eq!(c.status, 202);
+    let done = wait_status(a, &id, &["cancelled"], Duration::from_secs(10));
+    assert!(
+        done["progress"]["step"].as_u64().unwrap() < 20_000,
+        "{done}"
+    );
+    assert_problem(&get(a, &format!("/jobs/{id}/table.csv")), 409);
     srv.stop();
     std::fs::remove_dir_all(&dir).ok();
 }
