@@ -40,6 +40,8 @@ pub fn app(state: AppState) -> Router {
         .route("/scene.schema.json", get(misc::scene_schema))
         .route("/", get(client::index))
         .route("/docs", get(client::docs))
+        .route("/docs/", get(client::docs_slash))
+        .route("/favicon.ico", get(client::favicon))
         .route("/client/{*file}", get(client::file))
         .fallback(|| async { Problem::not_found("no such route; see GET /openapi.yaml") })
         .method_not_allowed_fallback(|| async {

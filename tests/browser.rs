@@ -132,6 +132,15 @@ fn client_files_are_served_with_types_and_etags() {
             "{bad}"
         );
     }
+    // The icon the pages name and browsers ask for by themselves; /docs/ as people type it.
+    let icon = get(a, "/favicon.ico", &[]);
+    assert_eq!(icon.status, 200);
+    assert_eq!(icon.header("content-type"), Some("image/svg+xml"));
+    assert_eq!(icon.body, get(a, "/client/favicon.svg", &[]).body);
+    assert!(html.contains(r#"<link rel="icon" href="/client/favicon.svg""#));
+    let slash = get(a, "/docs/", &[]);
+    assert_eq!(slash.status, 308);
+    assert_eq!(slash.header("location"), Some("/docs"));
     srv.stop();
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -203,7 +203,8 @@ const FORM_POINTERS = { '/mesh/h': '/overrides/h', '/time/k': '/overrides/k', '/
  */
 async function submit(body, { fromEditor = false, mapped = false, label = null, text = null } = {}) {
   clearFieldErrors();
-  if (fromEditor) editor.clearErrors();
+  // A new submission: the marks of an earlier one (from the editor or a failed job) go.
+  editor.clearErrors();
   setStatus('Submitting…');
   try {
     const job = await api.submit(body);

@@ -43,6 +43,7 @@ const JS: &str = "text/javascript; charset=utf-8";
 /// licences.
 const ASSETS: &[Asset] = &[
     asset!("index.html", "text/html; charset=utf-8"),
+    asset!("favicon.svg", "image/svg+xml"),
     asset!("style.css", "text/css; charset=utf-8"),
     asset!("app.js", JS),
     asset!("api.js", JS),
@@ -135,6 +136,21 @@ pub async fn docs(headers: HeaderMap) -> Result<Response, Problem> {
     serve("docs.html", &headers)
 }
 
+/// `GET /docs/`: the reference at its address with a trailing slash, as people type it
+/// (308 to `/docs`, so relative links of the page resolve as at `/docs`).
+pub async fn docs_slash() -> Response {
+    (
+        StatusCode::PERMANENT_REDIRECT,
+        [(header::LOCATION, HeaderValue::from_static("/docs"))],
+    )
+        .into_response()
+}
+
+/// `GET /favicon.ico`: what browsers ask for by themselves; the client's icon (an SVG).
+pub async fn favicon(headers: HeaderMap) -> Result<Response, Problem> {
+    serve("favicon.svg", &headers)
+}
+
 /// `GET /client/{*file}`: a module, stylesheet or the page itself, or a vendored file
 /// (`vendor/three/...`).
 pub async fn file(Path(file): Path<String>, headers: HeaderMap) -> Result<Response, Problem> {
@@ -184,6 +200,7 @@ mod tests {
                 "css" => "text/css",
                 "js" => "text/javascript",
                 "LICENSE" | "NOTICE" | "txt" => "text/plain",
+                "svg" => "image/svg+xml",
                 _ => panic!("unexpected client file {}", a.name),
             };
             assert!(a.content_type.starts_with(want), "{}", a.name);

@@ -530,6 +530,8 @@ async function testInvalidScene() {
   await page.waitForFunction(() => document.querySelector('.field-error[data-for="/overrides/h"]').textContent !== '');
   check((await fe.textContent()).includes(want), `message under the h input: "${await fe.textContent()}"`);
   check((await page.getAttribute('#ov-h', 'aria-invalid')) === 'true', 'the h input is marked invalid');
+  const stale = await page.locator('.editor-notes .note, #scene-errors li').count();
+  check(stale === 0, `the editor's marks of the earlier submission are gone after the next one (${stale} left)`);
   await page.fill('#ov-h', '');
 
   // A JSON syntax error far down: the editor scrolls to its line, and the server's errors of
