@@ -154,7 +154,12 @@ export class StudyView {
         c.refine !== undefined ? ` (refine ${c.refine})` : '',
         `, predicted error ${fmt(c.predicted_error)}, estimated ${fmt(c.estimated_error)} `,
         `(check ${c.check_passed ? 'passed' : 'failed'}); predicted ${fmtSeconds(c.predicted_seconds)}, `,
-        `measured ${fmtSeconds(c.seconds)}; whole study ${fmtSeconds(s.seconds)}.`),
+        `measured ${fmtSeconds(c.seconds)}; whole study ${fmtSeconds(s.seconds)}.`,
+        // The model's prediction may lie above the target while the run's own (2h, 2k)
+        // estimate, which decides, lies below it: say so rather than leave it unexplained.
+        c.predicted_error > s.target_error && c.check_passed
+          ? ` The fitted model predicted more than the target here; the run's own (2h, 2k) error estimate, ${fmt(c.estimated_error)}, is below it, and that check decides.`
+          : ''),
       el('p', { class: 'run-info', id: 'target-fit' },
         `Error model ${fmt(m.h?.coefficient)}·h^${order(m.h?.order)} + ${fmt(m.k?.coefficient)}·k^${order(m.k?.order)} `,
         `from ${(s.pilots || []).length} pilot runs; safety factor ${s.safety_factor}.`),

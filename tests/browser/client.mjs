@@ -1974,6 +1974,8 @@ async function testTargetView() {
   check(near(predicted, c.predicted_error) && near(estimated, c.estimated_error),
     `predicted error ${predicted} and estimated ${estimated} as in the summary (${c.predicted_error}, ${c.estimated_error})`);
   check(choice.includes('check passed'), 'the check by the (2h, 2k) error bar is said to pass');
+  check((c.predicted_error > 0.2) === choice.includes('predicted more than the target'),
+    `a predicted error above the target is explained (${c.predicted_error})`);
   const fit = await page.textContent('#target-fit');
   const m = s.error_model;
   const a = numberAfter(fit, 'Error model ');
