@@ -42,6 +42,9 @@ pub fn app(state: AppState) -> Router {
         .route("/docs", get(client::docs))
         .route("/docs/", get(client::docs_slash))
         .route("/favicon.ico", get(client::favicon))
+        .route("/guide", get(client::guide_root))
+        .route("/guide/", get(client::guide_index))
+        .route("/guide/{*file}", get(client::guide))
         .route("/client/{*file}", get(client::file))
         .fallback(|| async { Problem::not_found("no such route; see GET /openapi.yaml") })
         .method_not_allowed_fallback(|| async {

@@ -31,6 +31,8 @@ fn is_public(path: &str) -> bool {
             | "/presets"
             | "/healthz"
     ) || path.starts_with("/client/")
+        || path == "/guide"
+        || path.starts_with("/guide/")
         || path.starts_with("/presets/")
 }
 
