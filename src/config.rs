@@ -59,6 +59,9 @@ pub struct Config {
     /// Free space of the data directory below which the node takes no new work
     /// (`--min-free-disk`, see `crate::disk`).
     pub min_free_disk: crate::disk::MinFreeDisk,
+    /// The built user guide (the mdBook HTML `mdbook build docs` writes to `target/book`),
+    /// served at `/guide/` (`--guide-dir`); None: `/guide/` says how to get it.
+    pub guide_dir: Option<std::path::PathBuf>,
 }
 
 impl Config {
@@ -104,6 +107,7 @@ impl Default for Config {
             tls: None,
             auth: crate::auth::AuthMode::Off,
             min_free_disk: crate::disk::MinFreeDisk::default(),
+            guide_dir: None,
         }
     }
 }

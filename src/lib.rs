@@ -6,6 +6,7 @@
 pub mod app;
 pub mod auth;
 pub mod config;
+pub mod continuation;
 pub mod disk;
 pub mod jobs;
 pub mod json_body;

@@ -17,6 +17,7 @@ fn main() -> ExitCode {
         Command::Presets => cli::preset::list(),
         Command::Preset(args) => cli::preset::main(args),
         Command::Study(args) => cli::study::main(args),
+        Command::Sweep(args) => cli::sweep::main(args),
         Command::Bench(args) => cli::bench::main(args),
         Command::Stress(args) => cli::stress::main(args),
         Command::Keys(args) => cli::keys::main(args),

@@ -35,7 +35,7 @@ const PARSES: usize = 2;
 /// The uploaded-mesh id a job document uses: `domain.mesh` of a scene, or of a study's
 /// scene object, when it has the form of an id (bundled names are not uploads).
 pub fn mesh_ref(doc: &Value) -> Option<String> {
-    let scene = match doc.get("study") {
+    let scene = match doc.get("study").or_else(|| doc.get("sweep")) {
         Some(study) => study.get("scene")?,
         None => doc,
     };
@@ -58,6 +58,8 @@ pub fn check_owner(doc: &Value, store: &dyn Store, caller: &Caller) -> Result<()
     }
     let pointer = if doc.get("study").is_some() {
         "/study/scene/domain/mesh"
+    } else if doc.get("sweep").is_some() {
+        "/sweep/scene/domain/mesh"
     } else {
         "/domain/mesh"
     };

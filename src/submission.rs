@@ -8,23 +8,12 @@ use crate::problem::Problem;
 use crate::state::AppState;
 use crate::store::MemoryPrediction;
 use contact_core::admission::{self, LimitError, Pointers};
-use contact_core::scene::{self, canonical, hex_sha256, presets, Overrides};
-use contact_core::solve::SolverSettings;
+use contact_core::scene::{self, presets, Overrides};
 use contact_core::study;
 use contact_core::study::presets as study_presets;
 use serde_json::{json, Value};
 
-/// Content hash of a result: the computation the stored document asks for (canonical JSON,
-/// without the labels that change no number: the same computation under another name is the
-/// same result), crate version, solver settings.
-pub fn scene_hash(scene: &Value) -> String {
-    let key = json!({
-        "scene": canonical(&scene::computation(scene)),
-        "version": env!("CARGO_PKG_VERSION"),
-        "solver": SolverSettings::default(),
-    });
-    hex_sha256(key.to_string().as_bytes())
-}
+pub use crate::jobs::scene_hash;
 
 /// A preset request: `{"preset": NAME, "overrides": {...}}`.
 enum PresetRequest {
@@ -131,7 +120,7 @@ fn map_override_pointers(mut p: Problem, t_key: &str) -> Problem {
 /// A simulation against the per-job limits ([`admission::check_run`]), reported at the field
 /// that sets what is too large; its estimated stored bytes (what the owner's quota counts)
 /// and its predicted memory on the path the run takes.
-fn check_limits(
+pub(crate) fn check_limits(
     p: &contact_core::problem::Problem,
     state: &AppState,
     is_preset: bool,
@@ -229,8 +218,53 @@ pub fn validated(doc: Value, state: &AppState) -> Result<Validated, Problem> {
                 }),
             })
         }
+        None if doc.get("sweep").is_some() => validated_sweep(&doc, state),
         None => validated_scene(doc, None, state),
     }
+}
+
+/// A sweep request `{"sweep": {...}}` ([`contact_core::study::sweep`]): every member validated
+/// (422 at `/sweep/vary/<pointer>`), all of them admitted under the per-job limits (the
+/// largest member decides the memory, the steps of all count).
+fn validated_sweep(doc: &Value, state: &AppState) -> Result<Validated, Problem> {
+    if let Some(k) = doc
+        .as_object()
+        .and_then(|o| o.keys().find(|k| *k != "sweep"))
+    {
+        return Err(Problem::invalid_field(
+            &format!("/{k}"),
+            format!(
+                "unknown field {k:?} next to a sweep (a sweep request is {{\"sweep\": {{...}}}})"
+            ),
+        ));
+    }
+    // The body is the scene's: an uploaded mesh is checked against its owner once, before
+    // the sweep is read (members on other meshes are separate jobs).
+    if let Some(pointer) = doc["sweep"]["vary"].as_object().and_then(|v| {
+        v.keys()
+            .find(|p| *p == "/domain" || p.starts_with("/domain/mesh"))
+    }) {
+        return Err(Problem::invalid_field(
+            &format!("/sweep/vary/{}", study::sweep::escape(pointer)),
+            "a sweep runs on its scene's body: vary loads, friction, damage, material, mesh.h or time, not domain.mesh",
+        ));
+    }
+    let (request, expanded) =
+        study::request::parse_sweep(&doc["sweep"], "/sweep", &*state.rt.meshes).map_err(|e| {
+            crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))
+        })?;
+    let admitted = request
+        .admit(&state.rt.config.job_limits())
+        .map_err(|e| over_limit(&e))?;
+    Ok(Validated {
+        doc: json!({ "sweep": expanded }),
+        steps: admitted.steps,
+        stored_bytes: 0,
+        memory: Some(MemoryPrediction {
+            linear_path: admitted.largest.path,
+            predicted_bytes: admitted.largest.memory_bytes,
+        }),
+    })
 }
 
 /// A scene document (`preset`: the key of the final time when it was expanded from a preset

@@ -42,6 +42,69 @@ fn start(tag: &str) -> (Server, PathBuf) {
     (srv, dir)
 }
 
+/// The user guide built by mdBook, served from `--guide-dir` at /guide/: its pages by their
+/// relative paths, a folder as its index, nothing outside the folder; without the flag, a
+/// 404 saying how to build and serve it.
+#[test]
+fn the_user_guide_is_served_from_its_folder() {
+    let book = temp_dir("book");
+    std::fs::create_dir_all(book.join("tutorial")).unwrap();
+    std::fs::create_dir_all(book.join("css")).unwrap();
+    std::fs::write(book.join("index.html"), "<h1>guide</h1>").unwrap();
+    std::fs::write(book.join("tutorial/first.html"), "<h1>first</h1>").unwrap();
+    std::fs::write(book.join("tutorial/index.html"), "<h1>tutorials</h1>").unwrap();
+    std::fs::write(book.join("css/general.css"), "body {}").unwrap();
+    let secret = temp_dir("outside");
+    std::fs::create_dir_all(&secret).unwrap();
+    std::fs::write(secret.join("secret.txt"), "no").unwrap();
+    let dir = temp_dir("guide");
+    let srv = Server::start_with(Config {
+        data_dir: dir.clone(),
+        workers: 0,
+        guide_dir: Some(book.clone()),
+        ..Config::default()
+    });
+    let a = srv.addr;
+    let root = get(a, "/guide", &[]);
+    assert_eq!(
+        (root.status, root.header("location")),
+        (308, Some("/guide/"))
+    );
+    let index = get(a, "/guide/", &[]);
+    assert_eq!(index.status, 200);
+    assert_eq!(
+        index.header("content-type"),
+        Some("text/html; charset=utf-8")
+    );
+    assert_eq!(index.body, b"<h1>guide</h1>");
+    assert_eq!(
+        get(a, "/guide/tutorial/first.html", &[]).body,
+        b"<h1>first</h1>"
+    );
+    assert_eq!(get(a, "/guide/tutorial/", &[]).body, b"<h1>tutorials</h1>");
+    let css = get(a, "/guide/css/general.css", &[]);
+    assert_eq!(css.header("content-type"), Some("text/css; charset=utf-8"));
+    let name = secret.file_name().unwrap().to_str().unwrap();
+    for bad in [
+        "/guide/nope.html".to_string(),
+        format!("/guide/../{name}/secret.txt"),
+        format!("/guide/%2E%2E/{name}/secret.txt"),
+        "/guide//etc/passwd".to_string(),
+    ] {
+        let r = get(a, &bad, &[]);
+        assert_eq!(r.status, 404, "{bad}: {}", String::from_utf8_lossy(&r.body));
+    }
+    srv.stop();
+    let (none, none_dir) = start("no-guide");
+    let r = get(none.addr, "/guide/", &[]);
+    assert_eq!(r.status, 404);
+    assert!(String::from_utf8_lossy(&r.body).contains("--guide-dir"));
+    none.stop();
+    for d in [book, secret, dir, none_dir] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}
+
 #[test]
 fn client_files_are_served_with_types_and_etags() {
     let (srv, dir) = start("files");
@@ -132,6 +195,15 @@ fn client_files_are_served_with_types_and_etags() {
             "{bad}"
         );
     }
+    // The icon the pages name and browsers ask for by themselves; /docs/ as people type it.
+    let icon = get(a, "/favicon.ico", &[]);
+    assert_eq!(icon.status, 200);
+    assert_eq!(icon.header("content-type"), Some("image/svg+xml"));
+    assert_eq!(icon.body, get(a, "/client/favicon.svg", &[]).body);
+    assert!(html.contains(r#"<link rel="icon" href="/client/favicon.svg""#));
+    let slash = get(a, "/docs/", &[]);
+    assert_eq!(slash.status, 308);
+    assert_eq!(slash.header("location"), Some("/docs"));
     srv.stop();
     let _ = std::fs::remove_dir_all(dir);
 }

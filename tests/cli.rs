@@ -817,3 +817,71 @@ fn a_continued_run_is_one_long_run() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `contact-sim sweep FILE`: the table of a 2 × 2 sweep as JSON (the same numbers as single
+/// runs of its members), as CSV, and its plot; a bad pointer exits 2 naming it.
+#[test]
+fn a_sweep_file_prints_its_table_and_plots_it() {
+    let dir = std::env::temp_dir().join(format!("contact-sim-cli-sweep-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut scene = contact_core::scene::presets::get("paper-convergence").unwrap();
+    scene["mesh"]["h"] = serde_json::json!("1/4");
+    scene["time"] = serde_json::json!({"t_end": "1/2", "k": "1/4"});
+    scene["friction"] = serde_json::json!({"law": "tresca", "g": 1});
+    let file = dir.join("sweep.json");
+    let sweep = serde_json::json!({"sweep": {"scene": scene,
+        "vary": {"/friction/g": [0.05, 2], "/damage/kappa": [0.1, 0.5]}}});
+    std::fs::write(&file, sweep.to_string()).unwrap();
+    let plot = dir.join("plot.svg");
+    let out = bin()
+        .args(["sweep", "--plot"])
+        .arg(&plot)
+        .args(["--quantity", "slip_nodes", "--against", "/damage/kappa"])
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["kind"], "sweep");
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 4);
+    // The third member (g = 2, κ = 0.1) as a single run: the same final norms.
+    let mut single = scene.clone();
+    single["friction"]["g"] = serde_json::json!(2);
+    single["damage"]["kappa"] = serde_json::json!(0.1);
+    let scene_file = dir.join("single.json");
+    std::fs::write(&scene_file, single.to_string()).unwrap();
+    let one = bin().arg("run").arg(&scene_file).output().unwrap();
+    let one: serde_json::Value = serde_json::from_slice(&one.stdout).unwrap();
+    assert_eq!(rows[2]["values"]["/friction/g"], 2);
+    assert_eq!(rows[2]["w_V"], one["final"]["w_V"]);
+    assert_eq!(rows[2]["zeta_L2"], one["final"]["zeta_L2"]);
+    let svg = std::fs::read_to_string(&plot).unwrap();
+    assert_eq!(svg.matches("<g class=\"line\">").count(), 2, "a line per g");
+    let csv = bin()
+        .args(["sweep", "--format", "csv"])
+        .arg(&file)
+        .output()
+        .unwrap();
+    let csv = String::from_utf8(csv.stdout).unwrap();
+    assert!(
+        csv.starts_with("member,/friction/g,/damage/kappa,w_V"),
+        "{csv}"
+    );
+    assert_eq!(csv.lines().count(), 5);
+    std::fs::write(
+        &file,
+        serde_json::json!({"sweep": {"scene": "paper-convergence", "vary": {"/friction/gg": [1]}}})
+            .to_string(),
+    )
+    .unwrap();
+    let out = bin().arg("sweep").arg(&file).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/sweep/vary/~1friction~1gg"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -203,7 +203,8 @@ const FORM_POINTERS = { '/mesh/h': '/overrides/h', '/time/k': '/overrides/k', '/
  */
 async function submit(body, { fromEditor = false, mapped = false, label = null, text = null } = {}) {
   clearFieldErrors();
-  if (fromEditor) editor.clearErrors();
+  // A new submission: the marks of an earlier one (from the editor or a failed job) go.
+  editor.clearErrors();
   setStatus('Submitting…');
   try {
     const job = await api.submit(body);
@@ -229,6 +230,12 @@ async function submit(body, { fromEditor = false, mapped = false, label = null, 
     }
   }
 }
+
+// "Continue…" in a simulation's view: the continuation of that job to the asked final time.
+document.addEventListener('continue-job', (ev) => {
+  const { job, t_end } = ev.detail;
+  submit({ continue: { job: job.id, t_end } });
+});
 
 /** h, k and T of a scene document (as written: "1/32" stays a fraction), for the job list. */
 function sceneFacts(doc) {

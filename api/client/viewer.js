@@ -126,6 +126,56 @@ export class SimulationView {
     this.root.dataset.state = 'ready';
   }
 
+  /**
+   * "Continue…": a form asking for the later final time, whose submission (POST /jobs
+   * {"continue": {"job", "t_end"}}, sent by the page through a `continue-job` event) goes on
+   * from this run's last stored state with its step k.
+   */
+  continueButton(job, summary) {
+    const T = summary.time?.t_end;
+    const k = summary.time?.k;
+    const input = el('input', {
+      id: 'continue-t-end', name: 't_end', size: '6', autocomplete: 'off', 'data-pointer': '/continue/t_end',
+      value: T != null ? String(+(2 * T).toPrecision(12)) : '', 'aria-describedby': 'continue-hint',
+    });
+    const form = el('form', {
+      id: 'continue-form', class: 'continue-form', hidden: '', novalidate: '',
+      onsubmit: (ev) => {
+        ev.preventDefault();
+        const v = input.value.trim();
+        const t = v !== '' && !Number.isNaN(Number(v)) ? Number(v) : v;
+        document.dispatchEvent(new CustomEvent('continue-job', { detail: { job, t_end: t } }));
+      },
+    },
+    el('label', {}, 'to t = ', input),
+    el('button', { type: 'submit', id: 'continue-submit', class: 'small primary' }, 'Continue'),
+    el('span', { class: 'field-error', 'data-for': '/continue/t_end', role: 'alert' }),
+    el('span', { class: 'hint', id: 'continue-hint' },
+      ` from t = ${T} with its k = ${fmtStep(k)}: the same steps as one run to that time`));
+    const button = el('button', {
+      id: 'continue-job', type: 'button', class: 'small', 'aria-expanded': 'false',
+      title: 'continue this run to a later final time, from the state after its last step',
+      onclick: () => {
+        form.hidden = !form.hidden;
+        button.setAttribute('aria-expanded', String(!form.hidden));
+        if (!form.hidden) input.focus();
+      },
+    }, 'Continue…');
+    this.continueForm = form;
+    return button;
+  }
+
+  /** The continue form (hidden until asked for) and, for a continuation, its parent. */
+  continuation(job, summary) {
+    const out = [this.continueForm];
+    const c = summary.continued_from;
+    if (c) {
+      out.push(el('p', { class: 'run-info', id: 'continued-from' },
+        `Continued from job ${String(c.job).slice(0, 8)} after its step ${c.step} (t = ${c.t}): steps 1–${c.step} are the parent's.`));
+    }
+    return out;
+  }
+
   /** The run's figures from its summary (`mesh`: the fields' mesh when it was read). */
   runInfo(summary, mesh) {
     const m = summary.mesh || {};
@@ -262,8 +312,10 @@ export class SimulationView {
           this.vtuLink,
           this.archiveLink,
           this.summaryLink(id),
-          el('button', { id: 'export-png', type: 'button', class: 'small', title: 'the picture with its colour bar, as a PNG file', onclick: () => this.exportPng() }, 'PNG of the view'))),
+          el('button', { id: 'export-png', type: 'button', class: 'small', title: 'the picture with its colour bar, as a PNG file', onclick: () => this.exportPng() }, 'PNG of the view'),
+          this.continueButton(job, summary))),
       info,
+      ...this.continuation(job, summary),
       ...(estimate ? [estimate] : []),
       ...warnings,
       el('div', { class: 'toolbar' },

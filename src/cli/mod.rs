@@ -27,6 +27,7 @@ pub mod run;
 pub mod serve;
 pub mod stress;
 pub mod study;
+pub mod sweep;
 pub mod worker;
 
 use clap::{Parser, Subcommand};
@@ -65,6 +66,9 @@ pub enum Command {
     /// presets (paper-table-1, paper-table-2). Studies of one scene share their reference run.
     /// Prints the result JSON (an array for several studies) or the paper-style tables.
     Study(study::StudyArgs),
+    /// A parameter sweep: a file `{"sweep": {"scene", "vary": {POINTER: [VALUES]}, "mode"}}`;
+    /// prints the table of members (JSON, CSV or text), optionally plots one quantity.
+    Sweep(sweep::SweepArgs),
     /// Speed figures: paper-convergence at h = k = 1/16 … 1/128 (and more with --levels).
     Bench(bench::BenchArgs),
     /// The stability suite: hard scenes (friction, non-convexity, damage, extreme h and k, a

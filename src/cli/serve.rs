@@ -49,6 +49,9 @@ pub struct ServeArgs {
         default_value_t = Config::default().header_timeout.as_secs_f64()
     )]
     pub header_timeout: f64,
+    /// Serve the user guide built by `mdbook build docs` (its folder, target/book) at /guide/.
+    #[arg(long = "guide-dir", value_name = "DIR")]
+    pub guide_dir: Option<std::path::PathBuf>,
     /// Serve HTTPS with this PEM certificate chain (server certificate first); needs
     /// --tls-key.
     #[arg(long = "tls-cert", value_name = "PEM", requires = "tls_key")]
@@ -102,6 +105,7 @@ impl ServeArgs {
                 _ => None,
             },
             auth,
+            guide_dir: self.guide_dir.clone(),
             ..base
         })
     }

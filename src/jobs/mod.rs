@@ -13,9 +13,11 @@ use super::store::results::ResultFiles;
 use super::store::{JobRecord, JobStatus, Progress, Store, StoreError};
 use super::Config;
 use axum::http::StatusCode;
-use contact_core::solve::SolveError;
+use contact_core::scene::{self, canonical, hex_sha256};
+use contact_core::solve::{SolveError, SolverSettings};
 use contact_core::study::{self, ReferenceCache};
 use serde::Serialize;
+use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
@@ -36,9 +38,15 @@ pub const SUMMARY_FILE: &str = "summary.json";
 /// Studies only: the paper-style table and the report plots.
 pub const TABLE_FILE: &str = "summary.txt";
 pub const REPORT_FILE: &str = "report.svg";
+/// Sweeps only: the table of members as CSV.
+pub const TABLE_CSV_FILE: &str = "table.csv";
 const REPORTS_FILE: &str = "reports.json";
 /// Error-estimate rows so far (simulations with `error_estimate`), saved with the reports.
 const ESTIMATES_FILE: &str = "estimates.json";
+/// Succeeded simulations: the state after the last step (u, ζ and the solvers' warm
+/// starts, [`contact_core::output::stored::encode_state`]), what a continuation starts from
+/// ([`crate::continuation`]).
+pub const STATE_FILE: &str = "state.bin";
 /// Target studies only: the scene document of the chosen run, whose stored steps the job's
 /// fields, VTU, PVD and archive serve.
 pub const CHOSEN_SCENE_FILE: &str = "chosen_scene.json";
@@ -49,10 +57,64 @@ pub fn is_target_study(doc: &serde_json::Value) -> bool {
     doc.get("study").is_some_and(study::is_target)
 }
 
-/// A stored job document is a study when it has a top-level `study` object (the scene of a
-/// simulation cannot: `study` is not a scene field).
+/// A stored job document is a study when it has a top-level `study` object, or a sweep's
+/// `sweep` (the scene of a simulation cannot: neither is a scene field).
 pub fn is_study(doc: &serde_json::Value) -> bool {
-    doc.get("study").is_some()
+    doc.get("study").is_some() || is_sweep(doc)
+}
+
+/// A stored sweep request `{"sweep": {...}}`: a study whose result is a table of members.
+pub fn is_sweep(doc: &serde_json::Value) -> bool {
+    doc.get("sweep").is_some()
+}
+
+/// The member of a stored job document that makes it a continuation.
+pub const CONTINUED_FROM: &str = "continued_from";
+
+/// The scene of a stored job document: the document without its [`CONTINUED_FROM`].
+pub fn scene_of(doc: &Value) -> std::borrow::Cow<'_, Value> {
+    match doc.get(CONTINUED_FROM) {
+        None => std::borrow::Cow::Borrowed(doc),
+        Some(_) => {
+            let mut d = doc.clone();
+            if let Some(o) = d.as_object_mut() {
+                o.remove(CONTINUED_FROM);
+            }
+            std::borrow::Cow::Owned(d)
+        }
+    }
+}
+
+/// The parent link of a stored continuation: `{job, step, t, scene_hash}`.
+pub fn parent_of(doc: &Value) -> Option<&Value> {
+    doc.get(CONTINUED_FROM)
+}
+
+/// The parent's id of a stored continuation.
+pub fn parent_id(doc: &Value) -> Option<Uuid> {
+    parent_of(doc)?["job"].as_str()?.parse().ok()
+}
+
+/// Content hash of a result: the computation the stored document asks for (canonical JSON,
+/// without the labels that change no number: the same computation under another name is the
+/// same result), crate version, solver settings.
+///
+/// A continuation's parent is named by its computation hash (which determines its last
+/// state), not by its job id: the same continuation of the same computation is one result.
+pub fn scene_hash(scene: &Value) -> String {
+    let mut computation = scene::computation(scene);
+    if let Some(link) = computation
+        .get_mut(CONTINUED_FROM)
+        .and_then(Value::as_object_mut)
+    {
+        link.remove("job");
+    }
+    let key = json!({
+        "scene": canonical(&computation),
+        "version": env!("CARGO_PKG_VERSION"),
+        "solver": SolverSettings::default(),
+    });
+    hex_sha256(key.to_string().as_bytes())
 }
 
 pub fn step_file(n: usize) -> String {

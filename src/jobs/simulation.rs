@@ -2,7 +2,7 @@
 //! (cancel, shutdown, stored steps, progress, checkpoints), resumed from its last checkpoint.
 
 use super::{failure, solve_problem, write_failure, Outcome, Runtime, CHECKPOINT_EVERY};
-use super::{step_file, ESTIMATES_FILE, REPORTS_FILE, SUMMARY_FILE};
+use super::{step_file, ESTIMATES_FILE, REPORTS_FILE, STATE_FILE, SUMMARY_FILE};
 use crate::problem::Problem;
 use crate::store::{JobRecord, Progress, StoreError};
 use contact_core::estimate::EstimateRow;
@@ -29,7 +29,7 @@ impl Runtime {
             self.with_store_retry(|| self.store.get_mesh(&mesh))
                 .map_err(|e| failure("cannot read the job's mesh", &e.to_string()))?;
         }
-        let problem = scene::validate_with(&job.scene, &*self.meshes)
+        let problem = scene::validate_with(&super::scene_of(&job.scene), &*self.meshes)
             .map_err(|e| failure("stored scene no longer validates", &e.to_string()))?;
         match problem.dim() {
             2 => self.execute_in::<2>(job, worker, cancel, problem),
@@ -64,6 +64,12 @@ impl Runtime {
                 "job {id} resumed from step {step} (attempt {})",
                 job.attempt
             );
+        } else if let Some(parent) = super::parent_id(&job.scene) {
+            let (state, reports) = self.parent_start(parent, run.sim())?;
+            let step = state.step;
+            run.resume(state, reports, Vec::new())
+                .map_err(|e| solve_problem(&e))?;
+            tracing::info!("job {id} continues job {parent} from its step {step}");
         }
         let mut hooks = JobHooks {
             rt: self,
@@ -81,7 +87,16 @@ impl Runtime {
         if let Some(stop) = self.lost(id, worker) {
             return Ok(stop);
         }
-        let text = serde_json::to_vec_pretty(&run.summary()).expect("summary serialises");
+        // The last state first: a summary present means the job's results are complete.
+        let last = encode_state(&run.sim().checkpoint_state());
+        self.results
+            .write_atomic(id, STATE_FILE, &last)
+            .map_err(|e| write_failure(&e))?;
+        let mut summary = serde_json::to_value(run.summary()).expect("summary serialises");
+        if let Some(link) = super::parent_of(&job.scene) {
+            summary[super::CONTINUED_FROM] = link.clone();
+        }
+        let text = serde_json::to_vec_pretty(&summary).expect("summary serialises");
         self.results
             .write_atomic(id, SUMMARY_FILE, &text)
             .map_err(|e| write_failure(&e))?;
@@ -167,6 +182,53 @@ impl Runtime {
         };
         rows.retain(|r| r.n <= step);
         Ok(Some((state, reports, rows)))
+    }
+}
+
+impl Runtime {
+    /// Where a continuation starts: its parent's last state and the reports of the parent's
+    /// steps (from its summary), checked against the child's shape. A parent deleted
+    /// meanwhile fails the job at `/continue/job`.
+    fn parent_start<const D: usize>(
+        &self,
+        parent: Uuid,
+        sim: &Simulation<D>,
+    ) -> Result<(State, Vec<StepReport>), Problem> {
+        let gone = || {
+            Problem::invalid_field(
+                "/continue/job",
+                format!("job {parent}, the continued job, was deleted before this one ran"),
+            )
+        };
+        let read = |name: &str| {
+            self.results
+                .read(parent, name)
+                .map_err(|e| failure("cannot read the parent's results", &e.to_string()))?
+                .ok_or_else(gone)
+        };
+        let state = decode_state(&read(STATE_FILE)?)
+            .map_err(|e| failure("the parent's state is unreadable", &e.to_string()))?;
+        let summary: serde_json::Value = serde_json::from_slice(&read(SUMMARY_FILE)?)
+            .map_err(|e| failure("the parent's summary is unreadable", &e.to_string()))?;
+        let reports: Vec<StepReport> = serde_json::from_value(summary["steps"].clone())
+            .map_err(|e| failure("the parent's summary is unreadable", &e.to_string()))?;
+        if state.step != reports.len()
+            || state.step >= sim.problem.steps
+            || state.u.len() != sim.state.u.len()
+            || state.zeta.len() != sim.state.zeta.len()
+        {
+            return Err(failure(
+                "the parent's state does not fit",
+                &format!(
+                    "state after step {} of a body of {} values; this run has {} steps, {} values",
+                    state.step,
+                    state.u.len(),
+                    sim.problem.steps,
+                    sim.state.u.len()
+                ),
+            ));
+        }
+        Ok((state, reports))
     }
 }
 

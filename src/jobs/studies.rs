@@ -3,12 +3,15 @@
 //! target study's chosen run writing its stored steps as a simulation does.
 
 use super::{failure, solve_problem, write_failure, Outcome, Runtime, CHECKPOINT_EVERY};
-use super::{parse_step_file, step_file, CHOSEN_SCENE_FILE, REPORT_FILE, SUMMARY_FILE, TABLE_FILE};
+use super::{is_study, parse_step_file, step_file, STATE_FILE, TABLE_CSV_FILE};
+use super::{CHOSEN_SCENE_FILE, REPORT_FILE, SUMMARY_FILE, TABLE_FILE};
 use crate::problem::Problem;
 use crate::store::results::ResultFiles;
 use crate::store::{JobRecord, Progress};
 use axum::http::StatusCode;
+use contact_core::output::stored::decode_state;
 use contact_core::output::stored::encode_step;
+use contact_core::solve::stepper::State;
 use contact_core::solve::SolverSettings;
 use contact_core::study::{self, StudyError};
 use std::ops::ControlFlow;
@@ -31,27 +34,49 @@ impl Runtime {
         cancel: &AtomicBool,
     ) -> Result<Outcome, Problem> {
         let id = job.id;
-        let (request, _) = study::request::parse(&job.scene["study"], "/study", &*self.meshes)
-            .map_err(|e| failure("stored study no longer validates", &e.to_string()))?;
+        let (request, _) = match job.scene.get("sweep") {
+            Some(sweep) => study::request::parse_sweep(sweep, "/sweep", &*self.meshes),
+            None => study::request::parse(&job.scene["study"], "/study", &*self.meshes),
+        }
+        .map_err(|e| failure("stored study no longer validates", &e.to_string()))?;
+        // A sweep's member equal to a simulation its owner has computed (the same content
+        // hash) is taken from that job's summary and last state.
+        let known = |scene: &serde_json::Value| -> Option<(serde_json::Value, State)> {
+            let hash = super::scene_hash(scene);
+            let rec = self.store.find_succeeded_for(&job.owner, &hash).ok()??;
+            if is_study(&rec.scene) {
+                return None;
+            }
+            let summary = self.results.read(rec.id, SUMMARY_FILE).ok()??;
+            let state = self.results.read(rec.id, STATE_FILE).ok()??;
+            Some((
+                serde_json::from_slice(&summary).ok()?,
+                decode_state(&state).ok()?,
+            ))
+        };
         let mut sink = StepFiles {
             results: &self.results,
             id,
         };
         self.run_study_job(id, worker, cancel, |progress| {
-            let outcome = request.execute(study::request::Context {
+            let cx = study::request::Context {
                 cache: &self.references,
                 threads: self.config.threads_per_job,
                 settings: SolverSettings::default(),
                 limits: self.config.job_limits(),
                 progress,
                 sink: &mut sink,
-            })?;
+            };
+            let outcome = request.execute_known(cx, &known)?;
             let pretty = |v: &serde_json::Value| {
                 serde_json::to_vec_pretty(v).expect("a JSON value serialises")
             };
             let mut files = Vec::new();
             if let Some(scene) = outcome.chosen_scene() {
                 files.push((CHOSEN_SCENE_FILE, pretty(scene)));
+            }
+            if let study::request::Outcome::Sweep(r) = &outcome {
+                files.push((TABLE_CSV_FILE, r.csv().into_bytes()));
             }
             files.push((TABLE_FILE, outcome.text_table().into_bytes()));
             files.push((REPORT_FILE, outcome.report_svg().into_bytes()));

@@ -23,8 +23,16 @@ use uuid::Uuid;
 fn is_public(path: &str) -> bool {
     matches!(
         path,
-        "/" | "/docs" | "/openapi.yaml" | "/scene.schema.json" | "/presets" | "/healthz"
+        "/" | "/docs"
+            | "/docs/"
+            | "/favicon.ico"
+            | "/openapi.yaml"
+            | "/scene.schema.json"
+            | "/presets"
+            | "/healthz"
     ) || path.starts_with("/client/")
+        || path == "/guide"
+        || path.starts_with("/guide/")
         || path.starts_with("/presets/")
 }
 

@@ -9,7 +9,8 @@
 //! put in their URLs without a build step).
 
 use crate::problem::Problem;
-use axum::extract::Path;
+use crate::state::AppState;
+use axum::extract::{Path, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use sha2::{Digest, Sha256};
@@ -43,6 +44,7 @@ const JS: &str = "text/javascript; charset=utf-8";
 /// licences.
 const ASSETS: &[Asset] = &[
     asset!("index.html", "text/html; charset=utf-8"),
+    asset!("favicon.svg", "image/svg+xml"),
     asset!("style.css", "text/css; charset=utf-8"),
     asset!("app.js", JS),
     asset!("api.js", JS),
@@ -135,6 +137,96 @@ pub async fn docs(headers: HeaderMap) -> Result<Response, Problem> {
     serve("docs.html", &headers)
 }
 
+/// `GET /docs/`: the reference at its address with a trailing slash, as people type it
+/// (308 to `/docs`, so relative links of the page resolve as at `/docs`).
+pub async fn docs_slash() -> Response {
+    (
+        StatusCode::PERMANENT_REDIRECT,
+        [(header::LOCATION, HeaderValue::from_static("/docs"))],
+    )
+        .into_response()
+}
+
+/// `GET /favicon.ico`: what browsers ask for by themselves; the client's icon (an SVG).
+pub async fn favicon(headers: HeaderMap) -> Result<Response, Problem> {
+    serve("favicon.svg", &headers)
+}
+
+/// `GET /guide`: the user guide at its folder's address (308 to `/guide/`, so the book's
+/// relative links resolve).
+pub async fn guide_root() -> Response {
+    (
+        StatusCode::PERMANENT_REDIRECT,
+        [(header::LOCATION, HeaderValue::from_static("/guide/"))],
+    )
+        .into_response()
+}
+
+/// `GET /guide/`: the user guide's first page.
+pub async fn guide_index(state: State<AppState>) -> Result<Response, Problem> {
+    guide(state, Path(String::new())).await
+}
+
+/// `GET /guide/{*file}`: a file of the built user guide (`--guide-dir`, the HTML
+/// `mdbook build docs` writes), by its relative path: `..`, absolute paths and links out of
+/// the folder are 404; a folder is its `index.html`.
+pub async fn guide(
+    State(state): State<AppState>,
+    Path(file): Path<String>,
+) -> Result<Response, Problem> {
+    let Some(root) = state.rt.config.guide_dir.clone() else {
+        return Err(Problem::not_found(
+            "this node serves no user guide: build it with `mdbook build docs` (it is written to target/book) and start the node with --guide-dir target/book; its sources are docs/src in the repository",
+        ));
+    };
+    crate::routes::blocking(move || {
+        let missing = || Problem::not_found(format!("the user guide has no page {file:?}"));
+        let rel = std::path::Path::new(&file);
+        if !rel
+            .components()
+            .all(|c| matches!(c, std::path::Component::Normal(_)))
+        {
+            return Err(missing());
+        }
+        let root = root
+            .canonicalize()
+            .map_err(|e| Problem::internal(format!("--guide-dir {}: {e}", root.display())))?;
+        let mut path = root.join(rel);
+        if path.is_dir() {
+            path = path.join("index.html");
+        }
+        let path = path.canonicalize().map_err(|_| missing())?;
+        if !path.starts_with(&root) || !path.is_file() {
+            return Err(missing());
+        }
+        let body = std::fs::read(&path).map_err(|_| missing())?;
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+        let content_type = match ext {
+            "html" => "text/html; charset=utf-8",
+            "css" => "text/css; charset=utf-8",
+            "js" => JS,
+            "json" => "application/json",
+            "svg" => "image/svg+xml",
+            "png" => "image/png",
+            "woff2" => "font/woff2",
+            "woff" => "font/woff",
+            "ttf" => "font/ttf",
+            "txt" | "md" => "text/plain; charset=utf-8",
+            _ => "application/octet-stream",
+        };
+        let mut r = body.into_response();
+        let h = r.headers_mut();
+        h.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+        h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+        h.insert(
+            header::X_CONTENT_TYPE_OPTIONS,
+            HeaderValue::from_static("nosniff"),
+        );
+        Ok(r)
+    })
+    .await
+}
+
 /// `GET /client/{*file}`: a module, stylesheet or the page itself, or a vendored file
 /// (`vendor/three/...`).
 pub async fn file(Path(file): Path<String>, headers: HeaderMap) -> Result<Response, Problem> {
@@ -184,6 +276,7 @@ mod tests {
                 "css" => "text/css",
                 "js" => "text/javascript",
                 "LICENSE" | "NOTICE" | "txt" => "text/plain",
+                "svg" => "image/svg+xml",
                 _ => panic!("unexpected client file {}", a.name),
             };
             assert!(a.content_type.starts_with(want), "{}", a.name);

@@ -42,6 +42,10 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
         links["summary"] = json!(format!("{base}/summary"));
         links["table"] = json!(format!("{base}/summary?format=text"));
         links["report"] = json!(format!("{base}/report.svg"));
+        if crate::jobs::is_sweep(&rec.scene) {
+            links["table_csv"] = json!(format!("{base}/table.csv"));
+            links["plot"] = json!(format!("{base}/plot.svg"));
+        }
         if crate::jobs::is_target_study(&rec.scene) {
             // The chosen run's results, served as a simulation's.
             links["fields"] = json!(format!("{base}/fields?step=last"));
@@ -60,7 +64,8 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
         "id": id,
         "kind": if study { "study" } else { "simulation" },
         "scene": if study {
-            rec.scene["study"].get("name").or_else(|| rec.scene["study"]["scene"].get("name"))
+            let st = rec.scene.get("sweep").unwrap_or(&rec.scene["study"]);
+            st.get("name").or_else(|| st["scene"].get("name"))
         } else {
             rec.scene.get("name")
         }
@@ -99,6 +104,13 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
         }),
         "links": links,
     });
+    if let Some(link) = crate::continuation::parent_of(&rec.scene) {
+        // A continuation: the parent's id, computation hash and last step.
+        view["continued_from"] = link.clone();
+        if let Some(parent) = link["job"].as_str() {
+            view["links"]["parent"] = json!(format!("/jobs/{parent}"));
+        }
+    }
     if !rec.owner.is_empty() {
         view["owner"] = json!(rec.owner);
     }
@@ -144,6 +156,9 @@ pub async fn submit(
         stored_bytes,
         memory,
     } = blocking(move || {
+        if doc.get("continue").is_some() {
+            return crate::continuation::validated(doc, &st, &who);
+        }
         crate::meshes::check_owner(&doc, st.store().as_ref(), &who)?;
         crate::submission::validated(doc, &st)
     })

@@ -10,8 +10,8 @@
 use super::query::Params;
 use super::{blocking, load_job, parse_id};
 use crate::jobs::{
-    is_study, is_target_study, parse_step_file, step_file, CHOSEN_SCENE_FILE, REPORT_FILE,
-    SUMMARY_FILE, TABLE_FILE,
+    is_study, is_sweep, is_target_study, parse_step_file, step_file, CHOSEN_SCENE_FILE,
+    REPORT_FILE, SUMMARY_FILE, TABLE_CSV_FILE, TABLE_FILE,
 };
 use crate::meshes::Meshes;
 use crate::problem::Problem;
@@ -124,7 +124,8 @@ fn scene_of(
     meshes: &Meshes,
     rec: &JobRecord,
 ) -> Result<(contact_core::problem::Problem, AnyMesh), Problem> {
-    let p = contact_core::scene::validate_with(&rec.scene, meshes).map_err(|e| {
+    let scene = crate::continuation::scene_of(&rec.scene);
+    let p = contact_core::scene::validate_with(&scene, meshes).map_err(|e| {
         match e.0.iter().find(|f| f.pointer == "/domain/mesh") {
             Some(f) if crate::meshes::mesh_ref(&rec.scene).is_some() => Problem::conflict(format!(
                 "job {}: its mesh is no longer stored ({}); upload the same .msh again (POST /meshes gives it the same id) to read these results",
@@ -271,6 +272,77 @@ pub async fn report(
         result_file(&state, &rec, REPORT_FILE).await?,
         "image/svg+xml",
     ))
+}
+
+/// A succeeded sweep (404 for any other job: only a sweep has a table of members).
+async fn sweep(state: &AppState, id: &str) -> Result<JobRecord, Problem> {
+    let rec = succeeded(state, id).await?;
+    if !is_sweep(&rec.scene) {
+        return Err(Problem::not_found(format!(
+            "job {} is not a sweep; tables of members and their plots are made by sweeps (POST /jobs with {{\"sweep\": ...}})",
+            rec.id
+        )));
+    }
+    Ok(rec)
+}
+
+/// `/jobs/{id}/table.csv`: a sweep's table, one row per member.
+pub async fn table_csv(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Response, Problem> {
+    let rec = sweep(&state, &id).await?;
+    Ok(with_type(
+        result_file(&state, &rec, TABLE_CSV_FILE).await?,
+        "text/csv; charset=utf-8",
+    ))
+}
+
+/// The query of `/jobs/{id}/plot.svg`.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlotQuery {
+    /// The quantity on the vertical axis (default `w_V`).
+    quantity: Option<String>,
+    /// The varied pointer on the horizontal axis (default: the first).
+    against: Option<String>,
+}
+
+/// `/jobs/{id}/plot.svg?quantity=Q&against=POINTER`: a sweep's quantity against one varied
+/// parameter, one line per value of the others.
+pub async fn plot(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    Params(q): Params<PlotQuery>,
+) -> Result<Response, Problem> {
+    use contact_core::study::sweep::{plot_svg, SweepResult, QUANTITIES};
+    let rec = sweep(&state, &id).await?;
+    let bytes = result_file(&state, &rec, SUMMARY_FILE).await?;
+    let result: SweepResult = serde_json::from_slice(&bytes)
+        .map_err(|e| Problem::internal(format!("{SUMMARY_FILE}: {e}")))?;
+    let quantity = q.quantity.unwrap_or_else(|| "w_V".into());
+    if !QUANTITIES.contains(&quantity.as_str()) {
+        return Err(Problem::bad_request(format!(
+            "quantity must be one of {}, not {quantity:?}",
+            QUANTITIES.join(", ")
+        )));
+    }
+    let pointers: Vec<String> = result
+        .vary
+        .iter()
+        .filter_map(|v| v["pointer"].as_str().map(String::from))
+        .collect();
+    let against = match q.against {
+        Some(a) => a,
+        None => pointers.first().cloned().unwrap_or_default(),
+    };
+    let svg = plot_svg(&result, &quantity, &against).ok_or_else(|| {
+        Problem::bad_request(format!(
+            "against must be one of the varied pointers {}, not {against:?}",
+            pointers.join(", ")
+        ))
+    })?;
+    Ok(with_type(svg.into_bytes(), "image/svg+xml"))
 }
 
 /// The query of `/jobs/{id}/mesh`.

@@ -530,6 +530,8 @@ async function testInvalidScene() {
   await page.waitForFunction(() => document.querySelector('.field-error[data-for="/overrides/h"]').textContent !== '');
   check((await fe.textContent()).includes(want), `message under the h input: "${await fe.textContent()}"`);
   check((await page.getAttribute('#ov-h', 'aria-invalid')) === 'true', 'the h input is marked invalid');
+  const stale = await page.locator('.editor-notes .note, #scene-errors li').count();
+  check(stale === 0, `the editor's marks of the earlier submission are gone after the next one (${stale} left)`);
   await page.fill('#ov-h', '');
 
   // A JSON syntax error far down: the editor scrolls to its line, and the server's errors of
@@ -1972,6 +1974,8 @@ async function testTargetView() {
   check(near(predicted, c.predicted_error) && near(estimated, c.estimated_error),
     `predicted error ${predicted} and estimated ${estimated} as in the summary (${c.predicted_error}, ${c.estimated_error})`);
   check(choice.includes('check passed'), 'the check by the (2h, 2k) error bar is said to pass');
+  check((c.predicted_error > 0.2) === choice.includes('predicted more than the target'),
+    `a predicted error above the target is explained (${c.predicted_error})`);
   const fit = await page.textContent('#target-fit');
   const m = s.error_model;
   const a = numberAfter(fit, 'Error model ');
@@ -2010,9 +2014,75 @@ async function testTargetView() {
   await page.close();
 }
 
+/**
+ * "Continue…" in a finished simulation's view: a final time before the parent's is refused
+ * under the input (422 at /continue/t_end); a later one submits the continuation, whose view
+ * opens, names its parent, and whose summary has the parent's steps and its own.
+ */
+async function testContinue() {
+  console.log('test 11: continue a finished simulation from its view');
+  const id = await runJob({ preset: 'paper-convergence', overrides: { h: '1/4', k: '1/4', T: '1/2' } }, 'the run to continue');
+  const page = await openPage(async () => {}, `#job=${id}`);
+  await page.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 10_000 });
+  check(await page.isHidden('#continue-form'), 'the continue form is hidden until asked for');
+  await page.click('#continue-job');
+  check(await page.isVisible('#continue-t-end'), '"Continue…" shows the final-time input');
+  check((await page.inputValue('#continue-t-end')) === '1', 'the input proposes twice the final time');
+  await page.fill('#continue-t-end', '0.25');
+  await page.click('#continue-submit');
+  await page.waitForFunction(() => document.querySelector('.field-error[data-for="/continue/t_end"]')?.textContent, null, { timeout: 10_000 });
+  const said = await page.textContent('.field-error[data-for="/continue/t_end"]');
+  check(/after the parent's final time/.test(said), `a final time before the parent's is refused under the input: "${said}"`);
+  check((await page.getAttribute('#continue-t-end', 'aria-invalid')) === 'true', 'the input is marked invalid');
+  await page.fill('#continue-t-end', '1');
+  await page.click('#continue-submit');
+  await page.waitForFunction((parent) => /^#job=/.test(location.hash) && location.hash !== `#job=${parent}`, id, { timeout: 10_000 });
+  const child = new URL(page.url()).hash.slice('#job='.length);
+  const job = await finished(child, 'the continuation');
+  check(job.status === 'succeeded' && job.continued_from?.job === id, `the continuation succeeded and links its parent (${job.status})`);
+  await page.waitForSelector(`#viewer[data-state="ready"][data-job="${child}"]`, { timeout: 15_000 });
+  const from = await page.textContent('#continued-from');
+  check(from.includes(id.slice(0, 8)) && from.includes('step 2'), `the view names the parent: "${from}"`);
+  const s = await (await context.request.get(`${base}/jobs/${child}/summary`)).json();
+  check(s.steps.length === 4 && s.steps[3].n === 4 && s.continued_from.step === 2, `its summary numbers steps from the parent's start (${s.steps.map((x) => x.n)})`);
+  await page.screenshot({ path: path.join(outDir, 'client-continue.png'), fullPage: true });
+  await axeCheck(page, 'on a continued job with the continue form');
+  await page.close();
+}
+
+/**
+ * A parameter sweep's view: a table row per member with its values, and the server's plot of
+ * the quantity and parameter picked in the menus.
+ */
+async function testSweepView() {
+  console.log('test 12: sweep view (a real 3 × 2 sweep)');
+  const scene = await (await context.request.get(`${base}/presets/paper-convergence`)).json();
+  scene.mesh.h = '1/4';
+  scene.time = { t_end: '1/2', k: '1/4' };
+  scene.friction = { law: 'tresca', g: 1 };
+  const id = await runJob({ sweep: { name: 'friction sweep', scene, vary: { '/friction/g': [0.05, 1, 2], '/damage/kappa': [0.1, 0.5] } } }, 'the sweep');
+  const page = await openPage(async () => {}, `#job=${id}`);
+  await page.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 10_000 });
+  check((await page.textContent('#viewer h2')).startsWith('friction sweep'), 'the view is titled with the sweep\'s name');
+  const rows = await page.$$eval('#sweep-table tbody tr', (trs) => trs.map((tr) => [...tr.cells].map((x) => x.textContent)));
+  check(rows.length === 6 && rows[0][0] === '0.05' && rows[0][1] === '0.1' && rows[5][0] === '2' && rows[5][1] === '0.5',
+    `a row per member with its values: ${JSON.stringify(rows.map((r) => r.slice(0, 2)))}`);
+  await page.waitForFunction(() => document.querySelector('#sweep-plot')?.naturalWidth > 0, null, { timeout: 10_000 });
+  await page.selectOption('#sweep-quantity', 'max_slip_speed');
+  await page.selectOption('#sweep-against', '/damage/kappa');
+  await page.waitForFunction(() => /quantity=max_slip_speed&against=%2Fdamage%2Fkappa/.test(document.querySelector('#sweep-plot').src) && document.querySelector('#sweep-plot').complete && document.querySelector('#sweep-plot').naturalWidth > 0, null, { timeout: 10_000 });
+  const svg = await (await context.request.get(`${base}/jobs/${id}/plot.svg?quantity=max_slip_speed&against=/damage/kappa`)).text();
+  check((svg.match(/<g class="line">/g) || []).length === 3, 'the plot the menus ask for has a line per value of g');
+  const csv = await context.request.get(`${base}/jobs/${id}/table.csv`);
+  check(csv.status() === 200 && (await page.getAttribute('#dl-table-csv', 'href')) === `/jobs/${id}/table.csv`, 'the table is offered as CSV');
+  await page.screenshot({ path: path.join(outDir, 'client-sweep.png'), fullPage: true });
+  await axeCheck(page, 'on the sweep view');
+  await page.close();
+}
+
 // CLIENT_TESTS=5,7 runs only those sections (while working on one); all by default.
 const only = process.env.CLIENT_TESTS ? new Set(process.env.CLIENT_TESTS.split(',').map(Number)) : null;
-const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys, testNewcomer, testTargetView];
+const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys, testNewcomer, testTargetView, testContinue, testSweepView];
 
 let failed = false;
 try {

@@ -572,3 +572,65 @@ def test_examples_help_shows_defaults() -> None:
         )
         assert run.returncode == 0, run.stderr
         assert "(default: http://127.0.0.1:8080)" in run.stdout, run.stdout
+
+
+def test_continue_a_finished_job(client: Client) -> None:
+    # paper-convergence at h = k = 1/4 with a low Tresca bound (Γ3 slips): 2 steps, then on to
+    # t = 1; the same 4 steps as one run to t = 1, bit for bit (direct path).
+    scene = client.preset("paper-convergence")
+    scene["mesh"]["h"] = "1/4"
+    scene["time"] = {"t_end": "1/2", "k": "1/4"}
+    scene["friction"] = {"law": "tresca", "g": 0.05}
+    scene["solver"] = {"linear": "direct"}
+    parent = client.submit(scene).wait(progress=False, timeout=60)
+    child = client.continue_(parent, t_end=1).wait(progress=False, timeout=60)
+    summary = child.summary()
+    assert summary["continued_from"]["job"] == parent.id
+    assert summary["continued_from"]["step"] == 2
+    assert [s["n"] for s in summary["steps"]] == [1, 2, 3, 4]
+    straight = dict(scene, time={"t_end": 1, "k": "1/4"})
+    one = client.submit(straight).wait(progress=False, timeout=60)
+    steps = one.summary()["steps"]
+    assert [s["w_V"] for s in summary["steps"]] == [s["w_V"] for s in steps]
+    assert any(s["slip_nodes"] > 0 for s in steps)
+    cu, ou = child.fields(step=4).u, one.fields(step=4).u
+    assert cu is not None and ou is not None and cu.tolist() == ou.tolist()
+    # The same continuation again is the same job; a string id works as the Job does.
+    assert client.continue_(parent.id, t_end=1) == child
+    # Another friction from t = 1/2 on: a job of its own.
+    slower = dict(scene, friction={"law": "tresca", "g": 1})
+    other = client.continue_(parent, t_end=1, scene=slower).wait(progress=False, timeout=60)
+    assert other != child and other.summary()["continued_from"]["job"] == parent.id
+    # Refused: a changed mesh, and a job that is not finished.
+    with pytest.raises(ApiError) as e:
+        client.continue_(parent, t_end=1, scene=dict(scene, mesh={"h": "1/8"}))
+    assert e.value.status == 422 and e.value.errors[0][0] == "/continue/scene/mesh"
+    with pytest.raises(ApiError) as e:
+        client.continue_("00000000-0000-4000-8000-000000000000", t_end=1)
+    assert e.value.status == 422 and e.value.errors[0][0] == "/continue/job"
+
+
+def test_a_sweep_as_a_dataframe(client: Client) -> None:
+    # paper-convergence at h = k = 1/4 to t = 1/2: a 3 × 2 sweep of the Tresca bound and κ,
+    # one member already computed as a job (taken from it, not computed again).
+    scene = client.preset("paper-convergence")
+    scene["mesh"]["h"] = "1/4"
+    scene["time"] = {"t_end": "1/2", "k": "1/4"}
+    scene["friction"] = {"law": "tresca", "g": 1}
+    scene["solver"] = {"linear": "direct"}
+    done = dict(scene, friction={"law": "tresca", "g": 0.05})
+    one = client.submit(done).wait(progress=False, timeout=60).summary()
+    df = client.sweep(
+        scene, {"/friction/g": [0.05, 1, 2], "/damage/kappa": [0.5, 0.1]}, progress=False, timeout=60
+    )
+    assert list(df["/friction/g"]) == [0.05, 0.05, 1, 1, 2, 2]
+    assert list(df["/damage/kappa"]) == [0.5, 0.1] * 3
+    assert {"w_V", "zeta_min", "min_zeta", "slip_nodes", "max_slip_speed", "wall_s"} <= set(df)
+    assert list(df["cached"]) == [True, False, False, False, False, False]
+    assert df.attrs["computed"] == 5 and df.attrs["mode"] == "grid"
+    assert df["w_V"][0] == one["final"]["w_V"] and df["slip_nodes"][0] > 0
+    job = client.job(df.attrs["job"])
+    assert job.sweep_table().equals(df)
+    with pytest.raises(ApiError) as e:
+        client.sweep(scene, {"/friction/g": [-1]}, progress=False)
+    assert e.value.status == 422 and e.value.errors[0][0] == "/sweep/vary/~1friction~1g"

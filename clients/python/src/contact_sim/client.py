@@ -264,6 +264,56 @@ class Client:
             study["name"] = name
         return self.submit({"study": study})
 
+    def continue_(
+        self,
+        job: Union[str, "Job"],
+        t_end: Optional[Ratio] = None,
+        scene: Optional[Mapping[str, Any]] = None,
+    ) -> "Job":
+        """Continues a finished simulation ``job`` (a :class:`Job` or its id) from the state
+        after its last step to the final time ``t_end``, with the parent's step k: the same
+        steps as one run to ``t_end``, numbered from the parent's start; the new job's summary
+        has ``continued_from``. ``scene`` changes loads, friction, output or solver for the
+        continuation (the mesh and the body must stay the parent's; its ``time`` may only give
+        ``t_end``). The same continuation twice is answered with the first job. A parent that
+        has not stored its last state (unfinished, failed) is refused: :class:`ApiError` 422
+        at ``/continue/job``."""
+        request: Dict[str, Any] = {"job": job.id if isinstance(job, Job) else str(job)}
+        if t_end is not None:
+            request["t_end"] = _ratio(t_end)
+        if scene is not None:
+            request["scene"] = dict(scene)
+        return Job(self, self._json("POST", "/jobs", json={"continue": request}))
+
+    def sweep(
+        self,
+        scene: Union[str, Mapping[str, Any]],
+        vary: Mapping[str, Sequence[Any]],
+        mode: str = "grid",
+        name: Optional[str] = None,
+        progress: bool = True,
+        timeout: Optional[float] = None,
+    ) -> "pandas.DataFrame":
+        """Runs a parameter sweep as one job and returns its table as a DataFrame (needs the
+        pandas extra): ``scene`` (a preset name or a scene document) with the values of
+        ``vary`` (JSON pointers into the scene, e.g. ``{"/friction/g": [0.5, 1, 2],
+        "/damage/kappa": [0.1, 0.5]}``) substituted, every combination (``mode="grid"``, the
+        first pointer slowest) or the i-th values together (``"zip"``). One row per member:
+        a column per pointer, ``w_V``, ``u_V``, ``zeta_L2``, ``zeta_min`` (at T),
+        ``min_zeta`` (over the run), ``slip_nodes``, ``max_slip_speed`` (at T), ``steps``,
+        ``wall_s``, ``cached`` (taken from an earlier job of the same scene). ``attrs`` has
+        the job's id (``job``) and the sweep's ``name``, ``mode`` and ``computed``. A bad
+        pointer or value raises :class:`ApiError` 422 at ``/sweep/vary/<pointer>``."""
+        sweep: Dict[str, Any] = {
+            "scene": scene if isinstance(scene, str) else dict(scene),
+            "vary": {k: list(v) for k, v in vary.items()},
+            "mode": mode,
+        }
+        if name is not None:
+            sweep["name"] = name
+        job = self.submit({"sweep": sweep}).wait(progress=progress, timeout=timeout)
+        return job.sweep_table()
+
     def _study_presets(self) -> List[str]:
         """Names of the server's study presets (asked once per client)."""
         if self._studies is None:
@@ -516,6 +566,26 @@ class Job:
         for key in ("name", "vary", "reference", "lsq_order_w", "lsq_order_zeta"):
             if key in s:
                 df.attrs[key] = s[key]
+        return df
+
+    def sweep_table(self) -> "pandas.DataFrame":
+        """A sweep's table as a DataFrame, one row per member (see :meth:`Client.sweep`)."""
+        import pandas as pd
+
+        s = self.summary()
+        if s.get("kind") != "sweep":
+            raise ValueError(f"job {self.id} is not a sweep")
+        pointers = [v["pointer"] for v in s["vary"]]
+        records = []
+        for row in s["rows"]:
+            rec = {p: row["values"].get(p) for p in pointers}
+            rec.update({k: v for k, v in row.items() if k not in ("values", "member")})
+            records.append(rec)
+        df = pd.DataFrame.from_records(records, index=[r["member"] for r in s["rows"]])
+        df.index.name = "member"
+        df.attrs["job"] = self.id
+        for key in ("name", "mode", "computed"):
+            df.attrs[key] = s.get(key)
         return df
 
     def table_text(self) -> str:

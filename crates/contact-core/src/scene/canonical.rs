@@ -26,12 +26,18 @@ pub fn canonical(v: &Value) -> Value {
 /// check: two scenes that differ only in these are one computation.
 pub const LABEL_FIELDS: &[&str] = &["$schema", "name"];
 
-/// The computation a stored job document asks for: a scene, or a study request
-/// `{"study": {...}}` (its `name` and its inline scene's labels), with the [`LABEL_FIELDS`]
-/// removed, so that the same computation under another name gets the same content key.
+/// The computation a stored job document asks for: a scene, or a study or sweep request
+/// `{"study": {...}}`, `{"sweep": {...}}` (its `name` and its inline scene's labels), with the
+/// [`LABEL_FIELDS`] removed, so that the same computation under another name gets the same
+/// content key.
 pub fn computation(doc: &Value) -> Value {
     let mut doc = doc.clone();
-    match doc.get_mut("study").and_then(Value::as_object_mut) {
+    let key = if doc.get("sweep").is_some() {
+        "sweep"
+    } else {
+        "study"
+    };
+    match doc.get_mut(key).and_then(Value::as_object_mut) {
         Some(study) => {
             study.remove("name");
             if let Some(scene) = study.get_mut("scene") {

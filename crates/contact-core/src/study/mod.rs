@@ -24,6 +24,7 @@ pub mod report_svg;
 pub mod request;
 mod schedule;
 pub mod spec;
+pub mod sweep;
 pub mod target;
 
 pub use compare::{StudyReference, StudyResult, StudyRow};

@@ -320,20 +320,7 @@ pub fn target_report(r: &TargetResult) -> String {
         "work–precision (predicted frontier, pilots, chosen run)",
         "wall time [s]",
     );
-    for (level, dash, label) in [
-        (r.target_error, "8 4", "target"),
-        (r.target_error / r.safety_factor, "2 3", "target / safety"),
-    ] {
-        let y = panel.py(level);
-        let _ = writeln!(
-            out,
-            r##"<line x1="{}" y1="{y:.1}" x2="{}" y2="{y:.1}" stroke="{COLOR_Z}" stroke-dasharray="{dash}"/><text x="{}" y="{:.1}" font-size="11" fill="{COLOR_Z}">{label}</text>"##,
-            panel.left,
-            panel.left + PANEL_W,
-            panel.left + PANEL_W + 6.0,
-            y + 4.0
-        );
-    }
+    target_lines(&mut out, &panel, r.target_error, r.safety_factor);
     let frontier: Vec<(f64, f64)> = frontier.into_iter().filter(inside).collect();
     panel.series(&mut out, &frontier, COLOR_F, false);
     for p in pilots.iter().filter(|p| inside(p)) {
@@ -389,9 +376,54 @@ pub fn target_report(r: &TargetResult) -> String {
     out
 }
 
+/// The target and target / safety lines of a target report, labelled at the panel's right:
+/// "target" above its line and "target / safety" (the lower error, the lower line) below
+/// its own, so the two labels never overlap however close the lines are.
+fn target_lines(out: &mut String, panel: &Panel, target: f64, safety_factor: f64) {
+    for (level, dash, label, dy) in [
+        (target, "8 4", "target", -4.0),
+        (target / safety_factor, "2 3", "target / safety", 12.0),
+    ] {
+        let y = panel.py(level);
+        let _ = writeln!(
+            out,
+            r##"<line x1="{}" y1="{y:.1}" x2="{}" y2="{y:.1}" stroke="{COLOR_Z}" stroke-dasharray="{dash}"/><text x="{}" y="{:.1}" font-size="11" fill="{COLOR_Z}">{label}</text>"##,
+            panel.left,
+            panel.left + PANEL_W,
+            panel.left + PANEL_W + 6.0,
+            y + dy
+        );
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The two labels stay 11 px fonts apart (more than a line of text) for any safety
+    /// factor, 1 included.
+    #[test]
+    fn target_labels_do_not_overlap() {
+        let p = Panel {
+            left: 0.0,
+            x: LogAxis { lo: -3.0, hi: 0.0 },
+            y: LogAxis { lo: -4.0, hi: 0.0 },
+        };
+        for safety in [1.0, 1.2, 2.0, 10.0] {
+            let mut out = String::new();
+            target_lines(&mut out, &p, 0.01, safety);
+            let ys: Vec<f64> = out
+                .match_indices("<text x=\"")
+                .map(|(i, _)| {
+                    let rest = &out[i..];
+                    let at = rest.find(" y=\"").unwrap() + 4;
+                    rest[at..].split('"').next().unwrap().parse().unwrap()
+                })
+                .collect();
+            assert_eq!(ys.len(), 2);
+            assert!(ys[1] - ys[0] >= 14.0, "safety {safety}: labels at {ys:?}");
+        }
+    }
 
     #[test]
     fn fractions_and_axes() {

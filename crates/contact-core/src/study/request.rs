@@ -11,6 +11,7 @@
 //! - [`Request::execute`]: the study under the same limits (each run's set-up refuses a path
 //!   that does not fit; concurrent runs share the memory limit, [`super::schedule`]).
 
+use super::sweep::{self, Known, SweepResult, SweepSpec};
 use super::target::{self, Sink, TargetSpec};
 use super::{Execution, Plan, ReferenceCache, StudyError, StudyResult, TargetResult};
 use crate::admission::{self, Fit, Limit, LimitError, Limits, Pointers};
@@ -27,6 +28,18 @@ pub enum Request {
     /// The cheapest run meeting a target error. `at` is the request's pointer to the study
     /// (its pilots are refused at `{at}/scene`).
     Target { spec: TargetSpec, at: String },
+    /// Members of one scene with values substituted at JSON pointers ([`super::sweep`]).
+    Sweep(Box<SweepSpec>),
+}
+
+/// Reads the sweep object `doc` at `at` (`/sweep`), as [`parse`] reads a study.
+pub fn parse_sweep(
+    doc: &Value,
+    at: &str,
+    files: &dyn MeshFiles,
+) -> Result<(Request, Value), ValidationErrors> {
+    let (spec, expanded) = sweep::parse_with(doc, at, files)?;
+    Ok((Request::Sweep(Box::new(spec)), expanded))
 }
 
 /// Reads the study object `doc`, located at JSON pointer `at` in the request (errors point
@@ -80,6 +93,7 @@ pub struct Context<'a> {
 pub enum Outcome {
     Ladder(Box<StudyResult>),
     Target(Box<TargetResult>),
+    Sweep(Box<SweepResult>),
 }
 
 impl Request {
@@ -88,6 +102,7 @@ impl Request {
         match self {
             Request::Ladder(plan) => &plan.name,
             Request::Target { spec, .. } => &spec.name,
+            Request::Sweep(spec) => &spec.name,
         }
     }
 
@@ -184,11 +199,20 @@ impl Request {
                     largest: largest.expect("a target study has pilots"),
                 })
             }
+            Request::Sweep(spec) => {
+                let (steps, largest) = spec.admit(limits)?;
+                Ok(Admission { steps, largest })
+            }
         }
     }
 
     /// Runs the study under `cx.limits`.
     pub fn execute(&self, cx: Context) -> Result<Outcome, StudyError> {
+        self.execute_known(cx, &|_| None)
+    }
+
+    /// [`Request::execute`], a sweep taking the members `known` knows from there.
+    pub fn execute_known(&self, cx: Context, known: &Known) -> Result<Outcome, StudyError> {
         let exec = Execution {
             threads: cx.threads.max(1),
             settings: SolverSettings {
@@ -204,6 +228,9 @@ impl Request {
                 target::run(spec, exec, cx.limits, cx.progress, cx.sink)
                     .map(|r| Outcome::Target(Box::new(r)))
             }
+            Request::Sweep(spec) => {
+                sweep::run(spec, exec, cx.progress, known).map(|r| Outcome::Sweep(Box::new(r)))
+            }
         }
     }
 }
@@ -213,6 +240,7 @@ impl Outcome {
         match self {
             Outcome::Ladder(r) => &r.name,
             Outcome::Target(r) => &r.name,
+            Outcome::Sweep(r) => &r.name,
         }
     }
 
@@ -221,6 +249,7 @@ impl Outcome {
         match self {
             Outcome::Ladder(r) => serde_json::to_value(r),
             Outcome::Target(r) => serde_json::to_value(r),
+            Outcome::Sweep(r) => serde_json::to_value(r),
         }
         .expect("a study result serialises")
     }
@@ -230,6 +259,7 @@ impl Outcome {
         match self {
             Outcome::Ladder(r) => r.text_table(),
             Outcome::Target(r) => r.text_table(),
+            Outcome::Sweep(r) => r.text_table(),
         }
     }
 
@@ -238,13 +268,18 @@ impl Outcome {
         match self {
             Outcome::Ladder(r) => super::report_svg::study_report(r),
             Outcome::Target(r) => super::report_svg::target_report(r),
+            // w_V against the first varied pointer, one line per value of the others.
+            Outcome::Sweep(r) => {
+                let first = r.vary[0]["pointer"].as_str().unwrap_or_default();
+                sweep::plot_svg(r, "w_V", first).unwrap_or_default()
+            }
         }
     }
 
     /// A target study's chosen run's scene document (None for a ladder).
     pub fn chosen_scene(&self) -> Option<&Value> {
         match self {
-            Outcome::Ladder(_) => None,
+            Outcome::Ladder(_) | Outcome::Sweep(_) => None,
             Outcome::Target(r) => Some(&r.scene),
         }
     }
