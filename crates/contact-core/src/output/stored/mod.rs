@@ -249,6 +249,9 @@ pub fn encode_state(s: &State) -> Vec<u8> {
     w.f64s(&s.contact_velocity);
     let active: Vec<f64> = s.damage_active.iter().map(|&c| f64::from(c)).collect();
     w.f64s(&active);
+    // ζ_{n−1}, from which the damage step's start is extrapolated; older checkpoints end
+    // before it.
+    w.f64s(&s.damage_before);
     w.finish()
 }
 
@@ -276,6 +279,11 @@ pub fn decode_state(bytes: &[u8]) -> Result<State, DecodeError> {
             })
             .collect::<Result<_, _>>()?;
     }
+    let damage_before = if r.available() > 0 {
+        r.f64s("damage before")?
+    } else {
+        Vec::new()
+    };
     r.close()?;
     Ok(State {
         step,
@@ -283,6 +291,7 @@ pub fn decode_state(bytes: &[u8]) -> Result<State, DecodeError> {
         zeta,
         contact_velocity,
         damage_active,
+        damage_before,
     })
 }
 

@@ -169,6 +169,7 @@ fn state_round_trips_bit_exactly() {
         zeta: rng.f64s(15),
         contact_velocity: rng.f64s(4),
         damage_active: vec![0, 1, 2, 0, 2],
+        damage_before: rng.f64s(15),
     };
     let bytes = encode_state(&s);
     assert_eq!(&bytes[..6], STATE_MAGIC);
@@ -179,6 +180,7 @@ fn state_round_trips_bit_exactly() {
     assert_eq!(b(&back.zeta), b(&s.zeta));
     assert_eq!(b(&back.contact_velocity), b(&s.contact_velocity));
     assert_eq!(back.damage_active, s.damage_active);
+    assert_eq!(b(&back.damage_before), b(&s.damage_before));
 
     let empty = State::default();
     assert_eq!(decode_state(&encode_state(&empty)).unwrap(), empty);
@@ -250,6 +252,7 @@ fn every_truncation_and_extension_is_an_error() {
         zeta: vec![1.0; 2],
         contact_velocity: vec![0.5],
         damage_active: vec![1, 0],
+        damage_before: vec![0.75; 2],
     });
     for len in 0..state.len() {
         assert!(decode_state(&state[..len]).is_err(), "length {len}");

@@ -56,6 +56,11 @@ pub struct State {
     pub contact_velocity: Vec<f64>,
     #[serde(default)]
     pub damage_active: Vec<u8>,
+    /// ζ_{n−1}, from which the damage step's starting point is extrapolated (empty: none),
+    /// so that a resumed run on the multigrid path starts its damage solves where the
+    /// uninterrupted one does.
+    #[serde(default)]
+    pub damage_before: Vec<f64>,
 }
 
 /// What one time step did.
@@ -251,6 +256,10 @@ impl<const D: usize> Simulation<D> {
                 .damage
                 .as_ref()
                 .map_or_else(Vec::new, |d| d.solver.active_codes()),
+            damage_before: self
+                .damage
+                .as_ref()
+                .map_or_else(Vec::new, |d| d.before.clone()),
             ..self.state.clone()
         }
     }
@@ -270,8 +279,12 @@ impl<const D: usize> Simulation<D> {
                 d.solver.set_active_from(&state.zeta);
             }
             d.next.copy_from_slice(&state.zeta);
-            d.before.clear();
+            d.before = std::mem::take(&mut state.damage_before);
+            if d.before.len() != d.next.len() {
+                d.before.clear();
+            }
         }
+        state.damage_before.clear();
         self.state = state;
     }
 
