@@ -27,14 +27,16 @@ const CHAR_W = 0.62 * TICK_PX; // a digit's advance in the system font, with roo
  * `onPick(x)`: called with the x of the nearest point when the plot is clicked. `dots`: the
  * points are drawn as dots (a scatter), not joined.
  */
-export function linePlot(parent, { title, xs, ys, xLabel = 't', colour = '#1864ab', fromZero = true, onPick = null, dots = false, id }) {
+export function linePlot(parent, { title, xs, ys, xLabel = 't', colour = '#1864ab', fromZero = true, onPick = null, dots = false, band = null, id }) {
   const w = VIEW_W, h = VIEW_H;
   const good = xs.map((x, i) => [x, ys[i]]).filter(([x, y]) => Number.isFinite(x) && Number.isFinite(y));
+  // band: {lo, hi} beside ys, a shaded range around the line (binned data: each bin's extremes).
+  const spread = band ? xs.map((x, i) => [x, band.lo[i], band.hi[i]]).filter((q) => q.every(Number.isFinite)) : [];
   let xmin = Math.min(...good.map((p) => p[0]));
   const xmax = Math.max(...good.map((p) => p[0]));
   if (fromZero && xmin > 0) xmin = 0;
-  let ymin = Math.min(...good.map((p) => p[1]));
-  let ymax = Math.max(...good.map((p) => p[1]));
+  let ymin = Math.min(...good.map((p) => p[1]), ...spread.map((q) => q[1]));
+  let ymax = Math.max(...good.map((p) => p[1]), ...spread.map((q) => q[2]));
   // A series constant up to rounding (no damage; a friction traction of 0.5 ± 1e-14) is
   // drawn flat in the middle with its value, not stretched into full-height noise.
   const flat = good.length > 0 && !(ymax - ymin > 1e-9 * Math.max(Math.abs(ymax), Math.abs(ymin), 1e-300));
@@ -70,6 +72,12 @@ export function linePlot(parent, { title, xs, ys, xLabel = 't', colour = '#1864a
     text(w - m.r, h - 7, good.length ? fmt(xmax, 3) : '', 'end'),
     text((m.l + w - m.r) / 2, h - 7, xLabel, 'middle'),
   );
+  if (spread.length && !flat) {
+    const upper = spread.map(([x, , hi], i) => `${i ? 'L' : 'M'}${X(x).toFixed(1)},${Y(hi).toFixed(1)}`).join('');
+    const lower = spread.slice().reverse().map(([x, lo]) => `L${X(x).toFixed(1)},${Y(lo).toFixed(1)}`).join('');
+    root.append(svg('path', { d: `${upper}${lower}Z`, fill: colour, 'fill-opacity': 0.18, stroke: 'none', class: 'band' }));
+    root.dataset.band = String(spread.length);
+  }
   if (good.length) {
     if (dots) {
       const g = svg('g', { fill: colour });

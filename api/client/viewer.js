@@ -28,6 +28,9 @@ const QUANTITIES = {
 const CACHE_STEPS = 400;
 const RUN_RANGE_STEPS = 200;
 const FRAME_MS = 150;
+/** A 3D contact face with more nodes than this is plotted in BINS slices along Γ3. */
+const BIN_ABOVE = 60;
+const BINS = 40;
 const ZOOM_MIN = 0.5;
 const ZOOM_MAX = 500;
 
@@ -618,11 +621,36 @@ export class SimulationView {
       if (sp > spread) [axis, spread] = [a, sp];
     }
     const sorted = c.slice().sort((p, q) => N[p.node][axis] - N[q.node][axis]);
+    const slipping = c.filter((e) => e.slipping).length;
+    const plot = (id, title, key, colour, series) => linePlot(this.gammaPlots, {
+      xLabel: names[axis], fromZero: false, id, title, colour, ...series(key),
+    });
+    if (d === 3 && c.length > BIN_ABOVE) {
+      // A contact face's nodes spread over a surface: by position along the axis they form a
+      // cloud, so each of BINS slices shows its mean (the line) and its range (the band).
+      const lo = N[sorted[0].node][axis], hi = N[sorted[sorted.length - 1].node][axis];
+      const nb = Math.min(BINS, Math.max(8, Math.round(Math.sqrt(c.length))));
+      const bins = Array.from({ length: nb }, () => []);
+      for (const e of sorted) bins[Math.min(nb - 1, Math.floor(((N[e.node][axis] - lo) / (hi - lo || 1)) * nb))].push(e);
+      const full = bins.filter((b) => b.length);
+      const mean = (xs) => xs.reduce((a, b) => a + b, 0) / xs.length;
+      const series = (key) => ({
+        xs: full.map((b) => mean(b.map((e) => N[e.node][axis]))),
+        ys: full.map((b) => mean(b.map((e) => e[key]))),
+        band: { lo: full.map((b) => Math.min(...b.map((e) => e[key]))), hi: full.map((b) => Math.max(...b.map((e) => e[key]))) },
+      });
+      this.gammaNote.textContent = `${c.length} contact nodes in ${full.length} slices along ${names[axis]}: the line is each slice's mean, the band its range; ${slipping} slip.`;
+      plot('plot-slip', 'slip velocity w_τ', 'slip_velocity', SLIP, series);
+      plot('plot-friction', 'friction traction', 'friction_traction', '#5f3dc4', series);
+      for (const s of this.gammaPlots.querySelectorAll('svg.plot')) s.dataset.nodes = String(c.length);
+      return;
+    }
     const xs = sorted.map((e) => N[e.node][axis]);
-    this.gammaNote.textContent = `${c.length} contact nodes by ${names[axis]}${d === 3 ? ' (each node a dot)' : ''}; ${c.filter((e) => e.slipping).length} slip.`;
-    const opts = { xs, xLabel: names[axis], fromZero: false, dots: d === 3 };
-    linePlot(this.gammaPlots, { ...opts, id: 'plot-slip', title: 'slip velocity w_τ', ys: sorted.map((e) => e.slip_velocity), colour: SLIP });
-    linePlot(this.gammaPlots, { ...opts, id: 'plot-friction', title: 'friction traction', ys: sorted.map((e) => e.friction_traction), colour: '#5f3dc4' });
+    this.gammaNote.textContent = `${c.length} contact nodes by ${names[axis]}${d === 3 ? ' (each node a dot)' : ''}; ${slipping} slip.`;
+    const series = (key) => ({ xs, ys: sorted.map((e) => e[key]), dots: d === 3 });
+    plot('plot-slip', 'slip velocity w_τ', 'slip_velocity', SLIP, series);
+    plot('plot-friction', 'friction traction', 'friction_traction', '#5f3dc4', series);
+    for (const s of this.gammaPlots.querySelectorAll('svg.plot')) s.dataset.nodes = String(c.length);
   }
 
   /** Values of the selected quantity for the current step, and whether per triangle. */

@@ -1626,6 +1626,18 @@ async function testViewer3d() {
   });
   const median = (xs) => xs.slice().sort((a, b) => a - b)[Math.floor(xs.length / 2)];
   console.log(`  ${big.boundary.length} boundary triangles (${big.tets.length} tetrahedra), ${times.size.join('×')} px: orbit frames ${times.out.map((x) => x.toFixed(0)).join(', ')} ms (median ${median(times.out).toFixed(0)} ms)`);
+  // Γ3 of 4,970 nodes: slices along Γ3, each a mean on the line and a range in the band.
+  const g3 = await bigPage.$eval('#plot-slip', (s) => ({
+    points: Number(s.dataset.points), nodes: Number(s.dataset.nodes), band: Number(s.dataset.band),
+    ymax: Number(s.dataset.ymax), ymin: Number(s.dataset.ymin), dots: s.querySelectorAll('circle[r="1.8"]').length,
+  }));
+  const contactNodes = big.nodes.filter(([x, , z]) => z === 0 && x !== 0);
+  // The mock's slip speed at t = 1: |(0.2 x, 0.05 (y − 1))| where x > 1, else 0.
+  const speeds = contactNodes.map(([x, y]) => (x > 1 ? Math.hypot(0.2 * x, 0.05 * (y - 1)) : 0));
+  check(g3.nodes === contactNodes.length && g3.points >= 8 && g3.points <= 40 && g3.band === g3.points && g3.dots === 0
+    && Math.abs(g3.ymax - Math.max(...speeds)) < 1e-12 && g3.ymin === 0,
+    `the 3D Γ3 plot of ${g3.nodes} nodes is ${g3.points} slices with their range (up to ${g3.ymax}), not a cloud of dots`);
+  check(/slices along/.test(await bigPage.textContent('#viewer')), 'the note says the Γ3 plot is sliced');
   const bs = await stats3d(bigPage);
   check(bs.drawn > 0.1 * bs.pixels, `the ${big.boundary.length}-triangle body is drawn`);
   check(median(times.out) < 1000, `a frame at ${big.boundary.length} boundary triangles takes ${median(times.out).toFixed(0)} ms (< 1 s)`);
