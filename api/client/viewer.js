@@ -615,10 +615,24 @@ export class SimulationView {
     const N = this.mesh.nodes;
     const names = ['x', 'y', 'z'];
     let axis = 0, spread = -1;
+    const spreads = [];
     for (let a = 0; a < d; a++) {
       const vs = c.map((e) => N[e.node][a]);
-      const sp = Math.max(...vs) - Math.min(...vs);
-      if (sp > spread) [axis, spread] = [a, sp];
+      spreads[a] = Math.max(...vs) - Math.min(...vs);
+      if (spreads[a] > spread) [axis, spread] = [a, spreads[a]];
+    }
+    // In 3D the axis the slices are cut along is the user's choice (the face's longest by
+    // default): a stick–slip transition shows along the axis it runs across.
+    if (d === 3 && c.length > BIN_ABOVE) {
+      if (this.gammaAxis !== undefined && spreads[this.gammaAxis] > 0) axis = this.gammaAxis;
+      const pick = el('select', { id: 'gamma3-axis', 'aria-label': 'slices along' },
+        ...names.filter((_, a) => spreads[a] > 0).map((n) => el('option', { value: String(names.indexOf(n)) }, `along ${n}`)));
+      pick.value = String(axis);
+      pick.addEventListener('change', () => {
+        this.gammaAxis = Number(pick.value);
+        this.drawGamma3();
+      });
+      this.gammaPlots.append(el('div', { class: 'gamma3-axis' }, pick));
     }
     const sorted = c.slice().sort((p, q) => N[p.node][axis] - N[q.node][axis]);
     const slipping = c.filter((e) => e.slipping).length;

@@ -1638,6 +1638,15 @@ async function testViewer3d() {
     && Math.abs(g3.ymax - Math.max(...speeds)) < 1e-12 && g3.ymin === 0,
     `the 3D Γ3 plot of ${g3.nodes} nodes is ${g3.points} slices with their range (up to ${g3.ymax}), not a cloud of dots`);
   check(/slices along/.test(await bigPage.textContent('#viewer')), 'the note says the Γ3 plot is sliced');
+  // Along x the stick–slip transition at x = 1 shows: the slices' means are 0 below it.
+  await bigPage.selectOption('#gamma3-axis', '0');
+  await bigPage.waitForFunction(() => /slices along x/.test(document.querySelector("#viewer").textContent));
+  const alongX = await bigPage.$eval('#plot-slip', (s) => ({ points: Number(s.dataset.points), path: s.querySelector('path:not(.band)').getAttribute('d') }));
+  const ys = alongX.path.split(/[ML]/).slice(1).map((p) => Number(p.split(',')[1]));
+  const bottom = Math.max(...ys);
+  const flatStart = ys.findIndex((y) => y < bottom - 1);
+  check(alongX.points >= 8 && flatStart > 0.3 * ys.length && flatStart < 0.7 * ys.length,
+    `sliced along x the slip speed is 0 up to the transition and rises after it (first rise at slice ${flatStart} of ${ys.length})`);
   const bs = await stats3d(bigPage);
   check(bs.drawn > 0.1 * bs.pixels, `the ${big.boundary.length}-triangle body is drawn`);
   check(median(times.out) < 1000, `a frame at ${big.boundary.length} boundary triangles takes ${median(times.out).toFixed(0)} ms (< 1 s)`);
