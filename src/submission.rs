@@ -190,74 +190,53 @@ pub fn validated(doc: Value, state: &AppState) -> Result<Validated, Problem> {
         }
         PresetRequest::None => doc,
     };
-    match doc.get("study") {
-        Some(study) => {
-            if let Some(k) = doc
-                .as_object()
-                .and_then(|o| o.keys().find(|k| *k != "study"))
-            {
-                return Err(Problem::invalid_field(
-                    &format!("/{k}"),
-                    format!("unknown field {k:?} next to a study (a study request is {{\"study\": {{...}}}})"),
-                ));
-            }
-            let (request, expanded) = study::request::parse(study, "/study", &*state.rt.meshes)
-                .map_err(|e| {
-                    crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))
-                })?;
-            let admitted = request
-                .admit(&state.rt.config.job_limits())
-                .map_err(|e| over_limit(&e))?;
-            Ok(Validated {
-                doc: json!({ "study": expanded }),
-                steps: admitted.steps,
-                stored_bytes: 0,
-                memory: Some(MemoryPrediction {
-                    linear_path: admitted.largest.path,
-                    predicted_bytes: admitted.largest.memory_bytes,
-                }),
-            })
-        }
-        None if doc.get("sweep").is_some() => validated_sweep(&doc, state),
-        None => validated_scene(doc, None, state),
+    if doc.get("study").is_some() {
+        validated_study(&doc, "study", state)
+    } else if doc.get("sweep").is_some() {
+        validated_study(&doc, "sweep", state)
+    } else {
+        validated_scene(doc, None, state)
     }
 }
 
-/// A sweep request `{"sweep": {...}}` ([`contact_core::study::sweep`]): every member validated
-/// (422 at `/sweep/vary/<pointer>`), all of them admitted under the per-job limits (the
-/// largest member decides the memory, the steps of all count).
-fn validated_sweep(doc: &Value, state: &AppState) -> Result<Validated, Problem> {
-    if let Some(k) = doc
-        .as_object()
-        .and_then(|o| o.keys().find(|k| *k != "sweep"))
-    {
+/// A study request `{"study": {...}}` (a ladder or a target) or a sweep request
+/// `{"sweep": {...}}` ([`contact_core::study::sweep`]), read by the one study request
+/// ([`study::request`]): every run validated (422 at its pointer under `/{key}`) and admitted
+/// under the per-job limits (the largest run decides the memory, the steps of all count).
+fn validated_study(doc: &Value, key: &str, state: &AppState) -> Result<Validated, Problem> {
+    if let Some(k) = doc.as_object().and_then(|o| o.keys().find(|k| *k != key)) {
         return Err(Problem::invalid_field(
             &format!("/{k}"),
             format!(
-                "unknown field {k:?} next to a sweep (a sweep request is {{\"sweep\": {{...}}}})"
+                "unknown field {k:?} next to a {key} (a {key} request is {{\"{key}\": {{...}}}})"
             ),
         ));
     }
-    // The body is the scene's: an uploaded mesh is checked against its owner once, before
-    // the sweep is read (members on other meshes are separate jobs).
-    if let Some(pointer) = doc["sweep"]["vary"].as_object().and_then(|v| {
-        v.keys()
-            .find(|p| *p == "/domain" || p.starts_with("/domain/mesh"))
-    }) {
-        return Err(Problem::invalid_field(
-            &format!("/sweep/vary/{}", study::sweep::escape(pointer)),
-            "a sweep runs on its scene's body: vary loads, friction, damage, material, mesh.h or time, not domain.mesh",
-        ));
-    }
+    let parse = if key == "sweep" {
+        // The body is the scene's: an uploaded mesh is checked against its owner once,
+        // before the sweep is read (members on other meshes are separate jobs).
+        if let Some(pointer) = doc["sweep"]["vary"].as_object().and_then(|v| {
+            v.keys()
+                .find(|p| *p == "/domain" || p.starts_with("/domain/mesh"))
+        }) {
+            return Err(Problem::invalid_field(
+                &format!("/sweep/vary/{}", study::sweep::escape(pointer)),
+                "a sweep runs on its scene's body: vary loads, friction, damage, material, mesh.h or time, not domain.mesh",
+            ));
+        }
+        study::request::parse_sweep
+    } else {
+        study::request::parse
+    };
     let (request, expanded) =
-        study::request::parse_sweep(&doc["sweep"], "/sweep", &*state.rt.meshes).map_err(|e| {
+        parse(&doc[key], &format!("/{key}"), &*state.rt.meshes).map_err(|e| {
             crate::meshes::store_outage(&e).unwrap_or_else(|| Problem::invalid_scene(&e))
         })?;
     let admitted = request
         .admit(&state.rt.config.job_limits())
         .map_err(|e| over_limit(&e))?;
     Ok(Validated {
-        doc: json!({ "sweep": expanded }),
+        doc: json!({ key: expanded }),
         steps: admitted.steps,
         stored_bytes: 0,
         memory: Some(MemoryPrediction {
