@@ -644,3 +644,49 @@ fn repeated_bisection_of_every_tetrahedron_keeps_the_shapes() {
         assert!(last >= 0.1, "{name}: {last}");
     }
 }
+
+/// A polygon mesh (the L-bracket's shape), tagged and graded towards its re-entrant corner:
+/// the corners stay nodes, the tagged side keeps its part and length.
+#[test]
+fn the_polygon_mesh_graded_at_its_reentrant_corner_keeps_corners_parts_and_quality() {
+    use crate::mesh::support::Support;
+    use crate::mesh::{polygon, Segment};
+    let outer = [
+        [0.0, 0.0],
+        [2.0, 0.0],
+        [2.0, 1.0],
+        [1.0, 1.0],
+        [1.0, 2.0],
+        [0.0, 2.0],
+    ];
+    let t = polygon::triangulate(&outer, &[], 0.25, 100_000).unwrap();
+    let mut m = Mesh::from_cells(t.nodes, t.triangles.concat()).unwrap();
+    let bottom = Segment {
+        a: [0.0, 0.0],
+        b: [2.0, 0.0],
+    };
+    m.tag_boundary(&[Support::Segment(bottom)]).unwrap();
+    let tagged = |mesh: &Mesh<2>| -> f64 {
+        mesh.facets
+            .iter()
+            .filter(|f| f.part == Some(0))
+            .map(|f| f.measure)
+            .sum()
+    };
+    assert!((tagged(&m) - 2.0).abs() < 1e-12);
+    let (b, ratio) = cycles(&m, ball([1.0, 1.0], 0.3, 0.75));
+    println!(
+        "L-shaped polygon, graded at (1, 1): {} → {} nodes, {} → {} cells, min quality ratio {ratio:.3}",
+        m.n_nodes(),
+        b.mesh().n_nodes(),
+        m.n_cells(),
+        b.mesh().n_cells()
+    );
+    assert!(ratio >= 0.3, "{ratio}");
+    assert!((tagged(b.mesh()) - 2.0).abs() < 1e-12);
+    for corner in outer {
+        assert!(b.mesh().nodes.contains(&corner), "{corner:?}");
+    }
+    let f = figures(b.mesh());
+    assert!(f.min_cell_size < f.max_cell_size / 20.0, "{f:?}");
+}
