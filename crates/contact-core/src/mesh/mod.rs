@@ -11,6 +11,8 @@
 //!   conforming simplicial mesh, checked by [`quality`] and with its boundary facets found
 //!   as the faces that belong to one cell only.
 //! - [`Mesh::refine`] ([`refine`]): uniform (red) refinement, nested by construction.
+//! - [`bisect::Bisection`] ([`bisect`]): local refinement by bisection with a conforming
+//!   closure, nested, each step described by its [`bisect::Step`].
 //!
 //! Boundary parts are tagged once on the mesh given by the user ([`support`]); refinement
 //! hands each child facet its parent's tag, so curved parts stay selected although the new
@@ -19,6 +21,7 @@
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
 pub mod any;
+pub mod bisect;
 pub mod cuboid;
 pub mod import;
 pub mod polygon;
