@@ -55,6 +55,10 @@ pub struct RunArgs {
     /// Linear solver path, overriding the scene's `solver.linear`: auto, direct or multigrid.
     #[arg(long = "linear-solver", value_parser = ["auto", "direct", "multigrid"])]
     pub linear_solver: Option<String>,
+    /// Precision of the multigrid path's level operators, overriding the scene's
+    /// `solver.precision`: auto (mixed in 3D), double or mixed.
+    #[arg(long, value_parser = ["auto", "double", "mixed"])]
+    pub precision: Option<String>,
     /// Threads of the run (default: all cores). The numbers are the same bits for every
     /// count.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1024))]
@@ -97,10 +101,15 @@ pub fn main(args: RunArgs) -> ExitCode {
         // The parent's step k, exactly: the number of steps follows from --t-end.
         *time = json!({"t_end": time["t_end"], "k": p.k});
     }
-    if let (Some(path), Some(top)) = (&args.linear_solver, doc.as_object_mut()) {
-        let solver = top.entry("solver").or_insert_with(|| serde_json::json!({}));
-        if let Some(s) = solver.as_object_mut() {
-            s.insert("linear".into(), Value::String(path.clone()));
+    for (key, value) in [
+        ("linear", &args.linear_solver),
+        ("precision", &args.precision),
+    ] {
+        if let (Some(value), Some(top)) = (value, doc.as_object_mut()) {
+            let solver = top.entry("solver").or_insert_with(|| serde_json::json!({}));
+            if let Some(s) = solver.as_object_mut() {
+                s.insert(key.into(), Value::String(value.clone()));
+            }
         }
     }
     // Mesh files are looked up next to the scene file (the working directory for a preset; a

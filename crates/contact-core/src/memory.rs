@@ -151,6 +151,14 @@ const FULL_SPACE_AGGREGATION: f64 = 0.5;
 /// `benches/part` at 20k and 82k nodes (168 and 624 MB, predicted 1.14× and 1.18×).
 const AGGREGATION_HIERARCHY: f64 = 1.3;
 
+/// Mixed precision ([`crate::problem::Precision`]) adds a single-precision block copy of every
+/// level operator of K and H: f32 entries in node blocks with one index per block (3D:
+/// 40 bytes per 9 entries; 2D: 24 per 4; H: 8 per entry), counted as this multiple of the
+/// finest levels' copies: the coarse levels' copies are small, and the peak grew by 0.6–1.3×
+/// the finest copies on box-exp3 at 1/16–1/32 and the part of `benches/part` at 23k and 82k
+/// nodes (docs/src/speed/speed.md#mixed-precision-levels).
+const MIXED_LEVELS: f64 = 1.0;
+
 /// The resident size of the process before a run (code, allocator, runtime), counted on the
 /// multigrid path whose small runs it dominates.
 const PROCESS: f64 = 8.0 * (1u64 << 20) as f64;
@@ -247,12 +255,20 @@ pub fn predict(p: &Problem) -> Prediction {
     let shared_k_ii = if c.contact { csr(nnz_k, n) } else { 0.0 };
     // The earlier steps' solutions whose projection starts each K_II solve.
     let solution_space = 8.0 * SolutionSpace::vectors(CAPACITY) as f64 * n;
+    let mixed = if p.precision.mixed(c.d as usize) {
+        let per_entry = if c.d == 3.0 { 40.0 / 9.0 } else { 6.0 };
+        let h = if c.damage { 8.0 * nnz_h } else { 0.0 };
+        MIXED_LEVELS * (per_entry * nnz_k + h)
+    } else {
+        0.0
+    };
     let multigrid = PROCESS + base - shared_k_ii
         + hierarchy_k
         + hierarchy_h
         + coarsest
         + full_space
-        + solution_space;
+        + solution_space
+        + mixed;
     Prediction {
         direct: direct_peak(&t, direct_factors),
         multigrid: multigrid as u64,

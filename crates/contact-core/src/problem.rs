@@ -241,6 +241,8 @@ pub struct Problem {
     /// The path of the linear solves (`solver.linear`): `Auto` is decided per job from the
     /// predicted memory.
     pub linear: LinearPath,
+    /// The multigrid path's level operators in f32 or f64 (`solver.precision`).
+    pub precision: Precision,
     /// None: ζ ≡ 1, no damage solve.
     pub damage: Option<Damage>,
     /// Initial displacement u_0(x, y).
@@ -399,6 +401,49 @@ impl Problem {
             (self.width * n).round() as usize,
             (self.height * n).round() as usize,
         )
+    }
+}
+
+/// The precision of the multigrid V-cycle's level operators (the scene's
+/// `solver.precision`): the operators of the scheme, the residuals and conjugate gradients
+/// are f64 either way ([`crate::linalg::block_csr32`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Precision {
+    /// Mixed for 3D bodies, where it is faster; double in 2D, where it is not.
+    #[default]
+    Auto,
+    Double,
+    Mixed,
+}
+
+impl Precision {
+    pub const NAMES: &'static [&'static str] = &["auto", "double", "mixed"];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::Auto => "auto",
+            Precision::Double => "double",
+            Precision::Mixed => "mixed",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Precision> {
+        match s {
+            "auto" => Some(Precision::Auto),
+            "double" => Some(Precision::Double),
+            "mixed" => Some(Precision::Mixed),
+            _ => None,
+        }
+    }
+
+    /// Whether a body of dimension `dim` takes single-precision level operators.
+    pub fn mixed(self, dim: usize) -> bool {
+        match self {
+            Precision::Auto => dim == 3,
+            Precision::Double => false,
+            Precision::Mixed => true,
+        }
     }
 }
 

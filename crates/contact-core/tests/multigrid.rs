@@ -7,7 +7,7 @@
 //! inside (2.31), a curved Γ3, an imported cylinder as given and refined.
 
 use contact_core::linalg::LinearPath;
-use contact_core::problem::Problem;
+use contact_core::problem::{Precision, Problem};
 use contact_core::scene::{self, presets};
 use contact_core::solve::invariants;
 use contact_core::solve::stepper::{Simulation, StepReport};
@@ -66,7 +66,10 @@ fn compare_with<const D: usize>(
         doc["time"] = json!({"T": doc["time"].get("T").or(doc["time"].get("t_end")).cloned().unwrap_or(json!(1)), "N": steps});
         doc["solver"] = json!({"linear": path});
         for (pointer, value) in edits {
-            *doc.pointer_mut(pointer).expect("pointer") = value.clone();
+            match pointer.strip_prefix("/solver/") {
+                Some(key) => doc["solver"][key] = value.clone(),
+                None => *doc.pointer_mut(pointer).expect("pointer") = value.clone(),
+            }
         }
         if !edits.is_empty() {
             p = scene::validate(&doc).unwrap_or_else(|e| panic!("{preset}: {e}"));
@@ -82,7 +85,17 @@ fn compare_with<const D: usize>(
         "multigrid",
     ));
     assert_eq!(d_name, "direct (Cholesky)");
-    assert!(m_name.starts_with(expect), "{preset}: {m_name}");
+    // `expect`: the description's start, then (after each `*`) pieces that follow in order.
+    assert!(
+        m_name.starts_with(expect.split('*').next().unwrap_or(""))
+            && expect
+                .split('*')
+                .try_fold(m_name.as_str(), |rest, piece| {
+                    rest.find(piece).map(|i| &rest[i + piece.len()..])
+                })
+                .is_some(),
+        "{preset}: {m_name}"
+    );
     assert_eq!(direct.len(), multi.len());
     for (a, b) in direct.iter().zip(&multi) {
         let at = format!("{preset} step {}", a.n);
@@ -173,13 +186,50 @@ fn boxes_and_tetrahedral_meshes_agree() {
         "box-exp3",
         json!({"h": "1/8"}),
         4,
-        "multigrid (geometric, 2 levels)",
+        "multigrid (geometric, 2 levels, mixed precision)",
     );
     compare::<3>(
         "standing-cylinder",
         json!({"refine": 0}),
         3,
         "multigrid (smoothed aggregation",
+    );
+}
+
+/// `solver.precision`: 3D takes single-precision level operators by default (the cases
+/// above), 2D double; either precision on either dimension agrees with the direct path.
+#[test]
+fn both_precisions_agree_in_both_dimensions() {
+    let precision = |p: &str| ("/solver/precision", json!(p));
+    let tresca = |g: f64| ("/friction", json!({"law": "tresca", "g": g}));
+    let slipped = compare_with::<2>(
+        "paper-convergence",
+        json!({"h": "1/32"}),
+        4,
+        "multigrid (geometric*, mixed precision)",
+        &[precision("mixed"), tresca(0.5)],
+    );
+    assert!(slipped > 0);
+    compare_with::<2>(
+        "paper-exp3",
+        json!({"h": "1/16"}),
+        4,
+        "multigrid (smoothed aggregation*, mixed precision)",
+        &[precision("mixed")],
+    );
+    compare_with::<3>(
+        "box-exp3",
+        json!({"h": "1/8"}),
+        4,
+        "multigrid (geometric, 2 levels)",
+        &[precision("double")],
+    );
+    compare_with::<3>(
+        "box-exp3",
+        json!({"h": "1/8"}),
+        4,
+        "multigrid (geometric, 2 levels, mixed precision)",
+        &[],
     );
 }
 
@@ -194,6 +244,12 @@ fn the_scene_field_is_validated_and_hashed() {
     assert_eq!(p.linear, LinearPath::Multigrid);
     let plain = presets::get("paper-exp1").unwrap();
     assert_ne!(scene::content_hash(&doc), scene::content_hash(&plain));
+    doc["solver"] = json!({"precision": "half"});
+    let e = scene::validate(&doc).unwrap_err().to_string();
+    assert!(e.contains("/solver/precision"), "{e}");
+    doc["solver"] = json!({"precision": "double"});
+    assert_eq!(scene::validate(&doc).unwrap().precision, Precision::Double);
+    assert!(!Precision::Auto.mixed(2) && Precision::Auto.mixed(3));
 }
 
 /// A preset, its mesh, the expected hierarchy and scene edits.
@@ -298,7 +354,7 @@ fn a_long_run_agrees_through_the_compressions_of_its_starting_guesses() {
         "box-exp3",
         json!({"h": "1/8"}),
         24,
-        "multigrid (geometric, 2 levels)",
+        "multigrid (geometric, 2 levels, mixed precision)",
     );
     let (reports, _) = simulate::<3>(problem("box-exp3", json!({"h": "1/8"}), 24, "multigrid"));
     let its: Vec<usize> = reports
@@ -324,7 +380,7 @@ fn a_slipping_run_starts_its_steps_from_the_earlier_velocities() {
         "box-exp3",
         json!({"h": "1/8"}),
         16,
-        "multigrid (geometric, 2 levels)",
+        "multigrid (geometric, 2 levels, mixed precision)",
         std::slice::from_ref(&g2),
     );
     assert_eq!(slipped, 16, "every step slips with g = 2");

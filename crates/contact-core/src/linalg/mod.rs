@@ -7,6 +7,7 @@
 //! complement onto Γ3 ([`schur`]), the nested-dissection ordering ([`nested_dissection`]),
 //! and the threads every kernel splits its work over ([`par`]).
 
+pub mod block_csr32;
 pub mod cholesky;
 pub mod csr;
 pub mod dense;

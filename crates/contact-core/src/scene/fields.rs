@@ -58,4 +58,4 @@ pub(super) const OUTPUT_FIELDS: &[&str] = &["every", "last", "fields"];
 pub(super) const OUTPUT_FIELD_NAMES: &[&str] = &["u", "w", "zeta", "sigma", "von_mises", "contact"];
 pub(super) const PATTERNS: &[&str] = &["diagonal", "anti_diagonal", "cross"];
 pub(super) const SMALLNESS: &[&str] = &["refuse", "warn"];
-pub(super) const SOLVER_FIELDS: &[&str] = &["linear"];
+pub(super) const SOLVER_FIELDS: &[&str] = &["linear", "precision"];

@@ -59,7 +59,7 @@ use serde_json::Value;
 
 use crate::linalg::LinearPath;
 use crate::mesh::{AnyMesh, Mesh};
-use crate::problem::{Body, OutputSpec, Problem, SmallnessPolicy};
+use crate::problem::{Body, OutputSpec, Precision, Problem, SmallnessPolicy};
 use boundary::boundary;
 use damage::damage;
 use domain::domain;
@@ -199,8 +199,8 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
             })
         }
     };
-    let linear = match top.get("solver") {
-        None => Some(LinearPath::Auto),
+    let solver = match top.get("solver") {
+        None => Some((LinearPath::Auto, Precision::Auto)),
         Some(v) => solver(cx, v, "/solver"),
     };
     let damage = match top.get("damage") {
@@ -277,7 +277,8 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
         material: material?,
         friction: friction?,
         smallness: smallness?,
-        linear: linear?,
+        linear: solver?.0,
+        precision: solver?.1,
         damage: damage?,
         u0: u0?,
         output: output?,
@@ -292,10 +293,11 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
     Some(problem)
 }
 
-/// The `solver` section: `{"linear": "auto" | "direct" | "multigrid"}`.
-fn solver(cx: &mut Cx, v: &Value, ptr: &str) -> Option<LinearPath> {
+/// The `solver` section: `{"linear": "auto" | "direct" | "multigrid", "precision": "auto" |
+/// "double" | "mixed"}`.
+fn solver(cx: &mut Cx, v: &Value, ptr: &str) -> Option<(LinearPath, Precision)> {
     let m = object(cx, v, ptr, "the solver choice", SOLVER_FIELDS)?;
-    match m.get("linear") {
+    let linear = match m.get("linear") {
         None => Some(LinearPath::Auto),
         Some(l) => choice(
             cx,
@@ -305,7 +307,19 @@ fn solver(cx: &mut Cx, v: &Value, ptr: &str) -> Option<LinearPath> {
             LinearPath::NAMES,
         )
         .and_then(|i| LinearPath::parse(LinearPath::NAMES[i])),
-    }
+    };
+    let precision = match m.get("precision") {
+        None => Some(Precision::Auto),
+        Some(l) => choice(
+            cx,
+            l,
+            &format!("{ptr}/precision"),
+            "multigrid precision",
+            Precision::NAMES,
+        )
+        .and_then(|i| Precision::parse(Precision::NAMES[i])),
+    };
+    Some((linear?, precision?))
 }
 
 /// The run's label: 1 to [`MAX_NAME_LEN`] characters, no control characters.

@@ -407,7 +407,7 @@ mod tests {
             (64, 1.0 / 64.0, 1.0),
         ] {
             let (h, m, nn) = h_matrix(n, k, kappa);
-            let mut solver = multigrid::Multigrid::new(0)
+            let mut solver = multigrid::Multigrid::new(0, false)
                 .damage(&square(n), h.clone())
                 .unwrap();
             let mut direct = direct_step(&h);

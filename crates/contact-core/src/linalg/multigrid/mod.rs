@@ -13,11 +13,12 @@ pub mod aggregation;
 pub mod smoother;
 pub mod truncated;
 
+use super::block_csr32::BlockCsr32;
 use super::cholesky::{Cholesky, FactorError};
 use super::galerkin::{galerkin, transpose};
 use super::par;
 use super::pcg::Preconditioner;
-use super::Csr;
+use super::{Csr, LinearOperator};
 use smoother::Chebyshev;
 use std::sync::Arc;
 
@@ -130,6 +131,9 @@ pub struct Params {
     /// finest level ([`aggregation::squared`]); 2D keeps the plain graph, whose coarse
     /// operators are small enough and whose two-grid factor stays lower.
     pub square_finest: bool,
+    /// Mixed precision: each level's smoother and residual products use a single-precision
+    /// block copy of its operator ([`BlockCsr32`]); the operators themselves stay f64.
+    pub mixed: bool,
 }
 
 impl Default for Params {
@@ -143,6 +147,7 @@ impl Default for Params {
             ratio: 7.0,
             theta: 0.08,
             square_finest: true,
+            mixed: false,
         }
     }
 }
@@ -151,6 +156,8 @@ impl Default for Params {
 #[derive(Debug)]
 struct Level {
     a: Arc<Csr>,
+    /// `a` in f32 node blocks, with [`Params::mixed`].
+    a32: Option<BlockCsr32>,
     smoother: Chebyshev,
     /// To the next coarser level, and its transpose.
     p: Csr,
@@ -212,7 +219,14 @@ impl Hierarchy {
                     );
                     let pt = transpose(&p);
                     let coarse = Arc::new(galerkin(&a, &p, &pt));
-                    levels.push(Level { a, smoother, p, pt });
+                    let a32 = params.mixed.then(|| BlockCsr32::new(&a, &blocks));
+                    levels.push(Level {
+                        a,
+                        a32,
+                        smoother,
+                        p,
+                        pt,
+                    });
                     a = coarse;
                     blocks = coarse_blocks;
                     nullspace = coarse_null;
@@ -228,7 +242,14 @@ impl Hierarchy {
                     let smoother = Chebyshev::new(&a, &blocks, params.degree, params.ratio);
                     let pt = transpose(&p);
                     let coarse = Arc::new(galerkin(&a, &p, &pt));
-                    levels.push(Level { a, smoother, p, pt });
+                    let a32 = params.mixed.then(|| BlockCsr32::new(&a, &blocks));
+                    levels.push(Level {
+                        a,
+                        a32,
+                        smoother,
+                        p,
+                        pt,
+                    });
                     a = coarse;
                     blocks = cb;
                 }
@@ -268,6 +289,11 @@ impl Hierarchy {
         self.levels.get(l).map(|level| (&level.p, &level.pt))
     }
 
+    /// Level l's single-precision operator, with [`Params::mixed`].
+    pub fn level_f32(&self, l: usize) -> Option<&BlockCsr32> {
+        self.levels.get(l).and_then(|v| v.a32.as_ref())
+    }
+
     /// Level l's operator, smoother and prolongator to level l + 1 (l below the coarsest).
     pub fn level(&self, l: usize) -> Option<(&Arc<Csr>, &Chebyshev, &Csr)> {
         self.levels.get(l).map(|v| (&v.a, &v.smoother, &v.p))
@@ -285,7 +311,16 @@ impl Hierarchy {
 
     /// What a summary says of it: "multigrid (smoothed aggregation, 4 levels)".
     pub fn describe(&self) -> String {
-        format!("multigrid ({}, {} levels)", self.kind, self.n_levels())
+        let precision = if self.params.mixed {
+            ", mixed precision"
+        } else {
+            ""
+        };
+        format!(
+            "multigrid ({}, {} levels{precision})",
+            self.kind,
+            self.n_levels()
+        )
     }
 
     /// Sizes (rows) of every level, finest first.
@@ -376,13 +411,17 @@ impl VCycle {
             return;
         }
         let level = &h.levels[l];
+        let a: &dyn LinearOperator = match &level.a32 {
+            Some(a32) => a32,
+            None => level.a.as_ref(),
+        };
         {
             let w = &mut self.work[l];
             w.x.iter_mut().for_each(|v| *v = 0.0);
             let LevelWork { b, x, r, d, t } = w;
-            level.smoother.smooth(level.a.as_ref(), b, x, r, d, t, true);
+            level.smoother.smooth(a, b, x, r, d, t, true);
             // t ← b − A x, restricted into the next level's right-hand side.
-            level.a.mul_vec(x, t);
+            a.apply(x, t);
             par::zip_apply(t, b, |t, b| b - t);
         }
         let (fine, coarse) = self.work.split_at_mut(l + 1);
@@ -393,9 +432,7 @@ impl VCycle {
         level.p.mul_vec(&coarse[0].x, &mut w.t);
         par::zip_apply(&mut w.x, &w.t, |x, t| x + t);
         let LevelWork { b, x, r, d, t } = w;
-        level
-            .smoother
-            .smooth(level.a.as_ref(), b, x, r, d, t, false);
+        level.smoother.smooth(a, b, x, r, d, t, false);
     }
 }
 

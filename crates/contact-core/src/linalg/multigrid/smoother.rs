@@ -274,7 +274,7 @@ impl Chebyshev {
     #[allow(clippy::too_many_arguments)] // The vectors are the caller's scratch, as in faer.
     pub fn smooth(
         &self,
-        a: &impl LinearOperator,
+        a: &(impl LinearOperator + ?Sized),
         b: &[f64],
         x: &mut [f64],
         r: &mut [f64],

@@ -25,13 +25,14 @@
 
 use super::smoother::Chebyshev;
 use super::{Hierarchy, VCycle};
+use crate::linalg::block_csr32::BlockCsr32;
 use crate::linalg::cholesky::{Cholesky, FactorError};
 use crate::linalg::galerkin::{add, product, transpose};
 use crate::linalg::par;
 use crate::linalg::pcg::Preconditioner;
 use crate::linalg::{Csr, LinearOperator};
 use nalgebra::DMatrix;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 /// A symmetric s × s block (s ≤ 2) on the consecutive DOFs start..start + s.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -100,14 +101,49 @@ impl LinearOperator for Jacobian<'_> {
         for &s in self.fixed {
             y[s] = x[s];
         }
-        for b in self.blocks {
-            for i in 0..b.size {
-                let mut v = 0.0;
-                for j in 0..b.size {
-                    v += b.m[i * b.size + j] * x[b.start + j];
-                }
-                y[b.start + i] += v;
+        add_blocks(self.blocks, x, y);
+    }
+}
+
+/// M⁺ from A's single-precision copy, for the smoother of the finest level in mixed
+/// precision: y = A (x with x_F = 0), then the rows of F the identity's and E added. A's
+/// columns of F are removed by zeroing x_F rather than subtracted, so no f64 entry of A is
+/// read and M⁺ stays symmetric under the rounding of A.
+struct MixedJacobian<'a> {
+    a32: &'a BlockCsr32,
+    fixed: &'a [usize],
+    blocks: &'a [NodeBlock],
+    masked: &'a Mutex<Vec<f64>>,
+}
+
+impl LinearOperator for MixedJacobian<'_> {
+    fn dim(&self) -> usize {
+        self.a32.dim()
+    }
+
+    fn apply(&self, x: &[f64], y: &mut [f64]) {
+        let mut masked = self.masked.lock().expect("not poisoned");
+        masked.copy_from_slice(x);
+        for &s in self.fixed {
+            masked[s] = 0.0;
+        }
+        self.a32.mul_vec(&masked, y);
+        for &s in self.fixed {
+            y[s] = x[s];
+        }
+        add_blocks(self.blocks, x, y);
+    }
+}
+
+/// y += E x for E's node blocks.
+fn add_blocks(blocks: &[NodeBlock], x: &[f64], y: &mut [f64]) {
+    for b in blocks {
+        for i in 0..b.size {
+            let mut v = 0.0;
+            for j in 0..b.size {
+                v += b.m[i * b.size + j] * x[b.start + j];
             }
+            y[b.start + i] += v;
         }
     }
 }
@@ -154,6 +190,8 @@ struct Levels {
     fine: Arc<Hierarchy>,
     coarse: VCycle,
     work: [Vec<f64>; 7],
+    /// The masked copy of x that [`MixedJacobian`] multiplies.
+    masked: Vec<f64>,
 }
 
 #[derive(Clone)]
@@ -273,6 +311,11 @@ impl Truncated {
                         vec![0.0; nc],
                         vec![0.0; nc],
                     ],
+                    masked: if h.level_f32(0).is_some() {
+                        vec![0.0; n]
+                    } else {
+                        Vec::new()
+                    },
                 }))
             }
         };
@@ -305,12 +348,24 @@ impl Preconditioner for Truncated {
                     fine,
                     coarse,
                     work,
+                    masked: masked_work,
                 } = &mut **levels;
+                let masked = Mutex::new(std::mem::take(masked_work));
+                let mixed = fine.level_f32(0).map(|a32| MixedJacobian {
+                    a32,
+                    fixed: &self.fixed,
+                    blocks: &self.positive,
+                    masked: &masked,
+                });
+                let op: &dyn LinearOperator = match &mixed {
+                    Some(m) => m,
+                    None => &op,
+                };
                 let (p, pt) = fine.transfer(0).expect("A's hierarchy has a first level");
                 let [b, x, rr, d, t, bc, xc] = work;
                 b.copy_from_slice(r);
                 x.iter_mut().for_each(|v| *v = 0.0);
-                smoother.smooth(&op, b, x, rr, d, t, true);
+                smoother.smooth(op, b, x, rr, d, t, true);
                 op.apply(x, t);
                 par::zip_apply(t, b, |t, b| b - t);
                 for &s in &self.fixed {
@@ -323,8 +378,9 @@ impl Preconditioner for Truncated {
                     t[s] = 0.0;
                 }
                 par::zip_apply(x, t, |x, t| x + t);
-                smoother.smooth(&op, b, x, rr, d, t, false);
+                smoother.smooth(op, b, x, rr, d, t, false);
                 z.copy_from_slice(x);
+                *masked_work = masked.into_inner().expect("not poisoned");
             }
         }
         for &s in &self.fixed {

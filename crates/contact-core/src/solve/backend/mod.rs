@@ -129,7 +129,7 @@ pub fn confirm<const D: usize>(
     // One line per family.
     Ok(match (path, plans) {
         (LinearPath::Direct, Some(plans)) => Arc::new(direct::Direct::new(plans, bytes)),
-        _ => Arc::new(multigrid::Multigrid::new(bytes)),
+        _ => Arc::new(multigrid::Multigrid::new(bytes, problem.precision.mixed(D))),
     })
 }
 

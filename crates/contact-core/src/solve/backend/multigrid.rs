@@ -33,11 +33,23 @@ use std::sync::Arc;
 /// The multigrid family.
 pub struct Multigrid {
     predicted_bytes: u64,
+    /// Single-precision level operators in every V-cycle ([`Params::mixed`]).
+    mixed: bool,
 }
 
 impl Multigrid {
-    pub fn new(predicted_bytes: u64) -> Multigrid {
-        Multigrid { predicted_bytes }
+    pub fn new(predicted_bytes: u64, mixed: bool) -> Multigrid {
+        Multigrid {
+            predicted_bytes,
+            mixed,
+        }
+    }
+
+    fn params(&self) -> Params {
+        Params {
+            mixed: self.mixed,
+            ..Params::default()
+        }
     }
 }
 
@@ -83,8 +95,10 @@ impl<const D: usize> Backend<D> for Multigrid {
         let n_i = dofs.n_interior;
         if dofs.n_contact() == 0 {
             let (blocks, levels) = multilevel::velocity_levels(mesh, dofs, n_i);
-            let k_ii = LinearSolver::multigrid(Arc::new(k.block(0..n_i, 0..n_i)), blocks, levels)
+            let k_ii = Arc::new(k.block(0..n_i, 0..n_i));
+            let h = Hierarchy::new(k_ii.clone(), blocks, levels, self.params())
                 .map_err(factor_error)?;
+            let k_ii = LinearSolver::with_hierarchy(Arc::new(h), k_ii);
             return Ok(
                 VelocityStep::with_solver(k, dofs, law, k_ii, Box::new(NoContact))
                     .with_solution_space(),
@@ -93,7 +107,7 @@ impl<const D: usize> Backend<D> for Multigrid {
         // One hierarchy, of K on all free DOFs: the slip solver's, through which K_II is
         // solved too.
         let (blocks, levels) = multilevel::velocity_levels(mesh, dofs, dofs.n_free());
-        let h = Hierarchy::new(k.clone(), blocks, levels, Params::default())
+        let h = Hierarchy::new(k.clone(), blocks, levels, self.params())
             .map(Arc::new)
             .map_err(factor_error)?;
         let k_ii = LinearSolver::leading_block(h.clone(), k.clone(), n_i).map_err(factor_error)?;
@@ -113,7 +127,7 @@ impl<const D: usize> Backend<D> for Multigrid {
     fn damage(&self, mesh: &Mesh<D>, h: Csr) -> Result<DamageStep, SolveError> {
         let (blocks, levels) = multilevel::scalar_levels(mesh, h.nrows);
         let h = Arc::new(h);
-        let hierarchy = Hierarchy::new(h.clone(), blocks, levels, Params::default())
+        let hierarchy = Hierarchy::new(h.clone(), blocks, levels, self.params())
             .map(Arc::new)
             .map_err(|source| SolveError::Factor {
                 what: "damage",
@@ -146,7 +160,7 @@ impl<const D: usize> Backend<D> for Multigrid {
         let gram = Arc::new(gram);
         let (blocks, levels) = multilevel::velocity_levels(mesh, dofs, dofs.n_free());
         let g_hierarchy =
-            Hierarchy::new(gram.clone(), blocks, levels, Params::default()).map_err(|source| {
+            Hierarchy::new(gram.clone(), blocks, levels, self.params()).map_err(|source| {
                 SolveError::Factor {
                     what: "strain Gram",
                     source,

@@ -29,6 +29,11 @@ fn laplacian(m: usize) -> Csr {
 }
 
 fn hierarchy(a: &Csr) -> Hierarchy {
+    hierarchy_in(a, false)
+}
+
+/// [`hierarchy`] with single-precision level operators when `mixed`.
+fn hierarchy_in(a: &Csr, mixed: bool) -> Hierarchy {
     Hierarchy::new(
         Arc::new(a.clone()),
         Blocks::scalar(a.nrows),
@@ -38,6 +43,7 @@ fn hierarchy(a: &Csr) -> Hierarchy {
         },
         Params {
             coarse_size: 40,
+            mixed,
             ..Params::default()
         },
     )
@@ -182,4 +188,51 @@ fn conjugate_gradients_on_the_jacobian_converge_like_on_the_operator() {
     for &s in &fixed {
         assert_eq!(x[s], 0.0);
     }
+}
+
+/// With single-precision levels the truncated V-cycle is still a symmetric operator (its
+/// smoother multiplies the rounded A with the fixed DOFs masked, never the f64 entries), and
+/// conjugate gradients reach the same tolerance in about as many iterations.
+#[test]
+fn mixed_precision_keeps_the_truncated_cycle_symmetric_and_as_strong() {
+    let m = 48;
+    let a = laplacian(m);
+    let build = |mixed: bool| {
+        let h = hierarchy_in(&a, mixed);
+        assert_eq!(h.level_f32(0).is_some(), mixed);
+        Arc::new(h)
+    };
+    let (fixed, blocks) = modification(m);
+    let n = a.nrows;
+    let u: Vec<f64> = (0..n).map(|i| ((i * 31) % 17) as f64 - 8.0).collect();
+    let v: Vec<f64> = (0..n).map(|i| (0.3 * i as f64).sin()).collect();
+    let mut iterations = Vec::new();
+    for mixed in [false, true] {
+        let mut t = Truncated::new(&build(mixed), fixed.clone(), &blocks).unwrap();
+        let (mut bu, mut bv) = (vec![0.0; n], vec![0.0; n]);
+        t.apply(&u, &mut bu);
+        t.apply(&v, &mut bv);
+        let (vbu, ubv) = (dot(&v, &bu), dot(&u, &bv));
+        assert!(
+            (vbu - ubv).abs() <= 1e-12 * vbu.abs().max(ubv.abs()),
+            "mixed {mixed}: vᵀBu {vbu} against uᵀBv {ubv}"
+        );
+        let mut b = u.clone();
+        fixed.iter().for_each(|&s| b[s] = 0.0);
+        let mut x = vec![0.0; n];
+        let op = explicit(&a, &fixed, &blocks);
+        let rep = pcg::solve(&op, &mut t, &b, &mut x, 1e-10, 200, &mut PcgWork::default());
+        assert!(rep.converged, "mixed {mixed}: {rep:?}");
+        iterations.push(rep.iterations);
+    }
+    assert!(
+        iterations[1] <= iterations[0] + 1,
+        "double {} against mixed {} iterations",
+        iterations[0],
+        iterations[1]
+    );
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }

@@ -1,0 +1,370 @@
+//! A multigrid level's operator in single precision and node-block storage, for the
+//! mixed-precision V-cycle (docs/src/speed/speed.md#mixed-precision-levels): y = A x with A's
+//! entries rounded to f32, x, y and every sum in f64.
+//!
+//! The rows are cut into the level's node blocks (a node's free velocity components, an
+//! aggregate's coarse DOFs, or single DOFs), which must be consecutive DOF ranges in order.
+//! Block row b holds, for every block column c that meets it, the dense s_b × s_c block of A
+//! (zeros where A has no entry), row-major, one column index per block. A 3D node block of
+//! nine f32 entries and one index is 40 bytes against 108 in scalar f64 CSR: a product with A
+//! streams about a third of the bytes, and the sweep of a level is memory-bound.
+//!
+//! The rounding is a perturbation of relative size 2⁻²⁴ of the preconditioner only: the
+//! outer conjugate gradients, the residuals and the operator K itself stay in f64, so the
+//! solution is the same to the solver's tolerance (the mixed path's tests check it against
+//! the double-precision one).
+
+use super::multigrid::Blocks;
+use super::{par, Csr, LinearOperator};
+
+/// A square operator in variable-size block CSR with f32 entries.
+#[derive(Debug, Clone)]
+pub struct BlockCsr32 {
+    /// Block b covers DOFs ptr[b]..ptr[b + 1].
+    ptr: Vec<usize>,
+    /// Block row b's entries are cols[row[b]..row[b + 1]].
+    row: Vec<usize>,
+    /// The block column of each entry.
+    cols: Vec<u32>,
+    /// Block row b's values start at values[vals[b]]: its blocks in order, each row-major.
+    vals: Vec<usize>,
+    values: Vec<f32>,
+    /// Pieces of whole block rows for the threads: piece s is blocks split_blocks[s]..
+    /// (DOFs split_dofs[s]..), each about [`par::ROW_CHUNK`] DOFs, the same for any thread
+    /// count.
+    split_blocks: Vec<usize>,
+    split_dofs: Vec<usize>,
+    /// Every block is one DOF (a scalar operator): plain CSR in f32.
+    scalar: bool,
+}
+
+impl BlockCsr32 {
+    /// `a` in the node blocks `blocks`: each block whose DOFs are a consecutive increasing
+    /// range is one block row, in the order of their first DOFs; the DOFs of other blocks and
+    /// DOFs in no block are blocks of one DOF.
+    pub fn new(a: &Csr, blocks: &Blocks) -> BlockCsr32 {
+        let n = a.nrows;
+        let ptr = block_bounds(n, blocks);
+        let nb = ptr.len() - 1;
+        let mut block_of = vec![0u32; n];
+        for b in 0..nb {
+            block_of[ptr[b]..ptr[b + 1]].fill(b as u32);
+        }
+        // The block pattern: each piece of block rows on its own, joined in order.
+        let (split_blocks, split_dofs) = split(&ptr);
+        let pieces = par::map_ranges(split_blocks.len() - 1, 1, |pieces| {
+            let (mut row, mut cols) = (Vec::new(), Vec::<u32>::new());
+            for b in split_blocks[pieces.start]..split_blocks[pieces.end] {
+                let first = cols.len();
+                for r in ptr[b]..ptr[b + 1] {
+                    let entries = a.indptr[r]..a.indptr[r + 1];
+                    cols.extend(a.indices[entries].iter().map(|&c| block_of[c as usize]));
+                }
+                cols[first..].sort_unstable();
+                let mut unique = first;
+                for k in first..cols.len() {
+                    if k == first || cols[k] != cols[unique - 1] {
+                        cols[unique] = cols[k];
+                        unique += 1;
+                    }
+                }
+                cols.truncate(unique);
+                row.push(first);
+            }
+            (row, cols)
+        });
+        let mut row = Vec::with_capacity(nb + 1);
+        let mut cols = Vec::with_capacity(pieces.iter().map(|p| p.1.len()).sum());
+        for (r, c) in pieces {
+            let base = cols.len();
+            row.extend(r.into_iter().map(|r| r + base));
+            cols.extend(c);
+        }
+        row.push(cols.len());
+        let size = |b: usize| ptr[b + 1] - ptr[b];
+        let mut vals = Vec::with_capacity(nb + 1);
+        vals.push(0);
+        for b in 0..nb {
+            let width: usize = cols[row[b]..row[b + 1]]
+                .iter()
+                .map(|&c| size(c as usize))
+                .sum();
+            vals.push(vals[b] + size(b) * width);
+        }
+        // The entries, in one allocation (the copy is the only transient).
+        let mut values = vec![0.0f32; vals[nb]];
+        let mut offset = Vec::new();
+        for b in 0..nb {
+            let row_cols = &cols[row[b]..row[b + 1]];
+            offset.clear();
+            let mut total = vals[b];
+            for &c in row_cols {
+                offset.push(total);
+                total += size(b) * size(c as usize);
+            }
+            for (i, r) in (ptr[b]..ptr[b + 1]).enumerate() {
+                for p in a.indptr[r]..a.indptr[r + 1] {
+                    let c = a.indices[p] as usize;
+                    let cb = block_of[c] as usize;
+                    let k = row_cols.binary_search(&(cb as u32)).expect("column listed");
+                    let sc = size(cb);
+                    values[offset[k] + i * sc + (c - ptr[cb])] = a.values[p] as f32;
+                }
+            }
+        }
+        BlockCsr32 {
+            scalar: ptr.len() == n + 1,
+            ptr,
+            row,
+            cols,
+            vals,
+            values,
+            split_blocks,
+            split_dofs,
+        }
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        8 * (self.ptr.len() + self.row.len() + self.vals.len())
+            + 4 * (self.cols.len() + self.values.len())
+    }
+
+    /// y ← A x.
+    pub fn mul_vec(&self, x: &[f64], y: &mut [f64]) {
+        debug_assert_eq!(x.len(), self.dim());
+        debug_assert_eq!(y.len(), self.dim());
+        let ptr = &self.ptr;
+        par::for_each_segment_mut(y, &self.split_dofs, |seg, y| {
+            let base = self.split_dofs[seg];
+            for b in self.split_blocks[seg]..self.split_blocks[seg + 1] {
+                let (r0, sr) = (ptr[b], ptr[b + 1] - ptr[b]);
+                let entries = self.row[b]..self.row[b + 1];
+                let mut v = &self.values[self.vals[b]..self.vals[b + 1]];
+                if self.scalar {
+                    let mut s = 0.0f64;
+                    for (&c, v) in self.cols[entries].iter().zip(v) {
+                        s += *v as f64 * x[c as usize];
+                    }
+                    y[r0 - base] = s;
+                } else if sr == 3 {
+                    self.node_row::<3>(b, x, &mut y[r0 - base..r0 - base + 3]);
+                } else if sr == 2 {
+                    self.node_row::<2>(b, x, &mut y[r0 - base..r0 - base + 2]);
+                } else {
+                    let yb = &mut y[r0 - base..r0 - base + sr];
+                    yb.fill(0.0);
+                    for &c in &self.cols[entries] {
+                        let (c0, sc) = (ptr[c as usize], ptr[c as usize + 1] - ptr[c as usize]);
+                        for (a, y) in yb.iter_mut().enumerate() {
+                            *y += v[a * sc..(a + 1) * sc]
+                                .iter()
+                                .zip(&x[c0..c0 + sc])
+                                .map(|(v, x)| *v as f64 * x)
+                                .sum::<f64>();
+                        }
+                        v = &v[sr * sc..];
+                    }
+                }
+            }
+        });
+    }
+}
+
+impl BlockCsr32 {
+    /// y_b = Σ_c A_bc x_c for a block row of S DOFs (the node rows of 2D and 3D velocity),
+    /// with S × S blocks spelled out for the compiler.
+    #[inline(always)]
+    fn node_row<const S: usize>(&self, b: usize, x: &[f64], y: &mut [f64]) {
+        let ptr = &self.ptr;
+        let mut v = &self.values[self.vals[b]..self.vals[b + 1]];
+        let mut s = [0.0f64; S];
+        for &c in &self.cols[self.row[b]..self.row[b + 1]] {
+            let (c0, sc) = (ptr[c as usize], ptr[c as usize + 1] - ptr[c as usize]);
+            if sc == S {
+                let xc: [f64; S] = x[c0..c0 + S].try_into().expect("S entries");
+                for (a, s) in s.iter_mut().enumerate() {
+                    let row = &v[a * S..(a + 1) * S];
+                    let mut t = 0.0;
+                    for j in 0..S {
+                        t += row[j] as f64 * xc[j];
+                    }
+                    *s += t;
+                }
+            } else {
+                for (a, s) in s.iter_mut().enumerate() {
+                    for j in 0..sc {
+                        *s += v[a * sc + j] as f64 * x[c0 + j];
+                    }
+                }
+            }
+            v = &v[S * sc..];
+        }
+        y.copy_from_slice(&s);
+    }
+}
+
+impl LinearOperator for BlockCsr32 {
+    fn dim(&self) -> usize {
+        *self.ptr.last().unwrap_or(&0)
+    }
+
+    fn apply(&self, x: &[f64], y: &mut [f64]) {
+        self.mul_vec(x, y);
+    }
+}
+
+/// The bounds of consecutive DOF ranges covering 0..n: the blocks of `blocks` that are such
+/// ranges, single DOFs elsewhere.
+fn block_bounds(n: usize, blocks: &Blocks) -> Vec<usize> {
+    let mut len = vec![0usize; n];
+    for b in 0..blocks.len() {
+        let dofs = blocks.dofs(b);
+        let consecutive = dofs.windows(2).all(|w| w[1] == w[0] + 1);
+        match dofs.first() {
+            Some(&first) if consecutive && dofs.iter().all(|&d| d < n) => len[first] = dofs.len(),
+            _ => {}
+        }
+    }
+    let mut ptr = vec![0];
+    let mut i = 0;
+    while i < n {
+        i += len[i].max(1);
+        ptr.push(i.min(n));
+    }
+    ptr
+}
+
+/// Pieces of whole blocks of about [`par::ROW_CHUNK`] DOFs: (first block, first DOF) of each,
+/// both ending with the totals.
+fn split(ptr: &[usize]) -> (Vec<usize>, Vec<usize>) {
+    let nb = ptr.len() - 1;
+    let (mut blocks, mut dofs) = (vec![0], vec![0]);
+    for (b, &start) in ptr.iter().enumerate().take(nb).skip(1) {
+        if start - dofs.last().unwrap() >= par::ROW_CHUNK {
+            blocks.push(b);
+            dofs.push(start);
+        }
+    }
+    blocks.push(nb);
+    dofs.push(ptr[nb]);
+    (blocks, dofs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A symmetric pattern on 11 DOFs in blocks of 3, 2, 1, 3 and 2 DOFs with some block
+    /// pairs absent and some blocks only partly filled.
+    fn matrix() -> (Csr, Blocks) {
+        let ptr = [0usize, 3, 5, 6, 9, 11];
+        let block = |i: usize| ptr.iter().rposition(|&p| p <= i).unwrap();
+        let mut t = Vec::new();
+        for i in 0..11 {
+            for j in 0..11 {
+                let (bi, bj) = (block(i), block(j));
+                let far = bi.abs_diff(bj) > 2;
+                let hole = (i * 7 + j * 7) % 5 == 1 && i != j;
+                if !far && !hole {
+                    t.push((
+                        i,
+                        j,
+                        1.0 / (1.0 + i as f64 + j as f64) + if i == j { 4.0 } else { 0.0 },
+                    ));
+                }
+            }
+        }
+        (Csr::from_triplets(11, 11, t), Blocks::contiguous(&ptr))
+    }
+
+    fn reference(a: &Csr, x: &[f64]) -> Vec<f64> {
+        let rounded = Csr {
+            values: a.values.iter().map(|&v| v as f32 as f64).collect(),
+            ..a.clone()
+        };
+        let mut y = vec![0.0; a.nrows];
+        rounded.mul_vec(x, &mut y);
+        y
+    }
+
+    #[test]
+    fn applies_the_rounded_operator_in_node_blocks_and_in_scalar_blocks() {
+        let (a, blocks) = matrix();
+        let x: Vec<f64> = (0..11).map(|i| (0.9 * i as f64).cos() + 0.3).collect();
+        let expected = reference(&a, &x);
+        let scattered = Blocks::from_block_of(&[1, 0, 0, 1, 2, 2, 0, 1, 3, 3, 3], 4);
+        for blocks in [blocks, Blocks::scalar(11), scattered] {
+            let b = BlockCsr32::new(&a, &blocks);
+            assert_eq!(b.dim(), 11);
+            let mut y = vec![f64::NAN; 11];
+            b.mul_vec(&x, &mut y);
+            for i in 0..11 {
+                assert!(
+                    (y[i] - expected[i]).abs() <= 1e-14 * expected[i].abs().max(1.0),
+                    "row {i}: {} against {}",
+                    y[i],
+                    expected[i]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn differs_from_the_double_operator_by_single_rounding_only() {
+        let (a, blocks) = matrix();
+        let x: Vec<f64> = (0..11).map(|i| 1.0 + (i as f64).sin()).collect();
+        let mut exact = vec![0.0; 11];
+        a.mul_vec(&x, &mut exact);
+        let mut y = vec![0.0; 11];
+        BlockCsr32::new(&a, &blocks).mul_vec(&x, &mut y);
+        let bound: Vec<f64> = (0..11)
+            .map(|r| {
+                let row = a.indptr[r]..a.indptr[r + 1];
+                a.indices[row.clone()]
+                    .iter()
+                    .zip(&a.values[row])
+                    .map(|(&c, v)| (v * x[c as usize]).abs())
+                    .sum::<f64>()
+                    * f32::EPSILON as f64
+            })
+            .collect();
+        let mut differs = false;
+        for i in 0..11 {
+            assert!((y[i] - exact[i]).abs() <= bound[i], "row {i}");
+            differs |= y[i] != exact[i];
+        }
+        assert!(differs, "the entries were not rounded");
+    }
+
+    #[test]
+    fn gives_the_same_bits_on_any_number_of_threads() {
+        // Large enough for several pieces (ROW_CHUNK is 32 under test).
+        let n: usize = 3 * 200;
+        let mut t = Vec::new();
+        for i in 0..n {
+            for j in [i.saturating_sub(7), i, (i + 5).min(n - 1)] {
+                t.push((i, j, 1.0 + 0.01 * (i + 2 * j) as f64));
+                t.push((j, i, 1.0 + 0.01 * (i + 2 * j) as f64));
+            }
+        }
+        let a = Csr::from_triplets(n, n, t);
+        let blocks = Blocks::contiguous(&(0..=n / 3).map(|b| 3 * b).collect::<Vec<_>>());
+        let b = BlockCsr32::new(&a, &blocks);
+        let x: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
+        let run = |threads: usize| {
+            par::Threads::new(threads).install(|| {
+                let mut y = vec![0.0; n];
+                b.mul_vec(&x, &mut y);
+                y
+            })
+        };
+        let one = run(1);
+        assert_eq!(one, run(2));
+        assert_eq!(one, run(3));
+        // The blocked sums group the terms differently from the scalar rows.
+        for (i, (e, v)) in reference(&a, &x).iter().zip(&one).enumerate() {
+            assert!((e - v).abs() <= 1e-13 * e.abs().max(1.0), "row {i}");
+        }
+    }
+}
