@@ -3,11 +3,14 @@
 //! entries rounded to f32, x, y and every sum in f64.
 //!
 //! The rows are cut into the level's node blocks (a node's free velocity components, an
-//! aggregate's coarse DOFs, or single DOFs), which must be consecutive DOF ranges in order.
-//! Block row b holds, for every block column c that meets it, the dense s_b × s_c block of A
-//! (zeros where A has no entry), row-major, one column index per block. A 3D node block of
-//! nine f32 entries and one index is 40 bytes against 108 in scalar f64 CSR: a product with A
-//! streams about a third of the bytes, and the sweep of a level is memory-bound.
+//! aggregate's coarse DOFs, or single DOFs), consecutive DOF ranges in order. Every block is
+//! stored as S × S, S the largest block's size: block row b holds, for every block column c
+//! that meets it, A's s_b × s_c block padded with zeros, row-major, and one index per block,
+//! the first DOF of a window of S consecutive DOFs that holds c's DOFs (c's first DOF, moved
+//! back at the end of the vector). The product then reads S entries of x from one index
+//! without looking up block sizes; the few smaller blocks (Γ3 nodes, partly fixed nodes)
+//! cost their padding. A 3D node block of nine f32 entries and one index is 40 bytes against
+//! 108 in scalar f64 CSR.
 //!
 //! The rounding is a perturbation of relative size 2⁻²⁴ of the preconditioner only: the
 //! outer conjugate gradients, the residuals and the operator K itself stay in f64, so the
@@ -16,26 +19,26 @@
 
 use super::multigrid::Blocks;
 use super::{par, Csr, LinearOperator};
+use std::ops::Range;
 
-/// A square operator in variable-size block CSR with f32 entries.
+/// A square operator in block CSR with S × S blocks of f32 entries.
 #[derive(Debug, Clone)]
 pub struct BlockCsr32 {
     /// Block b covers DOFs ptr[b]..ptr[b + 1].
     ptr: Vec<usize>,
-    /// Block row b's entries are cols[row[b]..row[b + 1]].
+    /// The block size S.
+    s: usize,
+    /// Block row b's entries are window[row[b]..row[b + 1]].
     row: Vec<usize>,
-    /// The block column of each entry.
-    cols: Vec<u32>,
-    /// Block row b's values start at values[vals[b]]: its blocks in order, each row-major.
-    vals: Vec<usize>,
+    /// The first DOF of each entry's window of S columns.
+    window: Vec<u32>,
+    /// S² entries per block entry, row-major.
     values: Vec<f32>,
     /// Pieces of whole block rows for the threads: piece s is blocks split_blocks[s]..
     /// (DOFs split_dofs[s]..), each about [`par::ROW_CHUNK`] DOFs, the same for any thread
     /// count.
     split_blocks: Vec<usize>,
     split_dofs: Vec<usize>,
-    /// Every block is one DOF (a scalar operator): plain CSR in f32.
-    scalar: bool,
 }
 
 impl BlockCsr32 {
@@ -46,6 +49,8 @@ impl BlockCsr32 {
         let n = a.nrows;
         let ptr = block_bounds(n, blocks);
         let nb = ptr.len() - 1;
+        let size = |b: usize| ptr[b + 1] - ptr[b];
+        let s = (0..nb).map(size).max().unwrap_or(1);
         let mut block_of = vec![0u32; n];
         for b in 0..nb {
             block_of[ptr[b]..ptr[b + 1]].fill(b as u32);
@@ -81,43 +86,27 @@ impl BlockCsr32 {
             cols.extend(c);
         }
         row.push(cols.len());
-        let size = |b: usize| ptr[b + 1] - ptr[b];
-        let mut vals = Vec::with_capacity(nb + 1);
-        vals.push(0);
-        for b in 0..nb {
-            let width: usize = cols[row[b]..row[b + 1]]
-                .iter()
-                .map(|&c| size(c as usize))
-                .sum();
-            vals.push(vals[b] + size(b) * width);
-        }
         // The entries, in one allocation (the copy is the only transient).
-        let mut values = vec![0.0f32; vals[nb]];
-        let mut offset = Vec::new();
+        let start = |c: u32| ptr[c as usize].min(n - s);
+        let mut values = vec![0.0f32; s * s * cols.len()];
         for b in 0..nb {
             let row_cols = &cols[row[b]..row[b + 1]];
-            offset.clear();
-            let mut total = vals[b];
-            for &c in row_cols {
-                offset.push(total);
-                total += size(b) * size(c as usize);
-            }
             for (i, r) in (ptr[b]..ptr[b + 1]).enumerate() {
                 for p in a.indptr[r]..a.indptr[r + 1] {
-                    let c = a.indices[p] as usize;
-                    let cb = block_of[c] as usize;
-                    let k = row_cols.binary_search(&(cb as u32)).expect("column listed");
-                    let sc = size(cb);
-                    values[offset[k] + i * sc + (c - ptr[cb])] = a.values[p] as f32;
+                    let c = a.indices[p];
+                    let cb = block_of[c as usize];
+                    let k = row_cols.binary_search(&cb).expect("column listed");
+                    let j = c as usize - start(cb);
+                    values[s * s * (row[b] + k) + i * s + j] = a.values[p] as f32;
                 }
             }
         }
+        let window = cols.iter().map(|&c| start(c) as u32).collect();
         BlockCsr32 {
-            scalar: ptr.len() == n + 1,
             ptr,
+            s,
             row,
-            cols,
-            vals,
+            window,
             values,
             split_blocks,
             split_dofs,
@@ -126,81 +115,90 @@ impl BlockCsr32 {
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        8 * (self.ptr.len() + self.row.len() + self.vals.len())
-            + 4 * (self.cols.len() + self.values.len())
+        8 * (self.ptr.len() + self.row.len()) + 4 * (self.window.len() + self.values.len())
     }
 
     /// y ← A x.
     pub fn mul_vec(&self, x: &[f64], y: &mut [f64]) {
         debug_assert_eq!(x.len(), self.dim());
         debug_assert_eq!(y.len(), self.dim());
-        let ptr = &self.ptr;
         par::for_each_segment_mut(y, &self.split_dofs, |seg, y| {
             let base = self.split_dofs[seg];
-            for b in self.split_blocks[seg]..self.split_blocks[seg + 1] {
-                let (r0, sr) = (ptr[b], ptr[b + 1] - ptr[b]);
-                let entries = self.row[b]..self.row[b + 1];
-                let mut v = &self.values[self.vals[b]..self.vals[b + 1]];
-                if self.scalar {
-                    let mut s = 0.0f64;
-                    for (&c, v) in self.cols[entries].iter().zip(v) {
-                        s += *v as f64 * x[c as usize];
-                    }
-                    y[r0 - base] = s;
-                } else if sr == 3 {
-                    self.node_row::<3>(b, x, &mut y[r0 - base..r0 - base + 3]);
-                } else if sr == 2 {
-                    self.node_row::<2>(b, x, &mut y[r0 - base..r0 - base + 2]);
-                } else {
-                    let yb = &mut y[r0 - base..r0 - base + sr];
-                    yb.fill(0.0);
-                    for &c in &self.cols[entries] {
-                        let (c0, sc) = (ptr[c as usize], ptr[c as usize + 1] - ptr[c as usize]);
-                        for (a, y) in yb.iter_mut().enumerate() {
-                            *y += v[a * sc..(a + 1) * sc]
-                                .iter()
-                                .zip(&x[c0..c0 + sc])
-                                .map(|(v, x)| *v as f64 * x)
-                                .sum::<f64>();
-                        }
-                        v = &v[sr * sc..];
-                    }
-                }
+            let blocks = self.split_blocks[seg]..self.split_blocks[seg + 1];
+            match self.s {
+                1 => self.rows::<1>(blocks, x, y, base),
+                2 => self.rows::<2>(blocks, x, y, base),
+                3 => self.rows::<3>(blocks, x, y, base),
+                6 => self.rows::<6>(blocks, x, y, base),
+                _ => self.rows_any(blocks, x, y, base),
             }
         });
     }
-}
 
-impl BlockCsr32 {
-    /// y_b = Σ_c A_bc x_c for a block row of S DOFs (the node rows of 2D and 3D velocity),
-    /// with S × S blocks spelled out for the compiler.
+    /// The block rows `blocks` of y (which starts at DOF `base`) for blocks of S × S, spelled
+    /// out for the compiler: 2D and 3D node blocks, smoothed aggregation's six rigid modes.
     #[inline(always)]
-    fn node_row<const S: usize>(&self, b: usize, x: &[f64], y: &mut [f64]) {
-        let ptr = &self.ptr;
-        let mut v = &self.values[self.vals[b]..self.vals[b + 1]];
-        let mut s = [0.0f64; S];
-        for &c in &self.cols[self.row[b]..self.row[b + 1]] {
-            let (c0, sc) = (ptr[c as usize], ptr[c as usize + 1] - ptr[c as usize]);
-            if sc == S {
-                let xc: [f64; S] = x[c0..c0 + S].try_into().expect("S entries");
-                for (a, s) in s.iter_mut().enumerate() {
-                    let row = &v[a * S..(a + 1) * S];
+    fn rows<const S: usize>(&self, blocks: Range<usize>, x: &[f64], y: &mut [f64], base: usize) {
+        for b in blocks {
+            let entries = self.row[b]..self.row[b + 1];
+            let values = &self.values[S * S * entries.start..S * S * entries.end];
+            let mut sum = [0.0f64; S];
+            for (&w, v) in self.window[entries].iter().zip(values.chunks_exact(S * S)) {
+                let xw: &[f64; S] = x[w as usize..w as usize + S].try_into().expect("S");
+                for (a, sum) in sum.iter_mut().enumerate() {
                     let mut t = 0.0;
                     for j in 0..S {
-                        t += row[j] as f64 * xc[j];
+                        t += v[a * S + j] as f64 * xw[j];
                     }
-                    *s += t;
-                }
-            } else {
-                for (a, s) in s.iter_mut().enumerate() {
-                    for j in 0..sc {
-                        *s += v[a * sc + j] as f64 * x[c0 + j];
-                    }
+                    *sum += t;
                 }
             }
-            v = &v[S * sc..];
+            let r0 = self.ptr[b] - base;
+            let sr = self.ptr[b + 1] - self.ptr[b];
+            y[r0..r0 + sr].copy_from_slice(&sum[..sr]);
         }
-        y.copy_from_slice(&s);
+    }
+
+    /// y ← y − A[:, F] x_F for the DOFs F in `dofs`, from A's rows of F (A symmetric: the
+    /// same rounded entries as the product's columns, so A − A[:, F] stays symmetric).
+    pub fn sub_columns(&self, dofs: &[usize], x: &[f64], y: &mut [f64]) {
+        let s = self.s;
+        for &d in dofs {
+            if x[d] == 0.0 {
+                continue;
+            }
+            let b = self.ptr.partition_point(|&p| p <= d) - 1;
+            let i = d - self.ptr[b];
+            for p in self.row[b]..self.row[b + 1] {
+                let w = self.window[p] as usize;
+                let v = &self.values[s * s * p + i * s..s * s * p + (i + 1) * s];
+                for (j, v) in v.iter().enumerate() {
+                    y[w + j] -= *v as f64 * x[d];
+                }
+            }
+        }
+    }
+
+    /// [`BlockCsr32::rows`] for any S.
+    fn rows_any(&self, blocks: Range<usize>, x: &[f64], y: &mut [f64], base: usize) {
+        let s = self.s;
+        for b in blocks {
+            let r0 = self.ptr[b] - base;
+            let sr = self.ptr[b + 1] - self.ptr[b];
+            let yb = &mut y[r0..r0 + sr];
+            yb.fill(0.0);
+            for p in self.row[b]..self.row[b + 1] {
+                let w = self.window[p] as usize;
+                let v = &self.values[s * s * p..s * s * (p + 1)];
+                for (a, y) in yb.iter_mut().enumerate() {
+                    *y += v[a * s..(a + 1) * s]
+                        .iter()
+                        .zip(&x[w..w + s])
+                        .map(|(v, x)| *v as f64 * x)
+                        .sum::<f64>();
+                }
+            }
+        }
     }
 }
 
@@ -365,6 +363,27 @@ mod tests {
         // The blocked sums group the terms differently from the scalar rows.
         for (i, (e, v)) in reference(&a, &x).iter().zip(&one).enumerate() {
             assert!((e - v).abs() <= 1e-13 * e.abs().max(1.0), "row {i}");
+        }
+    }
+
+    #[test]
+    fn removing_columns_equals_the_product_with_those_entries_of_x_zeroed() {
+        let (a, blocks) = matrix();
+        let b = BlockCsr32::new(&a, &blocks);
+        let x: Vec<f64> = (0..11).map(|i| 0.5 + (1.3 * i as f64).sin()).collect();
+        let fixed = [0usize, 4, 5, 10];
+        let mut masked = x.clone();
+        fixed.iter().for_each(|&d| masked[d] = 0.0);
+        let mut expected = vec![0.0; 11];
+        b.mul_vec(&masked, &mut expected);
+        let mut y = vec![0.0; 11];
+        b.mul_vec(&x, &mut y);
+        b.sub_columns(&fixed, &x, &mut y);
+        for i in 0..11 {
+            assert!(
+                (y[i] - expected[i]).abs() <= 1e-14 * (1.0 + expected[i].abs()),
+                "row {i}"
+            );
         }
     }
 }

@@ -32,7 +32,7 @@ use crate::linalg::par;
 use crate::linalg::pcg::Preconditioner;
 use crate::linalg::{Csr, LinearOperator};
 use nalgebra::DMatrix;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 /// A symmetric s × s block (s ≤ 2) on the consecutive DOFs start..start + s.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -106,14 +106,12 @@ impl LinearOperator for Jacobian<'_> {
 }
 
 /// M⁺ from A's single-precision copy, for the smoother of the finest level in mixed
-/// precision: y = A (x with x_F = 0), then the rows of F the identity's and E added. A's
-/// columns of F are removed by zeroing x_F rather than subtracted, so no f64 entry of A is
-/// read and M⁺ stays symmetric under the rounding of A.
+/// precision: as [`Jacobian`], with A's columns of F removed with the same rounded entries
+/// as the product's ([`BlockCsr32::sub_columns`]), so M⁺ stays symmetric.
 struct MixedJacobian<'a> {
     a32: &'a BlockCsr32,
     fixed: &'a [usize],
     blocks: &'a [NodeBlock],
-    masked: &'a Mutex<Vec<f64>>,
 }
 
 impl LinearOperator for MixedJacobian<'_> {
@@ -122,12 +120,8 @@ impl LinearOperator for MixedJacobian<'_> {
     }
 
     fn apply(&self, x: &[f64], y: &mut [f64]) {
-        let mut masked = self.masked.lock().expect("not poisoned");
-        masked.copy_from_slice(x);
-        for &s in self.fixed {
-            masked[s] = 0.0;
-        }
-        self.a32.mul_vec(&masked, y);
+        self.a32.mul_vec(x, y);
+        self.a32.sub_columns(self.fixed, x, y);
         for &s in self.fixed {
             y[s] = x[s];
         }
@@ -190,8 +184,6 @@ struct Levels {
     fine: Arc<Hierarchy>,
     coarse: VCycle,
     work: [Vec<f64>; 7],
-    /// The masked copy of x that [`MixedJacobian`] multiplies.
-    masked: Vec<f64>,
 }
 
 #[derive(Clone)]
@@ -311,11 +303,6 @@ impl Truncated {
                         vec![0.0; nc],
                         vec![0.0; nc],
                     ],
-                    masked: if h.level_f32(0).is_some() {
-                        vec![0.0; n]
-                    } else {
-                        Vec::new()
-                    },
                 }))
             }
         };
@@ -348,14 +335,11 @@ impl Preconditioner for Truncated {
                     fine,
                     coarse,
                     work,
-                    masked: masked_work,
                 } = &mut **levels;
-                let masked = Mutex::new(std::mem::take(masked_work));
                 let mixed = fine.level_f32(0).map(|a32| MixedJacobian {
                     a32,
                     fixed: &self.fixed,
                     blocks: &self.positive,
-                    masked: &masked,
                 });
                 let op: &dyn LinearOperator = match &mixed {
                     Some(m) => m,
@@ -380,7 +364,6 @@ impl Preconditioner for Truncated {
                 par::zip_apply(x, t, |x, t| x + t);
                 smoother.smooth(op, b, x, rr, d, t, false);
                 z.copy_from_slice(x);
-                *masked_work = masked.into_inner().expect("not poisoned");
             }
         }
         for &s in &self.fixed {
