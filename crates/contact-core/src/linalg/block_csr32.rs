@@ -17,7 +17,6 @@
 //! solution is the same to the solver's tolerance (the mixed path's tests check it against
 //! the double-precision one).
 
-use super::multigrid::Blocks;
 use super::{par, Csr, LinearOperator};
 use std::ops::Range;
 
@@ -42,12 +41,16 @@ pub struct BlockCsr32 {
 }
 
 impl BlockCsr32 {
-    /// `a` in the node blocks `blocks`: each block whose DOFs are a consecutive increasing
-    /// range is one block row, in the order of their first DOFs; the DOFs of other blocks and
-    /// DOFs in no block are blocks of one DOF.
-    pub fn new(a: &Csr, blocks: &Blocks) -> BlockCsr32 {
+    /// `a` in the blocks of consecutive DOFs ptr[b]..ptr[b + 1] (increasing from 0 to n;
+    /// [`super::multigrid::Blocks::consecutive_bounds`] of a level's node blocks).
+    pub fn new(a: &Csr, ptr: &[usize]) -> BlockCsr32 {
         let n = a.nrows;
-        let ptr = block_bounds(n, blocks);
+        assert!(
+            ptr.first() == Some(&0)
+                && ptr.last() == Some(&n)
+                && ptr.windows(2).all(|w| w[0] < w[1])
+        );
+        let ptr = ptr.to_vec();
         let nb = ptr.len() - 1;
         let size = |b: usize| ptr[b + 1] - ptr[b];
         let s = (0..nb).map(size).max().unwrap_or(1);
@@ -212,27 +215,6 @@ impl LinearOperator for BlockCsr32 {
     }
 }
 
-/// The bounds of consecutive DOF ranges covering 0..n: the blocks of `blocks` that are such
-/// ranges, single DOFs elsewhere.
-fn block_bounds(n: usize, blocks: &Blocks) -> Vec<usize> {
-    let mut len = vec![0usize; n];
-    for b in 0..blocks.len() {
-        let dofs = blocks.dofs(b);
-        let consecutive = dofs.windows(2).all(|w| w[1] == w[0] + 1);
-        match dofs.first() {
-            Some(&first) if consecutive && dofs.iter().all(|&d| d < n) => len[first] = dofs.len(),
-            _ => {}
-        }
-    }
-    let mut ptr = vec![0];
-    let mut i = 0;
-    while i < n {
-        i += len[i].max(1);
-        ptr.push(i.min(n));
-    }
-    ptr
-}
-
 /// Pieces of whole blocks of about [`par::ROW_CHUNK`] DOFs: (first block, first DOF) of each,
 /// both ending with the totals.
 fn split(ptr: &[usize]) -> (Vec<usize>, Vec<usize>) {
@@ -255,7 +237,7 @@ mod tests {
 
     /// A symmetric pattern on 11 DOFs in blocks of 3, 2, 1, 3 and 2 DOFs with some block
     /// pairs absent and some blocks only partly filled.
-    fn matrix() -> (Csr, Blocks) {
+    fn matrix() -> (Csr, Vec<usize>) {
         let ptr = [0usize, 3, 5, 6, 9, 11];
         let block = |i: usize| ptr.iter().rposition(|&p| p <= i).unwrap();
         let mut t = Vec::new();
@@ -273,7 +255,7 @@ mod tests {
                 }
             }
         }
-        (Csr::from_triplets(11, 11, t), Blocks::contiguous(&ptr))
+        (Csr::from_triplets(11, 11, t), ptr.to_vec())
     }
 
     fn reference(a: &Csr, x: &[f64]) -> Vec<f64> {
@@ -291,8 +273,8 @@ mod tests {
         let (a, blocks) = matrix();
         let x: Vec<f64> = (0..11).map(|i| (0.9 * i as f64).cos() + 0.3).collect();
         let expected = reference(&a, &x);
-        let scattered = Blocks::from_block_of(&[1, 0, 0, 1, 2, 2, 0, 1, 3, 3, 3], 4);
-        for blocks in [blocks, Blocks::scalar(11), scattered] {
+        let mixed_sizes = vec![0, 1, 2, 3, 4, 6, 7, 8, 11];
+        for blocks in [blocks, (0..=11).collect(), mixed_sizes] {
             let b = BlockCsr32::new(&a, &blocks);
             assert_eq!(b.dim(), 11);
             let mut y = vec![f64::NAN; 11];
@@ -347,7 +329,7 @@ mod tests {
             }
         }
         let a = Csr::from_triplets(n, n, t);
-        let blocks = Blocks::contiguous(&(0..=n / 3).map(|b| 3 * b).collect::<Vec<_>>());
+        let blocks: Vec<usize> = (0..=n / 3).map(|b| 3 * b).collect();
         let b = BlockCsr32::new(&a, &blocks);
         let x: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
         let run = |threads: usize| {

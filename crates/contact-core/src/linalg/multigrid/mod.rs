@@ -64,6 +64,30 @@ impl Blocks {
         Blocks::contiguous(&(0..=n).collect::<Vec<_>>())
     }
 
+    /// The bounds of consecutive DOF ranges covering 0..n: each block whose DOFs are a
+    /// consecutive increasing range, single DOFs elsewhere (the block rows of a level's
+    /// [`BlockCsr32`]).
+    pub fn consecutive_bounds(&self, n: usize) -> Vec<usize> {
+        let mut len = vec![0usize; n];
+        for b in 0..self.len() {
+            let dofs = self.dofs(b);
+            let consecutive = dofs.windows(2).all(|w| w[1] == w[0] + 1);
+            match dofs.first() {
+                Some(&first) if consecutive && dofs.iter().all(|&d| d < n) => {
+                    len[first] = dofs.len()
+                }
+                _ => {}
+            }
+        }
+        let mut ptr = vec![0];
+        let mut i = 0;
+        while i < n {
+            i += len[i].max(1);
+            ptr.push(i.min(n));
+        }
+        ptr
+    }
+
     fn drop_empty(&mut self) {
         let mut ptr = vec![0];
         for b in 0..self.len() {
@@ -219,7 +243,9 @@ impl Hierarchy {
                     );
                     let pt = transpose(&p);
                     let coarse = Arc::new(galerkin(&a, &p, &pt));
-                    let a32 = params.mixed.then(|| BlockCsr32::new(&a, &blocks));
+                    let a32 = params
+                        .mixed
+                        .then(|| BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
                     levels.push(Level {
                         a,
                         a32,
@@ -242,7 +268,9 @@ impl Hierarchy {
                     let smoother = Chebyshev::new(&a, &blocks, params.degree, params.ratio);
                     let pt = transpose(&p);
                     let coarse = Arc::new(galerkin(&a, &p, &pt));
-                    let a32 = params.mixed.then(|| BlockCsr32::new(&a, &blocks));
+                    let a32 = params
+                        .mixed
+                        .then(|| BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
                     levels.push(Level {
                         a,
                         a32,
@@ -453,6 +481,19 @@ mod tests {
 
     fn dot(a: &[f64], b: &[f64]) -> f64 {
         a.iter().zip(b).map(|(x, y)| x * y).sum()
+    }
+
+    #[test]
+    fn consecutive_bounds_keep_consecutive_blocks_and_split_the_others() {
+        let blocks = Blocks::from_block_of(&[1, 0, 0, 1, 2, 2, 0, 1, 3, 3, 3], 4);
+        // Blocks 0 ({1, 2, 6}) and 1 ({0, 3, 7}) are not ranges: single DOFs.
+        assert_eq!(
+            blocks.consecutive_bounds(11),
+            vec![0, 1, 2, 3, 4, 6, 7, 8, 11]
+        );
+        assert_eq!(Blocks::scalar(4).consecutive_bounds(4), vec![0, 1, 2, 3, 4]);
+        let nodes = Blocks::contiguous(&[0, 3, 5, 8]);
+        assert_eq!(nodes.consecutive_bounds(8), vec![0, 3, 5, 8]);
     }
 
     /// H = 64 M + L of a square mesh with the levels the damage step would get.
