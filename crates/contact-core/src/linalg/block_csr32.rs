@@ -14,8 +14,8 @@
 //!
 //! The rounding is a perturbation of relative size 2⁻²⁴ of the preconditioner only: the
 //! outer conjugate gradients, the residuals and the operator K itself stay in f64, so the
-//! solution is the same to the solver's tolerance (the mixed path's tests check it against
-//! the double-precision one).
+//! solution is the same to the solver's tolerance (crates/contact-core/tests/multigrid.rs
+//! checks both precisions against the direct path).
 
 use super::{par, Csr, LinearOperator};
 use std::ops::Range;
