@@ -80,7 +80,7 @@
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
 use super::quality::IndexMap;
-use super::{signed_measure, Facet, Group, Mesh};
+use super::{signed_measure, Facet, Mesh};
 
 /// Vertex slot not used by a triangle.
 const NONE: usize = usize::MAX;
@@ -483,14 +483,7 @@ impl<const D: usize> Bisection<D> {
         let groups = old
             .groups
             .iter()
-            .map(|g| Group {
-                name: g.name.clone(),
-                facets: g
-                    .facets
-                    .iter()
-                    .flat_map(|&f| first[f]..first[f + 1])
-                    .collect(),
-            })
+            .map(|g| g.refined(|f| first[f]..first[f + 1]))
             .collect();
 
         let mesh = Mesh::from_parts(mid.nodes, cells, facets, groups, Vec::new());

@@ -93,6 +93,16 @@ pub struct Group {
     pub facets: Vec<usize>,
 }
 
+impl Group {
+    /// The same group on a refined mesh whose facets `children(f)` replace facet f.
+    pub fn refined(&self, children: impl Fn(usize) -> std::ops::Range<usize>) -> Group {
+        Group {
+            name: self.name.clone(),
+            facets: self.facets.iter().flat_map(|&f| children(f)).collect(),
+        }
+    }
+}
+
 /// How one red refinement relates to its coarse mesh: the first `coarse_nodes` nodes are the
 /// coarse nodes, node `coarse_nodes + k` is the midpoint of coarse edge `midpoints[k]`, and
 /// the children of coarse cell c are cells 2^D·c .. 2^D·c + 2^D − 1.

@@ -17,7 +17,7 @@
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
 use super::quality::IndexMap;
-use super::{Facet, Group, Mesh, Nesting};
+use super::{Facet, Mesh, Nesting};
 
 /// The local edges of a simplex, in numbering order.
 fn local_edges(d: usize) -> &'static [[usize; 2]] {
@@ -110,14 +110,7 @@ pub fn red<const D: usize>(coarse: &Mesh<D>) -> Mesh<D> {
     let groups = coarse
         .groups
         .iter()
-        .map(|g| Group {
-            name: g.name.clone(),
-            facets: g
-                .facets
-                .iter()
-                .flat_map(|&f| per * f..per * (f + 1))
-                .collect(),
-        })
+        .map(|g| g.refined(|f| per * f..per * (f + 1)))
         .collect();
     let mut nesting = coarse.nesting.clone();
     nesting.push(Nesting {

@@ -188,6 +188,32 @@ struct Level {
     pt: Csr,
 }
 
+impl Level {
+    /// The level of `a` (node `blocks`) with prolongator `p`, and the next coarser operator
+    /// PᵀAP.
+    fn new(
+        a: Arc<Csr>,
+        blocks: &Blocks,
+        smoother: Chebyshev,
+        p: Csr,
+        params: Params,
+    ) -> (Level, Arc<Csr>) {
+        let pt = transpose(&p);
+        let coarse = Arc::new(galerkin(&a, &p, &pt));
+        let a32 = params
+            .mixed
+            .then(|| BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
+        let level = Level {
+            a,
+            a32,
+            smoother,
+            p,
+            pt,
+        };
+        (level, coarse)
+    }
+}
+
 /// The multigrid hierarchy of one operator: the fine operator, the coarser Galerkin
 /// operators, smoothers and the factored coarsest operator. Immutable once built; shared
 /// between solvers (each has its own [`VCycle`] work space).
@@ -241,18 +267,8 @@ impl Hierarchy {
                         smoother.lambda_hi() / 1.1,
                         &t,
                     );
-                    let pt = transpose(&p);
-                    let coarse = Arc::new(galerkin(&a, &p, &pt));
-                    let a32 = params
-                        .mixed
-                        .then(|| BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
-                    levels.push(Level {
-                        a,
-                        a32,
-                        smoother,
-                        p,
-                        pt,
-                    });
+                    let (level, coarse) = Level::new(a, &blocks, smoother, p, params);
+                    levels.push(level);
                     a = coarse;
                     blocks = coarse_blocks;
                     nullspace = coarse_null;
@@ -266,18 +282,8 @@ impl Hierarchy {
                 let most = params.max_levels.saturating_sub(1);
                 for (p, cb) in prolongators.into_iter().zip(coarse_blocks).take(most) {
                     let smoother = Chebyshev::new(&a, &blocks, params.degree, params.ratio);
-                    let pt = transpose(&p);
-                    let coarse = Arc::new(galerkin(&a, &p, &pt));
-                    let a32 = params
-                        .mixed
-                        .then(|| BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
-                    levels.push(Level {
-                        a,
-                        a32,
-                        smoother,
-                        p,
-                        pt,
-                    });
+                    let (level, coarse) = Level::new(a, &blocks, smoother, p, params);
+                    levels.push(level);
                     a = coarse;
                     blocks = cb;
                 }
