@@ -30,7 +30,15 @@ use contact_core::solve::stepper::{initial_fields_of, StepFields};
 use std::io::Write as _;
 use uuid::Uuid;
 
-const FIELD_NAMES: [&str; 6] = ["u", "w", "zeta", "sigma", "von_mises", "contact"];
+const FIELD_NAMES: [&str; 7] = [
+    "u",
+    "w",
+    "zeta",
+    "sigma",
+    "von_mises",
+    "contact",
+    "estimate",
+];
 
 fn require_succeeded(rec: &JobRecord) -> Result<(), Problem> {
     match rec.status {
@@ -468,7 +476,7 @@ impl TryFrom<String> for SurfaceFlag {
     }
 }
 
-/// `?step=N|last&fields=u,w,zeta,sigma,von_mises,contact&mesh=1&surface=1`.
+/// `?step=N|last&fields=u,w,zeta,sigma,von_mises,contact,estimate&mesh=1&surface=1`.
 pub async fn fields(
     State(state): State<AppState>,
     Path(id): Path<String>,
@@ -509,6 +517,9 @@ pub async fn fields(
         if !keep("contact") {
             f.contact = None
         }
+        if !keep("estimate") {
+            f.estimate = None
+        }
         let surface = match (&scene, with_surface) {
             (Some((_, mesh)), true) => Surface::of(mesh),
             _ => None,
@@ -535,13 +546,17 @@ pub async fn fields(
 }
 
 /// A step as its VTU shows it. Step 0, the initial state, has no contact state (stick and slip
-/// are decided by the first step); for a job that stores the contact state its VTU still has
-/// the arrays, every node with `contact_state` 0 and `slip_velocity` 0 (w_0 = 0), so that all
-/// files of the time series have the same arrays (ParaView keeps an array over time only when
-/// every step has it).
-fn vtu_step(mut f: StepFields, p: &contact_core::problem::Problem) -> StepFields {
+/// are decided by the first step) and no a posteriori estimate (no step was made); for a job
+/// that stores them its VTU still has the arrays, every node with `contact_state` 0 and
+/// `slip_velocity` 0 (w_0 = 0) and every cell with `estimate` 0, so that all files of the
+/// time series have the same arrays (ParaView keeps an array over time only when every step
+/// has it).
+fn vtu_step(mut f: StepFields, p: &contact_core::problem::Problem, mesh: &AnyMesh) -> StepFields {
     if f.n == 0 && f.contact.is_none() && p.output.fields.contact {
         f.contact = Some(Vec::new());
+    }
+    if f.n == 0 && f.estimate.is_none() && p.output.estimate {
+        f.estimate = Some(vec![0.0; mesh.n_cells()]);
     }
     f
 }
@@ -600,7 +615,7 @@ pub async fn vtu(
     let (f, mesh) = blocking(move || {
         let n = pick_step(&available_steps(&st, id)?, &spec)?;
         let (p, mesh) = scene_of(&st.rt.meshes, &rec)?;
-        Ok((vtu_step(load_step(&st, &rec, n)?, &p), mesh))
+        Ok((vtu_step(load_step(&st, &rec, n)?, &p, &mesh), mesh))
     })
     .await?;
     // HEAD says the file's length (the browser shows it beside the link).
@@ -690,7 +705,7 @@ pub async fn archive(
         )?;
         member("result.pvd", &pvd)?;
         for n in steps {
-            let f = vtu_step(load_step(&st, &rec, n).map_err(io)?, &p);
+            let f = vtu_step(load_step(&st, &rec, n).map_err(io)?, &p, &mesh);
             let size = rendered_len(|w| write_mesh_vtu(w, &mesh, &f, compression))?;
             let mut h = tar::Header::new_ustar();
             h.set_entry_type(tar::EntryType::Regular);

@@ -151,7 +151,7 @@ pub fn check_run(p: &Problem, limits: &Limits, at: &Pointers) -> Result<Fit, Lim
 
 /// The bytes of the steps a run stores (the scene's `output`: its fields at its steps), an
 /// upper estimate from counts: u and w are d values per node, ζ one, σ 3(d − 1) per cell
-/// and its von Mises stress one; at most 4 triangles per rectangle cell (the cross pattern),
+/// and its von Mises stress and a posteriori cell indicator one each; at most 4 triangles per rectangle cell (the cross pattern),
 /// 6 tetrahedra per box cell, about 2 triangles per node on any triangulation and 6
 /// tetrahedra per node on a tetrahedral mesh.
 pub fn stored_bytes(p: &Problem) -> u64 {
@@ -159,7 +159,8 @@ pub fn stored_bytes(p: &Problem) -> u64 {
     let f = p.output.fields;
     let d = p.dim();
     let per_node = d * f.u as usize + d * f.w as usize + f.zeta as usize;
-    let per_cell = 3 * (d - 1) * f.sigma as usize + f.von_mises as usize;
+    let per_cell =
+        3 * (d - 1) * f.sigma as usize + f.von_mises as usize + p.output.estimate as usize;
     let cells = match (&p.body, p.depth_cells()) {
         (None, Some(nz)) => {
             let (nx, ny) = p.cells();

@@ -14,6 +14,7 @@
 //! dependency tree).
 #![forbid(unsafe_code)]
 
+pub mod a_posteriori;
 pub mod admission;
 pub mod estimate;
 pub mod expr;

@@ -191,6 +191,9 @@ pub struct OutputSpec {
     pub every: usize,
     pub last: bool,
     pub fields: FieldSet,
+    /// Compute the a posteriori estimate of every step ([`crate::a_posteriori`]): its parts
+    /// in the step reports and the summary, its cell indicators in the stored steps.
+    pub estimate: bool,
 }
 
 impl OutputSpec {

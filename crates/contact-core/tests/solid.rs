@@ -128,11 +128,13 @@ impl MeshFiles for RotatedBox {
     }
 }
 
-/// box-exp3 at h = 1/4, k = 1/8, with a friction bound g = 2 under which part of Γ3 slips.
+/// box-exp3 at h = 1/4, k = 1/8, with a friction bound g = 2 under which part of Γ3 slips,
+/// estimating its error a posteriori.
 fn box_slipping() -> Value {
     let mut doc = presets::get("box-exp3").unwrap();
     doc["mesh"]["h"] = json!("1/4");
     doc["friction"] = json!({"law": "tresca", "g": 2});
+    doc["output"] = json!({"estimate": true});
     doc
 }
 
@@ -145,6 +147,22 @@ fn reports<const D: usize>(p: Problem) -> (Vec<StepReport>, Simulation<D>) {
         out.push(r);
     }
     (out, sim)
+}
+
+/// The a posteriori estimate's parts of a step (velocity with friction, damage).
+fn estimate_parts(r: &StepReport) -> Vec<(f64, &'static str)> {
+    let e = r.estimate.expect("the scene asks for the estimate");
+    let (v, d) = (e.velocity, e.damage.unwrap());
+    vec![
+        (v.element, "η element"),
+        (v.jump, "η jump"),
+        (v.traction, "η traction"),
+        (v.friction, "η friction"),
+        (v.time, "η time"),
+        (d.element, "η damage element"),
+        (d.jump, "η damage jump"),
+        (d.time, "η damage time"),
+    ]
 }
 
 #[test]
@@ -167,6 +185,12 @@ fn a_rotated_box_gives_the_same_norms_and_slips_obliquely() {
         "every Γ3 node of the rotated box has a rotated frame"
     );
     assert!(straight.iter().any(|r| r.slip_nodes > 0), "Γ3 slips");
+    assert!(
+        straight
+            .iter()
+            .any(|r| r.estimate.unwrap().velocity.friction > 0.0),
+        "the friction residual is exercised"
+    );
     for (a, b) in straight.iter().zip(&rotated) {
         assert_eq!(a.slip_nodes, b.slip_nodes, "step {}", a.n);
         for (x, y, what) in [
@@ -177,6 +201,16 @@ fn a_rotated_box_gives_the_same_norms_and_slips_obliquely() {
         ] {
             assert!(
                 (x - y).abs() <= 1e-9 * x.abs().max(1e-300),
+                "{what} at step {}: {x} vs {y}",
+                a.n
+            );
+        }
+        // Each part to 1e-9 of the step's whole estimate (a part may be 0 up to rounding).
+        let total = a.estimate.unwrap().total;
+        assert!(total > 0.0 && (total - b.estimate.unwrap().total).abs() <= 1e-9 * total);
+        for ((x, what), (y, _)) in estimate_parts(a).into_iter().zip(estimate_parts(b)) {
+            assert!(
+                (x - y).abs() <= 1e-9 * total,
                 "{what} at step {}: {x} vs {y}",
                 a.n
             );

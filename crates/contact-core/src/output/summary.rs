@@ -1,8 +1,10 @@
 //! The summary of a run (the CLI's stdout and `summary.json`; a stable contract):
 //! `mesh.{nodes, triangles}`, `time.steps`, `initial` and `final` `{t, w_V, u_V, zeta_L2,
 //! zeta_min}` (step 0 and the last step), `steps[]` (the same per solved step, 1 to N, plus
-//! `velocity` and `damage` solver reports), `timing`.
+//! `velocity` and `damage` solver reports, and the a posteriori `estimate` when asked),
+//! `timing`, `estimate` (over the run, when asked).
 
+use crate::a_posteriori::{Parts, RunEstimate};
 use crate::estimate::ErrorEstimate;
 use crate::problem::{FrictionLaw, MeshPattern, Problem};
 use crate::solve::smallness::SmallnessReport;
@@ -151,6 +153,10 @@ pub struct Summary {
     /// Estimated discretisation error (scenes with `error_estimate: true`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error_estimate: Option<ErrorEstimate>,
+    /// The a posteriori estimate over the run (scenes with `output.estimate: true`): each
+    /// part's (k Σ_n η_n²)^½ ([`crate::a_posteriori`]); `steps[].estimate` holds each step's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub estimate: Option<Parts>,
     pub steps: Vec<StepReport>,
 }
 
@@ -300,6 +306,15 @@ impl Summary {
             },
             warnings,
             error_estimate: None,
+            estimate: p.output.estimate.then(|| {
+                let mut run = RunEstimate::default();
+                for s in steps.iter() {
+                    if let Some(e) = &s.estimate {
+                        run.add(e, s.w_v, p.k());
+                    }
+                }
+                run.parts()
+            }),
             steps,
         }
     }

@@ -214,6 +214,13 @@ impl Surface {
                 Ok(self.cells.iter().map(|&e| v[e]).collect())
             })
             .transpose()?;
+        let estimate = f
+            .estimate
+            .map(|v| {
+                check("estimate", v.len(), n_cells)?;
+                Ok(self.cells.iter().map(|&e| v[e]).collect())
+            })
+            .transpose()?;
         let contact = f.contact.map(|c| {
             c.into_iter()
                 .filter_map(|mut node| {
@@ -231,6 +238,7 @@ impl Surface {
             sigma,
             von_mises,
             contact,
+            estimate,
         })
     }
 }

@@ -215,6 +215,7 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
             every: 1,
             last: true,
             fields: all_fields(),
+            estimate: false,
         }),
         Some(v) => output(cx, v, "/output"),
     };

@@ -1,4 +1,5 @@
-//! The `output` section: which steps and fields a run stores.
+//! The `output` section: which steps and fields a run stores, and whether it estimates its
+//! error a posteriori.
 
 use serde_json::Value;
 
@@ -27,6 +28,20 @@ pub(super) fn output(cx: &mut Cx, v: &Value, ptr: &str) -> Option<OutputSpec> {
             None
         }
     };
+    let estimate = match m.get("estimate") {
+        None => Some(false),
+        Some(Value::Bool(b)) => Some(*b),
+        Some(other) => {
+            cx.err(
+                &join(ptr, "estimate"),
+                format!(
+                    "estimate must be true (compute the a posteriori error estimate of every step) or false, got {}",
+                    describe(other)
+                ),
+            );
+            None
+        }
+    };
     let fields = match m.get("fields") {
         None => Some(all_fields()),
         Some(f) => output_fields(cx, f, &join(ptr, "fields")),
@@ -35,6 +50,7 @@ pub(super) fn output(cx: &mut Cx, v: &Value, ptr: &str) -> Option<OutputSpec> {
         every: every?,
         last: last?,
         fields: fields?,
+        estimate: estimate?,
     })
 }
 

@@ -145,7 +145,8 @@ fn defaults_fill_the_minimal_scene() {
         OutputSpec {
             every: 1,
             last: true,
-            fields: all_fields()
+            fields: all_fields(),
+            estimate: false,
         }
     );
     // Default damage source and initial damage.

@@ -20,6 +20,7 @@
 //! | `sigma` | flag `u8`: 0 absent; 1 (2D): `u64` triangle count, then per triangle `f64` σ_xx, σ_yy, σ_xy; 2 (3D): `u64` tetrahedron count, then per tetrahedron `f64` σ_xx, σ_yy, σ_zz, σ_xy, σ_yz, σ_xz |
 //! | `von_mises` | presence flag; if present `u64` count, then count × `f64` |
 //! | `contact` | flag `u8`: 0 absent; 1 (2D) or 2 (3D): `u64` count, then per node: `u64` node, `f64` slip velocity, `f64` friction traction, `f64` bound, `u8` slipping (0 or 1), and in 3D 6 × `f64`: the tangential velocity and the traction as Cartesian vectors |
+//! | `estimate` | presence flag; if present `u64` count, then count × `f64` (the a posteriori cell indicators; steps written before it end after `contact`) |
 //! | checksum | the first 8 bytes of the SHA-256 of every byte before it |
 //!
 //! # Checkpoint format (`CSSTAT`, version 1)
@@ -85,7 +86,7 @@ pub enum DecodeError {
 
 /// Encodes one stored step (see the module docs for the format).
 pub fn encode_step(f: &StepFields) -> Vec<u8> {
-    let arrays = [&f.u, &f.w, &f.zeta, &f.von_mises]
+    let arrays = [&f.u, &f.w, &f.zeta, &f.von_mises, &f.estimate]
         .iter()
         .map(|a| a.as_ref().map_or(0, |v| 8 + 8 * v.len()))
         .sum::<usize>();
@@ -103,7 +104,7 @@ pub fn encode_step(f: &StepFields) -> Vec<u8> {
         CONTACT_RECORD_LEN
     };
     let contact = f.contact.as_ref().map_or(0, |c| 8 + record * c.len());
-    let mut w = Writer::with_capacity(6 + 2 + 16 + 6 + arrays + sigma + contact + CHECKSUM_LEN);
+    let mut w = Writer::with_capacity(6 + 2 + 16 + 7 + arrays + sigma + contact + CHECKSUM_LEN);
     w.bytes(STEP_MAGIC);
     w.u16(FORMAT_VERSION);
     w.u64(f.n as u64);
@@ -152,6 +153,7 @@ pub fn encode_step(f: &StepFields) -> Vec<u8> {
             }
         }
     }
+    w.opt_f64s(f.estimate.as_deref());
     w.finish()
 }
 
@@ -222,6 +224,11 @@ pub fn decode_step(bytes: &[u8]) -> Result<StepFields, DecodeError> {
             Some(c)
         }
     };
+    let estimate = if r.available() > 0 {
+        r.opt_f64s("estimate")?
+    } else {
+        None
+    };
     r.close()?;
     Ok(StepFields {
         n,
@@ -232,6 +239,7 @@ pub fn decode_step(bytes: &[u8]) -> Result<StepFields, DecodeError> {
         sigma,
         von_mises,
         contact,
+        estimate,
     })
 }
 
@@ -252,6 +260,8 @@ pub fn encode_state(s: &State) -> Vec<u8> {
     // ζ_{n−1}, from which the damage step's start is extrapolated; older checkpoints end
     // before it.
     w.f64s(&s.damage_before);
+    // w_n when the run estimates its error; older checkpoints end before it.
+    w.f64s(&s.w);
     w.finish()
 }
 
@@ -284,6 +294,11 @@ pub fn decode_state(bytes: &[u8]) -> Result<State, DecodeError> {
     } else {
         Vec::new()
     };
+    let w = if r.available() > 0 {
+        r.f64s("w")?
+    } else {
+        Vec::new()
+    };
     r.close()?;
     Ok(State {
         step,
@@ -292,6 +307,7 @@ pub fn decode_state(bytes: &[u8]) -> Result<State, DecodeError> {
         contact_velocity,
         damage_active,
         damage_before,
+        w,
     })
 }
 

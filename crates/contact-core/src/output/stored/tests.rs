@@ -56,6 +56,7 @@ fn full_fields(rng: &mut TestRng, nodes: usize, triangles: usize) -> StepFields 
                 })
                 .collect(),
         ),
+        estimate: Some(rng.f64s(triangles)),
     }
 }
 
@@ -69,13 +70,14 @@ fn empty_fields() -> StepFields {
         sigma: None,
         von_mises: None,
         contact: None,
+        estimate: None,
     }
 }
 
 /// Bit-exact equality (PartialEq on f64 would accept 0.0 == -0.0).
 fn bits(f: &StepFields) -> Vec<u64> {
     let mut out = vec![f.n as u64, f.t.to_bits()];
-    for a in [&f.u, &f.w, &f.zeta, &f.von_mises] {
+    for a in [&f.u, &f.w, &f.zeta, &f.von_mises, &f.estimate] {
         match a {
             None => out.push(u64::MAX),
             Some(v) => {
@@ -124,9 +126,12 @@ fn full_step_round_trips_bit_exactly() {
 fn empty_and_partial_steps_round_trip() {
     let f = empty_fields();
     let bytes = encode_step(&f);
-    // magic + version + n + t + 6 flags + checksum
-    assert_eq!(bytes.len(), 6 + 2 + 8 + 8 + 6 + 8);
+    // magic + version + n + t + 7 flags + checksum
+    assert_eq!(bytes.len(), 6 + 2 + 8 + 8 + 7 + 8);
     assert_eq!(decode_step(&bytes).unwrap(), f);
+    // A step written before the estimate existed ends after the contact flag.
+    let old = with_checksum(bytes[..bytes.len() - 9].to_vec());
+    assert_eq!(decode_step(&old).unwrap(), f);
 
     let mut rng = seeded(42);
     let full = full_fields(&mut rng, 6, 4);
@@ -170,6 +175,7 @@ fn state_round_trips_bit_exactly() {
         contact_velocity: rng.f64s(4),
         damage_active: vec![0, 1, 2, 0, 2],
         damage_before: rng.f64s(15),
+        w: rng.f64s(30),
     };
     let bytes = encode_state(&s);
     assert_eq!(&bytes[..6], STATE_MAGIC);
@@ -253,6 +259,7 @@ fn every_truncation_and_extension_is_an_error() {
         contact_velocity: vec![0.5],
         damage_active: vec![1, 0],
         damage_before: vec![0.75; 2],
+        w: vec![0.5; 4],
     });
     for len in 0..state.len() {
         assert!(decode_state(&state[..len]).is_err(), "length {len}");
@@ -346,7 +353,7 @@ fn hostile_lengths_are_rejected_before_allocating() {
         Err(DecodeError::LengthOverflow { what: "zeta", .. })
     ));
     let mut body = encode_step(&empty_fields());
-    body.truncate(body.len() - 9); // drop checksum and the contact flag
+    body.truncate(body.len() - 10); // drop checksum and the contact and estimate flags
     body.push(1);
     body.extend_from_slice(&(u64::MAX / 33).to_le_bytes());
     assert!(matches!(
@@ -388,11 +395,11 @@ fn arb_fields() -> impl Strategy<Value = StepFields> {
         (any::<usize>(), any::<f64>()),
         (arb_f64s(40), arb_f64s(40), arb_f64s(20)),
         proptest::option::of(proptest::collection::vec(any::<[f64; 3]>(), 0..20)),
-        arb_f64s(20),
+        (arb_f64s(20), arb_f64s(20)),
         proptest::option::of(contact),
     )
         .prop_map(
-            |((n, t), (u, w, zeta), sigma, von_mises, contact)| StepFields {
+            |((n, t), (u, w, zeta), sigma, (von_mises, estimate), contact)| StepFields {
                 n,
                 t,
                 u,
@@ -401,6 +408,7 @@ fn arb_fields() -> impl Strategy<Value = StepFields> {
                 sigma: sigma.map(Stress::Plane),
                 von_mises,
                 contact,
+                estimate,
             },
         )
 }

@@ -225,6 +225,7 @@ fn labelled(m: &Mesh<3>) -> StepFields {
                 })
                 .collect(),
         ),
+        estimate: Some((0..nc).map(|e| e as f64 + 0.25).collect()),
     }
 }
 
@@ -245,12 +246,15 @@ fn restricted_fields_are_those_of_the_mapped_nodes_and_owning_cells() {
     let zeta = f.zeta.unwrap();
     assert!(zeta.iter().zip(&s.node_ids).all(|(&z, &id)| z == id as f64));
     let vm = f.von_mises.unwrap();
+    let eta = f.estimate.unwrap();
     let Some(Stress::Solid(sigma)) = f.sigma else {
         panic!("σ of a solid")
     };
     assert_eq!(vm.len(), s.triangles.len());
+    assert_eq!(eta.len(), s.triangles.len());
     for (t, &e) in s.cells.iter().enumerate() {
         assert_eq!(vm[t], e as f64 + 0.5);
+        assert_eq!(eta[t], e as f64 + 0.25);
         assert_eq!(sigma[t][0], e as f64);
     }
     // Nodes 0, 1 and the last are corners or edges of the box: on the surface, renumbered.

@@ -142,7 +142,7 @@ pub fn write_vtu<W: Write, const D: usize>(
         }
         o.write_all(b"      </PointData>\n")?;
     }
-    if fields.sigma.is_some() || fields.von_mises.is_some() {
+    if fields.sigma.is_some() || fields.von_mises.is_some() || fields.estimate.is_some() {
         if fields.sigma.is_some() {
             o.write_all(b"      <CellData Tensors=\"sigma\">\n")?;
         } else {
@@ -154,6 +154,9 @@ pub fn write_vtu<W: Write, const D: usize>(
         }
         if let Some(vm) = &fields.von_mises {
             arrays.write(o, 8, "von_mises", &[], None, nc, vm.iter().copied())?;
+        }
+        if let Some(eta) = &fields.estimate {
+            arrays.write(o, 8, "estimate", &[], None, nc, eta.iter().copied())?;
         }
         o.write_all(b"      </CellData>\n")?;
     }
@@ -291,6 +294,7 @@ fn validate<const D: usize>(nodes: &[[f64; D]], cells: &[usize], f: &StepFields)
         nc,
         &per_cell,
     )?;
+    check("estimate", f.estimate.as_ref().map(Vec::len), nc, &per_cell)?;
     Ok(())
 }
 

@@ -236,6 +236,7 @@ fn hand_built(mesh: &Mesh) -> StepFields {
             tangential_velocity: None,
             traction: None,
         }]),
+        estimate: Some((0..nc).map(|e| 1.0 / (1.0 + e as f64)).collect()),
     }
 }
 
@@ -326,11 +327,15 @@ fn all_fields_read_back(compression: Compression) {
     assert!(slip[1..].iter().all(|v| *v == 0.0));
 
     let cd = piece.child("CellData");
-    assert_eq!(cd.array_names(), ["sigma", "von_mises"]);
+    assert_eq!(cd.array_names(), ["sigma", "von_mises", "estimate"]);
     assert_eq!(sigma_tensor(cd, nc), sym6(f.sigma.as_ref().unwrap()));
     assert_eq!(
         &f64s(cd.array("von_mises"), nc, 1),
         f.von_mises.as_ref().unwrap()
+    );
+    assert_eq!(
+        &f64s(cd.array("estimate"), nc, 1),
+        f.estimate.as_ref().unwrap()
     );
 }
 
@@ -345,6 +350,7 @@ fn vtu_writes_only_the_present_fields() {
         sigma: None,
         von_mises: None,
         contact: None,
+        estimate: None,
         ..full.clone()
     };
     let doc = render(&mesh, &none);
@@ -430,7 +436,7 @@ fn zlib_and_raw_files_hold_the_same_arrays() {
             .collect()
     };
     let (za, ra) = (arrays(&zx), arrays(&rx));
-    assert_eq!(za.len(), 13);
+    assert_eq!(za.len(), 14);
     assert_eq!(za, ra);
 }
 

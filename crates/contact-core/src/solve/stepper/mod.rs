@@ -24,6 +24,7 @@ use super::damage::DamageStep;
 use super::smallness::SmallnessReport;
 use super::velocity::VelocityStep;
 use super::{SolveError, SolverReport, SolverSettings};
+use crate::a_posteriori::{Estimator, Parts, StepData, StepEstimate};
 use crate::fem::{loads, norms, DofMap, Geometry};
 use crate::laws::constitutive::elastic_stress;
 use crate::laws::damage_source::phi;
@@ -61,6 +62,11 @@ pub struct State {
     /// uninterrupted one does.
     #[serde(default)]
     pub damage_before: Vec<f64>,
+    /// w_n (global, interleaved) when the run estimates its error (empty otherwise): the
+    /// next step's time indicator reads it, so a resumed run estimates as an uninterrupted
+    /// one does.
+    #[serde(default)]
+    pub w: Vec<f64>,
 }
 
 /// What one time step did.
@@ -79,6 +85,10 @@ pub struct StepReport {
     pub damage: Option<SolverReport>,
     /// Γ3 nodes with nonzero tangential velocity.
     pub slip_nodes: usize,
+    /// The step's a posteriori estimate ([`crate::a_posteriori`]), when the scene's output
+    /// asks for it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimate: Option<Parts>,
 }
 
 /// The velocity sub-problem (3.13): its solver and work vectors.
@@ -235,6 +245,10 @@ pub struct Simulation<const D: usize = 2> {
     /// Per-element ε(u_{n−1}) and B_{n−1} of the current step.
     eps: Vec<Tensor<D>>,
     b: Vec<Tensor<D>>,
+    /// The a posteriori estimator when the scene's output asks for it, with the cell
+    /// indicators of the last step.
+    estimator: Option<Box<Estimator<D>>>,
+    estimate: Option<StepEstimate>,
     pub setup_seconds: f64,
     /// The linear path taken and its predicted peak bytes ([`crate::memory`]).
     pub linear: LinearPath,
@@ -260,6 +274,10 @@ impl<const D: usize> Simulation<D> {
                 .damage
                 .as_ref()
                 .map_or_else(Vec::new, |d| d.before.clone()),
+            w: match self.estimator {
+                Some(_) if self.state.step > 0 => self.w.clone(),
+                _ => Vec::new(),
+            },
             ..self.state.clone()
         }
     }
@@ -285,6 +303,10 @@ impl<const D: usize> Simulation<D> {
             }
         }
         state.damage_before.clear();
+        let w = std::mem::take(&mut state.w);
+        if w.len() == self.w.len() {
+            self.w = w;
+        }
         self.state = state;
     }
 
@@ -356,8 +378,33 @@ impl<const D: usize> Simulation<D> {
     }
 
     /// u_n = u_{n−1} + k w_n (3.12) and ζ_n from the damage step: the state moves to t_n.
+    /// A run that estimates its error does so in between, while w_{n−1} and ζ_{n−1} are at
+    /// hand.
     fn advance(&mut self, n: usize, k: f64) {
+        let len = self.w.len();
+        let w_prev = self
+            .estimator
+            .as_ref()
+            .map(|_| std::mem::replace(&mut self.w, vec![0.0; len]));
         self.dofs.to_global(&self.velocity.w_free, &mut self.w);
+        if let (Some(estimator), Some(w_prev)) = (&self.estimator, &w_prev) {
+            let zeta = match &self.damage {
+                Some(d) => &d.next,
+                None => &self.state.zeta,
+            };
+            let data = StepData {
+                t: n as f64 * k,
+                k,
+                m_a: self.smallness.m_a,
+                w: &self.w,
+                w_prev: (n > 1).then_some(w_prev.as_slice()),
+                b: &self.b,
+                eps: &self.eps,
+                zeta_prev: &self.state.zeta,
+                zeta,
+            };
+            self.estimate = Some(estimator.step(&self.problem, &self.mesh, &self.geo, &data));
+        }
         for (u, w) in self.state.u.iter_mut().zip(&self.w) {
             *u += k * w;
         }
@@ -413,6 +460,7 @@ impl<const D: usize> Simulation<D> {
                 .chunks(D - 1)
                 .filter(|x| x.iter().any(|v| *v != 0.0))
                 .count(),
+            estimate: self.estimate.as_ref().map(|e| e.parts),
         };
         if !(report.w_v.is_finite() && report.u_v.is_finite() && report.zeta_l2.is_finite()) {
             return Err(SolveError::NonFinite("solution", n));

@@ -94,6 +94,9 @@ pub struct StepFields {
     pub von_mises: Option<Vec<f64>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub contact: Option<Vec<ContactNode>>,
+    /// The a posteriori cell indicators η_T ([`crate::a_posteriori`]), per element.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub estimate: Option<Vec<f64>>,
 }
 
 impl<const D: usize> Simulation<D> {
@@ -124,6 +127,7 @@ impl<const D: usize> Simulation<D> {
             sigma,
             von_mises,
             contact: sel.contact.then(|| self.contact_state()),
+            estimate: self.estimate.as_ref().map(|e| e.cells.clone()),
         }
     }
 
@@ -297,6 +301,7 @@ pub fn initial_fields<const D: usize>(
         sigma,
         von_mises,
         contact: None,
+        estimate: None,
     })
 }
 

@@ -4,6 +4,7 @@
 //! reads it.
 
 use super::{DamagePart, Simulation, State, VelocityPart};
+use crate::a_posteriori::Estimator;
 use crate::fem::{assembly, DofMap, Geometry};
 use crate::laws::Tensor;
 use crate::linalg::{Csr, LinearPath};
@@ -157,6 +158,11 @@ impl<const D: usize> Simulation<D> {
             damage,
             eps: vec![Tensor::zeros(); nt],
             b: vec![Tensor::zeros(); nt],
+            estimator: problem
+                .output
+                .estimate
+                .then(|| Box::new(Estimator::new(&problem, &mesh, &geo))),
+            estimate: None,
             setup_seconds: prepared_seconds + start.elapsed().as_secs_f64(),
             linear,
             predicted_bytes,
