@@ -495,6 +495,67 @@ fn tar_names(tar: &[u8]) -> Vec<String> {
 
 /// The study presets (the paper's Tables 1 and 2) are listed apart from the scenes and served
 /// at /presets/{name} as the body that POST /jobs runs; other names stay 404.
+/// A scene that asks for the a posteriori estimate gets its parts per step and over the run in
+/// the summary, the cell field in the fields JSON and every VTU (zeros at step 0, so ParaView
+/// keeps the array over time); a bad value is refused at its pointer.
+#[test]
+fn an_estimating_job_serves_its_indicators() {
+    let dir = temp_dir("estimate");
+    let srv = Server::start(&dir, 1);
+    let a = srv.addr;
+    let mut scene = contact_core::scene::presets::get("paper-exp3").unwrap();
+    scene["mesh"]["h"] = json!("1/4");
+    scene["time"]["k"] = json!("1/4");
+    scene["output"] = json!({"every": 2, "estimate": true});
+    let r = post_json(a, "/jobs", &scene);
+    assert_eq!(r.status, 202, "{}", String::from_utf8_lossy(&r.body));
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    wait_status(a, &id, &["succeeded"], Duration::from_secs(60));
+    let summary = get(a, &format!("/jobs/{id}/summary")).json();
+    let run = &summary["estimate"];
+    assert!(run["total"].as_f64().unwrap() > 0.0, "{run}");
+    for part in ["element", "jump", "traction", "friction", "time"] {
+        assert!(run["velocity"][part].is_number(), "{part}");
+    }
+    assert!(run["damage"]["total"].as_f64().unwrap() > 0.0);
+    let steps = summary["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 4);
+    assert!(steps
+        .iter()
+        .all(|s| s["estimate"]["total"].as_f64().unwrap() > 0.0));
+    let cells = summary["mesh"]["triangles"].as_u64().unwrap() as usize;
+    let f = get(a, &format!("/jobs/{id}/fields?step=last&fields=estimate")).json();
+    let eta: Vec<f64> = f["estimate"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(eta.len(), cells);
+    // The cell indicators make up the step's total.
+    let sum: f64 = eta.iter().map(|e| e * e).sum();
+    let total = steps[3]["estimate"]["total"].as_f64().unwrap();
+    assert!(
+        (sum.sqrt() - total).abs() <= 1e-12 * total,
+        "{sum} vs {total}"
+    );
+    assert!(get(a, &format!("/jobs/{id}/fields?step=last&fields=u"))
+        .json()
+        .get("estimate")
+        .is_none());
+    for (file, zero) in [("4.vtu", false), ("0.vtu", true)] {
+        let vtu = String::from_utf8(get(a, &format!("/jobs/{id}/fields/{file}")).body).unwrap();
+        let xml = roxmltree::Document::parse(&vtu).unwrap();
+        let v = vtu_f64s(&xml, "estimate");
+        assert_eq!(v.len(), cells, "{file}");
+        assert_eq!(v.iter().all(|e| *e == 0.0), zero, "{file}");
+    }
+    scene["output"]["estimate"] = json!("yes");
+    let r = post_json(a, "/jobs", &scene);
+    assert_problem(&r, 422);
+    assert!(String::from_utf8_lossy(&r.body).contains("/output/estimate"));
+}
+
 #[test]
 fn study_presets_are_listed_and_served_as_study_requests() {
     let dir = temp_dir("study-presets");
