@@ -230,12 +230,13 @@ export const uploadMesh = (bytes) => request('POST', '/meshes', bytes);
 
 /**
  * Fields of one stored step. Only what the viewer draws is asked for (sigma, three numbers
- * per triangle, is left out: von Mises is its scalar summary); `only`: just these fields.
+ * per triangle, is left out: von Mises is its scalar summary; the a posteriori indicators
+ * come only from jobs that computed them); `only`: just these fields.
  * Always on the boundary surface (surface=1): a 3D job's mesh and fields are those of its
  * outside, a small part of a fine mesh; a 2D job's come whole either way.
  */
 export function fields(id, step, withMesh, only = null) {
-  const q = new URLSearchParams({ step: String(step), fields: only ? only.join(',') : 'u,w,zeta,von_mises,contact', surface: '1' });
+  const q = new URLSearchParams({ step: String(step), fields: only ? only.join(',') : 'u,w,zeta,von_mises,contact,estimate', surface: '1' });
   if (withMesh) q.set('mesh', '1');
   return getJson(`/jobs/${id}/fields?${q}`);
 }

@@ -24,6 +24,7 @@ const QUANTITIES = {
   zeta: { label: 'damage ζ', key: 'zeta', perCell: false },
   von_mises: { label: 'von Mises stress (per triangle)', key: 'von_mises', perCell: true },
   w: { label: 'velocity |w|', key: 'w', perCell: false },
+  estimate: { label: 'error indicator η (per triangle)', key: 'estimate', perCell: true },
 };
 const CACHE_STEPS = 400;
 const RUN_RANGE_STEPS = 200;

@@ -422,6 +422,8 @@ async function testSimulation() {
     check(s.distinct >= 16 && s.hash !== s8.hash, `coloured by ${q}: ${s.distinct} entries`);
   }
   await page.selectOption('#quantity', 'zeta');
+  const estimateOff = await page.$eval('#quantity option[value="estimate"]', (o) => o.disabled);
+  check(estimateOff, 'the a posteriori indicator is offered only for jobs that computed it');
 
   // Narrow screen: one column, nothing wider than the window.
   await page.setViewportSize({ width: 390, height: 844 });
