@@ -271,25 +271,20 @@ impl<const D: usize> Estimator<D> {
         let nc = mesh.n_cells();
         let inv_ma2 = 1.0 / (s.m_a * s.m_a);
         // Per cell: σ_T, and the squared velocity element and time indicators.
-        let mut sigma = vec![Tensor::<D>::zeros(); nc];
-        par::for_each_chunk_mut(&mut sigma, par::ROW_CHUNK, |first, out| {
-            for (i, o) in out.iter_mut().enumerate() {
-                let e = first + i;
-                *o =
-                    viscous_stress(&problem.material.viscosity, &geo.strain(mesh, e, s.w)) + s.b[e];
-            }
-        });
-        // [element, jump, traction, friction, time] of the velocity, [element, jump, time]
-        // of the damage, squared, per cell.
-        let mut parts = vec![[0.0f64; 8]; nc];
+        // One pass over the cells: σ_T, ∇ζ_n, |T| |ε(w_n)|² and the cell's own indicators.
         let rule = cell_rule(D);
         let f0 = &problem.body_force;
         let damage = problem.damage.as_ref();
-        par::for_each_chunk_mut(&mut parts, par::ROW_CHUNK, |first, out| {
-            for (i, p) in out.iter_mut().enumerate() {
+        let mut cells = vec![Cell::<D>::default(); nc];
+        par::for_each_chunk_mut(&mut cells, par::ROW_CHUNK, |first, out| {
+            for (i, c) in out.iter_mut().enumerate() {
                 let e = first + i;
                 let cell = mesh.cell(e);
                 let (vol, h) = (geo.measure[e], self.h[e]);
+                let eps_w = geo.strain(mesh, e, s.w);
+                c.sigma = viscous_stress(&problem.material.viscosity, &eps_w) + s.b[e];
+                c.w2 = vol * eps_w.norm_squared();
+                let p = &mut c.parts;
                 if !f0.is_zero() {
                     let f2: f64 = rule
                         .iter()
@@ -301,7 +296,7 @@ impl<const D: usize> Estimator<D> {
                     p[0] = h * h * f2 * inv_ma2;
                 }
                 if let Some(prev) = s.w_prev {
-                    let d = geo.strain(mesh, e, s.w) - geo.strain(mesh, e, prev);
+                    let d = eps_w - geo.strain(mesh, e, prev);
                     p[4] = vol * d.norm_squared();
                 }
                 if let Some(dm) = damage {
@@ -319,33 +314,33 @@ impl<const D: usize> Estimator<D> {
                     p[5] = h * h * r2 / dm.kappa;
                     let dz = gradient(geo.grads(e), cell, s.zeta, s.zeta_prev);
                     p[7] = dm.kappa * vol * dot(&dz, &dz);
+                    c.grad = gradient(geo.grads(e), cell, s.zeta, &[]);
                 }
             }
         });
-        let grad = |e: usize| gradient(geo.grads(e), mesh.cell(e), s.zeta, &[]);
         for f in &self.interior {
             let [a, b] = f.cells;
-            let jump = mul(&(sigma[a] - sigma[b]), &f.normal);
+            let jump = mul(&(cells[a].sigma - cells[b].sigma), &f.normal);
             let v = 0.5 * f.h * f.measure * dot(&jump, &jump) * inv_ma2;
-            parts[a][1] += v;
-            parts[b][1] += v;
+            cells[a].parts[1] += v;
+            cells[b].parts[1] += v;
             if let Some(dm) = damage {
-                let (ga, gb) = (grad(a), grad(b));
-                let j = dot(&ga, &f.normal) - dot(&gb, &f.normal);
+                let j = dot(&cells[a].grad, &f.normal) - dot(&cells[b].grad, &f.normal);
                 let v = 0.5 * f.h * f.measure * dm.kappa * j * j;
-                parts[a][6] += v;
-                parts[b][6] += v;
+                cells[a].parts[6] += v;
+                cells[b].parts[6] += v;
             }
         }
         let facet_rule = cell_rule(D - 1);
         for (fi, f) in mesh.facets.iter().enumerate() {
             let e = self.owner[fi];
             let hf = self.facet_h[fi];
+            let c = &mut cells[e];
             if let Some(dm) = damage {
-                let g = dot(&grad(e), &f.normal);
-                parts[e][6] += hf * f.measure * dm.kappa * g * g;
+                let g = dot(&c.grad, &f.normal);
+                c.parts[6] += hf * f.measure * dm.kappa * g * g;
             }
-            let traction = mul(&sigma[e], &f.normal);
+            let traction = mul(&c.sigma, &f.normal);
             match f.part.map(|p| &problem.boundary[p].kind) {
                 Some(BoundaryKind::Clamped) => {}
                 Some(BoundaryKind::Contact) => {
@@ -362,7 +357,7 @@ impl<const D: usize> Estimator<D> {
                         let r = friction_residual(&problem.friction, &tangential(traction), &w_tau);
                         r2 += f.measure / D as f64 * r * r;
                     }
-                    parts[e][3] += hf * r2 * inv_ma2;
+                    c.parts[3] += hf * r2 * inv_ma2;
                 }
                 kind => {
                     // Γ2, or traction-free (f2 = 0).
@@ -380,18 +375,11 @@ impl<const D: usize> Estimator<D> {
                             wq * f.measure * dot(&r, &r)
                         })
                         .sum();
-                    parts[e][2] += hf * r2 * inv_ma2;
+                    c.parts[2] += hf * r2 * inv_ma2;
                 }
             }
         }
-        let w_v2: f64 = par::map_ranges(nc, par::VECTOR_CHUNK, |cells| {
-            cells
-                .map(|e| geo.measure[e] * geo.strain(mesh, e, s.w).norm_squared())
-                .sum::<f64>()
-        })
-        .into_iter()
-        .sum();
-        finish(&parts, w_v2, damage.is_some())
+        finish(&cells, damage.is_some())
     }
 }
 
@@ -410,17 +398,46 @@ fn gradient<const D: usize>(g: &[[f64; D]], cell: &[usize], z: &[f64], z_prev: &
     out
 }
 
-/// The cell indicators and the step's parts from the squared per-cell indicators
-/// ([element, jump, traction, friction, time] of the velocity, [element, jump, time] of the
-/// damage), with |w_h|²_V for the relative velocity estimate.
-fn finish(parts: &[[f64; 8]], w_v2: f64, damage: bool) -> StepEstimate {
-    let cells = parts.iter().map(|p| p.iter().sum::<f64>().sqrt()).collect();
+/// What the estimate keeps of a cell during a step.
+#[derive(Clone, Copy)]
+struct Cell<const D: usize> {
+    /// σ_T = A ε(w_n) + B_{n−1}.
+    sigma: Tensor<D>,
+    /// ∇ζ_n on T (with damage).
+    grad: [f64; D],
+    /// |T| |ε(w_n)|², for |w_h|_V.
+    w2: f64,
+    /// The squared indicators: [element, jump, traction, friction, time] of the velocity,
+    /// [element, jump, time] of the damage.
+    parts: [f64; 8],
+}
+
+impl<const D: usize> Default for Cell<D> {
+    fn default() -> Self {
+        Cell {
+            sigma: Tensor::zeros(),
+            grad: [0.0; D],
+            w2: 0.0,
+            parts: [0.0; 8],
+        }
+    }
+}
+
+/// The cell indicators and the step's parts from the cells' squared indicators, with
+/// |w_h|²_V for the relative velocity estimate. Sums run in cell order: the same bits for
+/// any thread count.
+fn finish<const D: usize>(cells: &[Cell<D>], damage: bool) -> StepEstimate {
     let mut sum = [0.0; 8];
-    for p in parts {
-        (0..8).for_each(|i| sum[i] += p[i]);
+    let mut w_v2 = 0.0;
+    for c in cells {
+        (0..8).for_each(|i| sum[i] += c.parts[i]);
+        w_v2 += c.w2;
     }
     StepEstimate {
-        cells,
+        cells: cells
+            .iter()
+            .map(|c| c.parts.iter().sum::<f64>().sqrt())
+            .collect(),
         parts: Parts::from_squares(&sum, w_v2, damage),
     }
 }

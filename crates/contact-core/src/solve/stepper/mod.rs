@@ -249,6 +249,8 @@ pub struct Simulation<const D: usize = 2> {
     /// indicators of the last step.
     estimator: Option<Box<Estimator<D>>>,
     estimate: Option<StepEstimate>,
+    /// w_{n−1} while the estimate of step n is computed (empty without an estimator).
+    w_prev: Vec<f64>,
     pub setup_seconds: f64,
     /// The linear path taken and its predicted peak bytes ([`crate::memory`]).
     pub linear: LinearPath,
@@ -381,13 +383,11 @@ impl<const D: usize> Simulation<D> {
     /// A run that estimates its error does so in between, while w_{n−1} and ζ_{n−1} are at
     /// hand.
     fn advance(&mut self, n: usize, k: f64) {
-        let len = self.w.len();
-        let w_prev = self
-            .estimator
-            .as_ref()
-            .map(|_| std::mem::replace(&mut self.w, vec![0.0; len]));
+        if self.estimator.is_some() {
+            std::mem::swap(&mut self.w, &mut self.w_prev);
+        }
         self.dofs.to_global(&self.velocity.w_free, &mut self.w);
-        if let (Some(estimator), Some(w_prev)) = (&self.estimator, &w_prev) {
+        if let Some(estimator) = &self.estimator {
             let zeta = match &self.damage {
                 Some(d) => &d.next,
                 None => &self.state.zeta,
@@ -397,7 +397,7 @@ impl<const D: usize> Simulation<D> {
                 k,
                 m_a: self.smallness.m_a,
                 w: &self.w,
-                w_prev: (n > 1).then_some(w_prev.as_slice()),
+                w_prev: (n > 1).then_some(self.w_prev.as_slice()),
                 b: &self.b,
                 eps: &self.eps,
                 zeta_prev: &self.state.zeta,

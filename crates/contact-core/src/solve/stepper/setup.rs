@@ -163,6 +163,10 @@ impl<const D: usize> Simulation<D> {
                 .estimate
                 .then(|| Box::new(Estimator::new(&problem, &mesh, &geo))),
             estimate: None,
+            w_prev: match problem.output.estimate {
+                true => vec![0.0; D * nn],
+                false => Vec::new(),
+            },
             setup_seconds: prepared_seconds + start.elapsed().as_secs_f64(),
             linear,
             predicted_bytes,
