@@ -23,7 +23,7 @@ pub struct Problem {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub quota: Option<Box<serde_json::Value>>,
     /// The per-job limit a request went over: its name, the member that sets the size, what
-    /// the request needs and what the node allows (see `crate::submission::over_limit`).
+    /// the request needs and what the node allows (see [`Problem::over_limit`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub limit: Option<Box<serde_json::Value>>,
     /// Seconds after which a retry may succeed (the `Retry-After` header, not a member).
@@ -134,6 +134,19 @@ impl Problem {
     }
 
     /// The problem as a JSON document (what a failed job stores as its `error`).
+    /// 422 at the member that does not fit, with the limit's name and figures as the
+    /// extension member `limit` (what the run needs, what this node allows).
+    pub fn over_limit(e: &contact_core::admission::LimitError) -> Problem {
+        let mut p = Problem::invalid_field(&e.pointer, e.message.clone());
+        p.limit = Some(Box::new(serde_json::json!({
+            "name": e.limit,
+            "pointer": e.pointer,
+            "needed": e.needed,
+            "allowed": e.allowed,
+        })));
+        p
+    }
+
     pub fn to_json(&self) -> serde_json::Value {
         serde_json::to_value(self).expect("a problem serialises")
     }

@@ -7,7 +7,7 @@
 use crate::problem::Problem;
 use crate::state::AppState;
 use crate::store::MemoryPrediction;
-use contact_core::admission::{self, LimitError, Pointers};
+use contact_core::admission::{self, Pointers};
 use contact_core::scene::{self, presets, Overrides};
 use contact_core::study;
 use contact_core::study::presets as study_presets;
@@ -145,8 +145,8 @@ pub(crate) fn check_limits(
         output: "/output".into(),
         solver: Some("/solver/linear".into()),
     };
-    let fit =
-        admission::check_run(p, &state.rt.config.job_limits(), &at).map_err(|e| over_limit(&e))?;
+    let fit = admission::check_run(p, &state.rt.config.job_limits(), &at)
+        .map_err(|e| Problem::over_limit(&e))?;
     Ok((
         fit.stored_bytes,
         MemoryPrediction {
@@ -154,19 +154,6 @@ pub(crate) fn check_limits(
             predicted_bytes: fit.memory_bytes,
         },
     ))
-}
-
-/// 422 at the member that does not fit, with the limit's name and figures as the extension
-/// member `limit` (what the run needs, what this node allows).
-pub fn over_limit(e: &LimitError) -> Problem {
-    let mut p = Problem::invalid_field(&e.pointer, e.message.clone());
-    p.limit = Some(Box::new(json!({
-        "name": e.limit,
-        "pointer": e.pointer,
-        "needed": e.needed,
-        "allowed": e.allowed,
-    })));
-    p
 }
 
 /// A submission as validated: what is stored and counted.
@@ -234,7 +221,7 @@ fn validated_study(doc: &Value, key: &str, state: &AppState) -> Result<Validated
         })?;
     let admitted = request
         .admit(&state.rt.config.job_limits())
-        .map_err(|e| over_limit(&e))?;
+        .map_err(|e| Problem::over_limit(&e))?;
     Ok(Validated {
         doc: json!({ key: expanded }),
         steps: admitted.steps,

@@ -5,7 +5,8 @@
 //! and has every step, every stored step file decodes (checksums) and is the step it is
 //! named after, the stored steps are exactly the scene's output selection, no temporary
 //! file survives, and a job interrupted by crashes ends with the same numbers as an
-//! uninterrupted run (bit for bit).
+//! uninterrupted run (bit for bit). A sweep whose member is running when the server is
+//! killed completes after the restart, its killed member resumed, no member queued twice.
 
 mod service_support;
 
@@ -283,4 +284,81 @@ fn kill_9_and_restart_loses_nothing() {
             .count(),
     );
     assert!(kills_running > 0, "no kill hit a running job");
+}
+
+/// paper-convergence at h = 1/16 with Tresca friction and `n` steps to t = 1, only the last
+/// step stored: a sweep member long enough to be caught running.
+fn sweep_scene(n: u32) -> Value {
+    let mut s = contact_core::scene::presets::get("paper-convergence").unwrap();
+    s["mesh"]["h"] = serde_json::json!("1/16");
+    s["time"] = serde_json::json!({"t_end": 1, "N": n});
+    s["friction"] = serde_json::json!({"law": "tresca", "g": 1});
+    s["solver"] = serde_json::json!({"linear": "direct"});
+    s["output"] = serde_json::json!({"every": n, "fields": ["u"]});
+    s
+}
+
+/// Accepted work is never lost: the server killed (SIGKILL) while a sweep's members run
+/// completes the sweep after its restart, no member enqueued twice.
+#[test]
+fn a_sweep_survives_a_kill_while_its_members_run() {
+    let dir = TempDir::new("sweep-kill");
+    let data = dir.0.join("data");
+    let srv = Proc::start(&data, &["--workers", "1"]);
+    let a = srv.addr;
+    let r = post_json(
+        a,
+        "/jobs",
+        &serde_json::json!({"sweep": {"scene": sweep_scene(10_000), "vary": {"/friction/g": [1, 2]}}}),
+    );
+    assert_eq!(r.status, 202, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let t0 = Instant::now();
+    let view = loop {
+        let j = get(a, &format!("/jobs/{id}")).json();
+        if j["progress"]["step"].as_u64().unwrap_or(0) > 0 {
+            break j;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "no member ran: {j}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    srv.kill9();
+    let srv = Proc::start(&data, &["--workers", "1"]);
+    let a = srv.addr;
+    let done = wait_status(a, &id, &["succeeded", "failed"], Duration::from_secs(300));
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert_eq!(done["members"], view["members"]);
+    let summary = get(a, &format!("/jobs/{id}/summary")).json();
+    assert_eq!(summary["computed"], 2);
+    for row in summary["rows"].as_array().unwrap() {
+        let m = get(
+            a,
+            &format!("/jobs/{}/summary", row["job"].as_str().unwrap()),
+        )
+        .json();
+        assert_eq!(m["steps"].as_array().unwrap().len(), 10_000);
+        assert_eq!(
+            row["w_V"].as_f64().unwrap().to_bits(),
+            m["final"]["w_V"].as_f64().unwrap().to_bits()
+        );
+    }
+    // The member killed mid-run was resumed by the restarted server.
+    let attempts: Vec<u64> = view["members"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| {
+            get(a, &format!("/jobs/{}", m.as_str().unwrap())).json()["attempt"]
+                .as_u64()
+                .unwrap()
+        })
+        .collect();
+    assert!(attempts.contains(&2), "{attempts:?}");
+    // Exactly the two members and the sweep exist: nothing was enqueued twice.
+    let listed = get(a, "/jobs?limit=500").json();
+    assert_eq!(listed["jobs"].as_array().unwrap().len(), 3, "{listed}");
+    srv.terminate();
 }

@@ -57,9 +57,9 @@ fn pg_store_migrations_and_reconnection() {
     let store = PgStore::connect(&pg.url()).unwrap();
 
     // Migrations: applied once, idempotent at the next connect.
-    assert_eq!(store.schema_version().unwrap(), 4);
+    assert_eq!(store.schema_version().unwrap(), 5);
     let again = PgStore::connect(&pg.url()).unwrap();
-    assert_eq!(again.schema_version().unwrap(), 4);
+    assert_eq!(again.schema_version().unwrap(), 5);
 
     let memory = MemoryPrediction {
         linear_path: LinearPath::Multigrid,
@@ -98,8 +98,8 @@ fn pg_store_migrations_and_reconnection() {
     assert!(err.to_string().contains("newer"), "{err}");
 }
 
-/// A database at schema version 3 (made by taking version 4's columns away again) upgrades
-/// at connect: its jobs read back without a memory prediction, new jobs store theirs.
+/// A database at schema version 3 (made by taking the columns of versions 4 and 5 away again)
+/// upgrades at connect: its jobs read back without a memory prediction, new jobs store theirs.
 #[test]
 fn pg_store_migrates_a_version_3_database() {
     let Some(pg) = Postgres::start("migrate-v3") else {
@@ -109,15 +109,16 @@ fn pg_store_migrates_a_version_3_database() {
     drop(PgStore::connect(&url).unwrap());
     let mut raw = ::postgres::Client::connect(&url, ::postgres::NoTls).unwrap();
     raw.batch_execute(
-        "ALTER TABLE jobs DROP COLUMN linear_path, DROP COLUMN predicted_bytes;
-         DELETE FROM contact_sim_schema WHERE version = 4;
+        "ALTER TABLE jobs DROP COLUMN linear_path, DROP COLUMN predicted_bytes,
+                          DROP COLUMN sweep, DROP COLUMN members;
+         DELETE FROM contact_sim_schema WHERE version >= 4;
          INSERT INTO jobs (id, status, scene, scene_hash, created_at, steps, owner)
              VALUES ('00000000-0000-4000-8000-000000000001', 'queued', '{\"name\": \"old\"}',
                      'h', 1.0, 9, 'alice');",
     )
     .unwrap();
     let store = PgStore::connect(&url).unwrap();
-    assert_eq!(store.schema_version().unwrap(), 4);
+    assert_eq!(store.schema_version().unwrap(), 5);
     let old = store
         .get("00000000-0000-4000-8000-000000000001".parse().unwrap())
         .unwrap()

@@ -366,7 +366,7 @@ fn postgres_over_tls() {
     let require = format!("{by_ip}?sslmode=require");
     assert_eq!(session_is_encrypted(&require), Ok(true));
     let store = PgStore::connect(&require).unwrap();
-    assert_eq!(store.schema_version().unwrap(), 4);
+    assert_eq!(store.schema_version().unwrap(), 5);
     let rec = service_support::store_contract::enqueued(
         &store,
         NewJob {
@@ -386,7 +386,7 @@ fn postgres_over_tls() {
     assert_eq!(session_is_encrypted(&full), Ok(true));
     assert_eq!(
         PgStore::connect(&full).unwrap().schema_version().unwrap(),
-        4
+        5
     );
     // The same in libpq's key=value form.
     let keywords = format!(
@@ -411,7 +411,7 @@ fn postgres_over_tls() {
     assert_eq!(session_is_encrypted(&scram), Ok(true));
     assert_eq!(
         PgStore::connect(&scram).unwrap().schema_version().unwrap(),
-        4
+        5
     );
     let e = session_is_encrypted(&scram.replace(":pw@", ":wrong@")).unwrap_err();
     assert!(e.contains("password authentication failed"), "{e}");

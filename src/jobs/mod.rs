@@ -199,6 +199,8 @@ enum Outcome {
     Cancelled,
     /// Stopped by shutdown or lost lease: left `running` for a later resume.
     Interrupted,
+    /// A sweep put back in the queue until its member jobs have ended (`studies`).
+    Waiting,
 }
 
 impl Runtime {
@@ -427,16 +429,20 @@ impl Runtime {
         let keeper =
             super::lease::Keeper::start(self.store.clone(), id, worker, self.config.lease_s);
         let started = Instant::now();
-        let outcome = if is_study(&job.scene) {
+        let outcome = if is_sweep(&job.scene) {
+            self.execute_sweep(&job, worker)
+        } else if is_study(&job.scene) {
             self.execute_study(&job, worker, &cancel)
         } else {
             self.execute(&job, worker, &cancel)
         };
         self.charge(&job.owner, started.elapsed().as_secs_f64());
+        // A sweep back in the queue keeps its subscribers: they follow it until it ends.
+        let waiting = matches!(outcome, Ok(Outcome::Waiting));
         let final_status = match outcome {
             Ok(Outcome::Succeeded) => Some((JobStatus::Succeeded, None)),
             Ok(Outcome::Cancelled) => Some((JobStatus::Cancelled, None)),
-            Ok(Outcome::Interrupted) => None,
+            Ok(Outcome::Interrupted | Outcome::Waiting) => None,
             Err(problem) if problem.type_ == DISK_FULL => {
                 self.requeue_full(id, worker, &problem.detail);
                 None
@@ -460,6 +466,11 @@ impl Runtime {
                 Ok(()) => tracing::info!("job {id} {} (attempt {})", status.as_str(), job.attempt),
                 Err(e) => tracing::error!("cannot record the end of job {id}: {e}"),
             }
+            if let Some(sweep) = job.sweep {
+                // A member ended: its sweep's progress moves, and the sweep may be claimable.
+                self.refresh_sweep_progress(sweep);
+                self.notify();
+            }
             if status != JobStatus::Succeeded {
                 // No partial results left on the disk: a failed job keeps its error (in the
                 // store) and its summary, if it wrote one.
@@ -479,7 +490,9 @@ impl Runtime {
                 },
             );
         }
-        self.channels.lock().unwrap().remove(&id);
+        if !waiting {
+            self.channels.lock().unwrap().remove(&id);
+        }
     }
 
     /// Adds an attempt's worker-seconds to its owner's compute of the day (the quota of

@@ -111,10 +111,31 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
             view["links"]["parent"] = json!(format!("/jobs/{parent}"));
         }
     }
+    if let Some(sweep) = rec.sweep {
+        // A sweep's member: the sweep that created it (and cancels it with itself).
+        view["sweep"] = json!(sweep);
+        view["links"]["sweep"] = json!(format!("/jobs/{sweep}"));
+    }
+    if crate::jobs::is_sweep(&rec.scene) {
+        // Its members' jobs in member order (equal members share one); empty until the
+        // sweep was first claimed.
+        view["members"] = json!(rec.members);
+    }
     if !rec.owner.is_empty() {
         view["owner"] = json!(rec.owner);
     }
     view
+}
+
+/// A sweep's record with its progress as its members' now (they run as jobs of their own,
+/// possibly on other nodes); any other record as it is. Blocking.
+fn with_member_progress(mut rec: JobRecord, state: &AppState) -> JobRecord {
+    if crate::jobs::is_sweep(&rec.scene) && !rec.status.is_finished() {
+        if let Some(p) = state.rt.sweep_members_progress(&rec) {
+            rec.progress = p;
+        }
+    }
+    rec
 }
 
 fn json_response(status: StatusCode, body: &Value) -> Response {
@@ -329,6 +350,8 @@ pub async fn get_job(
     headers: HeaderMap,
 ) -> Result<Response, Problem> {
     let rec = load_job(&state, parse_id(&id)?).await?;
+    let st = state.clone();
+    let rec = blocking(move || Ok(with_member_progress(rec, &st))).await?;
     let view = job_view(&rec, &state);
     let body = serde_json::to_vec(&view).unwrap_or_default();
     let etag = format!("\"{}\"", &hex_sha256(&body)[..16]);
@@ -366,6 +389,16 @@ pub async fn cancel(
     })
     .await?;
     state.rt.cancel(id);
+    if crate::jobs::is_sweep(&rec.scene) && rec.status == JobStatus::Cancelled {
+        // The members the sweep created go with it (a worker that requeues a sweep whose
+        // cancel was requested meanwhile cancels them then).
+        let rt = state.rt.clone();
+        blocking(move || {
+            rt.cancel_members(id);
+            Ok(())
+        })
+        .await?;
+    }
     let status = if rec.status.is_finished() && rec.status != JobStatus::Cancelled {
         StatusCode::CONFLICT
     } else {

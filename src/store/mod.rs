@@ -115,6 +115,13 @@ pub struct JobRecord {
     /// differ) and for jobs stored before predictions were kept.
     #[serde(default)]
     pub memory: Option<MemoryPrediction>,
+    /// A sweep's member job: the sweep that created it (and is cancelled with it).
+    #[serde(default)]
+    pub sweep: Option<Uuid>,
+    /// A sweep: its members' job ids in member order (equal members share one job), empty
+    /// before the sweep first looked at them ([`Store::set_members`]).
+    #[serde(default)]
+    pub members: Vec<Uuid>,
 }
 
 /// The linear path a simulation takes and its peak memory, as predicted at submission from
@@ -236,7 +243,23 @@ pub trait Store: owners::Owners + Send + Sync + 'static {
         owner: &str,
         stored_bytes: u64,
         job: NewJob,
+    ) -> Result<Enqueued, StoreError> {
+        self.enqueue_in(owner, stored_bytes, job, None)
+    }
+    /// [`Store::enqueue_for`] of a sweep's member: the new job names `sweep` as the sweep
+    /// that created it. While a queued sweep has a member that is queued or running, and none
+    /// that failed or was cancelled, the sweep is not claimed ([`Store::claim`]).
+    fn enqueue_in(
+        &self,
+        owner: &str,
+        stored_bytes: u64,
+        job: NewJob,
+        sweep: Option<Uuid>,
     ) -> Result<Enqueued, StoreError>;
+    /// The jobs `sweep` created as its members, oldest first.
+    fn sweep_members(&self, sweep: Uuid) -> Result<Vec<JobRecord>, StoreError>;
+    /// Records a sweep's members' job ids, in member order ([`JobRecord::members`]).
+    fn set_members(&self, id: Uuid, members: &[Uuid]) -> Result<(), StoreError>;
     fn get(&self, id: Uuid) -> Result<Option<JobRecord>, StoreError>;
     /// Newest first; optional status filter; `cursor` from a previous page.
     fn list(
@@ -258,7 +281,8 @@ pub trait Store: owners::Owners + Send + Sync + 'static {
     /// Claims the oldest queued job, or a running job whose lease expired (a dead worker's:
     /// its attempt counter is incremented), for `worker` until now + `lease_s`; fair
     /// across owners: the oldest job of the owner with the fewest running, and of those the
-    /// one served least recently.
+    /// one served least recently. A queued sweep waiting for its members (see
+    /// [`Store::enqueue_in`]) is not claimable.
     /// Jobs whose last `max_attempts` attempts all died without saving a new checkpoint are
     /// failed instead of claimed (dead letter); attempts that made progress do not count.
     fn claim(

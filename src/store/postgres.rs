@@ -155,6 +155,15 @@ const MIGRATIONS: &[&str] = &[
     ALTER TABLE jobs ADD CONSTRAINT jobs_memory_prediction
         CHECK ((linear_path IS NULL) = (predicted_bytes IS NULL));
     ",
+    // Version 5: sweeps whose members are jobs. A member job names the sweep that created it
+    // (`sweep`); a sweep lists its members' job ids in member order (`members`, JSON). A
+    // queued sweep is claimable only while none of its members is queued or running, or once
+    // one of them failed or was cancelled.
+    "
+    ALTER TABLE jobs ADD COLUMN sweep uuid;
+    ALTER TABLE jobs ADD COLUMN members text;
+    CREATE INDEX jobs_sweep ON jobs (sweep) WHERE sweep IS NOT NULL;
+    ",
 ];
 
 /// Columns of a [`MeshRecord`] (plus `seq`), in the order [`raw_mesh`] reads them.
@@ -172,7 +181,8 @@ const CHANNEL: &str = "contact_sim_jobs";
 /// Columns of a [`JobRecord`] (plus `seq`), in the order [`raw_job`] reads them.
 const COLS: &str = "id, status, scene, scene_hash, idempotency_key, request_hash, created_at, \
      started_at, finished_at, step, steps, last_residual, error, cancel_requested, attempt, \
-     worker_id, lease_until, last_checkpoint_step, seq, owner, linear_path, predicted_bytes";
+     worker_id, lease_until, last_checkpoint_step, seq, owner, linear_path, predicted_bytes, \
+     sweep, members";
 
 /// The database server's time in Unix seconds.
 pub(super) const NOW_S: &str = "extract(epoch from clock_timestamp())::float8";
@@ -208,6 +218,8 @@ fn raw_job(r: &Row) -> Result<RawJob, postgres::Error> {
         owner: r.try_get(19)?,
         linear_path: r.try_get(20)?,
         predicted_bytes: r.try_get(21)?,
+        sweep: r.try_get::<_, Option<Uuid>>(22)?.map(|s| s.to_string()),
+        members: r.try_get(23)?,
     })
 }
 
@@ -534,7 +546,11 @@ impl PgStore {
                                 GROUP BY owner) r ON r.owner = j.owner
                      LEFT JOIN owner_turns t ON t.owner = j.owner
                      WHERE j.status IN ('queued', 'running')
-                       AND ((j.status = 'queued' AND NOT j.cancel_requested)
+                       AND ((j.status = 'queued' AND NOT j.cancel_requested
+                             AND (NOT EXISTS (SELECT 1 FROM jobs m WHERE m.sweep = j.id
+                                              AND m.status IN ('queued', 'running'))
+                                  OR EXISTS (SELECT 1 FROM jobs m WHERE m.sweep = j.id
+                                             AND m.status IN ('failed', 'cancelled'))))
                             OR (j.status = 'running' AND COALESCE(j.lease_until, 0) < {NOW_S}))
                      ORDER BY COALESCE(r.n, 0), COALESCE(t.last_claim, 0), j.seq LIMIT 1
                      FOR UPDATE OF j SKIP LOCKED"
@@ -612,11 +628,12 @@ impl Store for PgStore {
     /// As [`super::sqlite::SqliteStore`]'s: one transaction looks up the idempotency key
     /// and inserts; a concurrent insert with the same key (unique constraint) is answered
     /// with the job that won. Notifies the worker nodes at commit.
-    fn enqueue_for(
+    fn enqueue_in(
         &self,
         owner: &str,
         stored_bytes: u64,
         job: NewJob,
+        sweep: Option<Uuid>,
     ) -> Result<Enqueued, StoreError> {
         let scene = json_text(&job.scene)?;
         let steps = to_i64(job.steps, "steps")?;
@@ -652,9 +669,9 @@ impl Store for PgStore {
                     format!(
                         "INSERT INTO jobs (id, status, scene, scene_hash, idempotency_key,
                                            request_hash, created_at, steps, mesh, owner,
-                                           stored_bytes, linear_path, predicted_bytes)
+                                           stored_bytes, linear_path, predicted_bytes, sweep)
                          VALUES ($1, 'queued', $2, $3, $4, $5, {NOW_S}, $6, $7, $8, $9, $10,
-                                 $11)
+                                 $11, $12)
                          ON CONFLICT (owner, idempotency_key) DO NOTHING
                          RETURNING {COLS}"
                     )
@@ -671,6 +688,7 @@ impl Store for PgStore {
                         &stored_bytes,
                         &linear_path,
                         &predicted_bytes,
+                        &sweep,
                     ],
                 )
                 .map_err(classify)?;
@@ -703,6 +721,30 @@ impl Store for PgStore {
         } else {
             Enqueued::KeyConflict(record)
         })
+    }
+
+    fn sweep_members(&self, sweep: Uuid) -> Result<Vec<JobRecord>, StoreError> {
+        let raws = self.read(|c| {
+            c.query(
+                format!("SELECT {COLS} FROM jobs WHERE sweep = $1 ORDER BY seq").as_str(),
+                &[&sweep],
+            )?
+            .iter()
+            .map(raw_job)
+            .collect::<Result<Vec<_>, _>>()
+        })?;
+        raws.into_iter().map(RawJob::into_record).collect()
+    }
+
+    fn set_members(&self, id: Uuid, members: &[Uuid]) -> Result<(), StoreError> {
+        let members = json_text(&serde_json::json!(members))?;
+        self.exec(|c| {
+            c.execute(
+                "UPDATE jobs SET members = $2 WHERE id = $1",
+                &[&id, &members],
+            )
+        })?;
+        Ok(())
     }
 
     fn get(&self, id: Uuid) -> Result<Option<JobRecord>, StoreError> {

@@ -88,6 +88,8 @@ pub(super) struct RawJob {
     pub(super) owner: String,
     pub(super) linear_path: Option<String>,
     pub(super) predicted_bytes: Option<i64>,
+    pub(super) sweep: Option<String>,
+    pub(super) members: Option<String>,
 }
 
 impl RawJob {
@@ -130,6 +132,18 @@ impl RawJob {
                 )))
             }
         };
+        let sweep = match self.sweep {
+            Some(s) => Some(
+                Uuid::parse_str(&s)
+                    .map_err(|e| StoreError::Corrupt(format!("job {id}: sweep {s:?}: {e}")))?,
+            ),
+            None => None,
+        };
+        let members = match self.members {
+            Some(text) => serde_json::from_str(&text)
+                .map_err(|e| StoreError::Corrupt(format!("job {id}: members JSON: {e}")))?,
+            None => Vec::new(),
+        };
         Ok(JobRecord {
             id,
             status,
@@ -153,6 +167,8 @@ impl RawJob {
             last_checkpoint_step,
             owner: self.owner,
             memory,
+            sweep,
+            members,
         })
     }
 }

@@ -97,6 +97,10 @@ const CASES: &[(&str, Case)] = &[
         "a_requeued_job_keeps_its_checkpoint_and_attempts",
         a_requeued_job_keeps_its_checkpoint_and_attempts,
     ),
+    (
+        "a_sweep_waits_for_its_members",
+        a_sweep_waits_for_its_members,
+    ),
 ];
 
 /// Runs every case on its own fixture from `fresh` (given the case's name) and fails naming
@@ -1146,4 +1150,62 @@ fn a_requeued_job_keeps_its_checkpoint_and_attempts(f: &Fixture) {
     assert_eq!(rec.status, JobStatus::Cancelled);
     assert!(rec.finished_at.is_some());
     assert!(store.claim("w", 60.0, 1).unwrap().is_none());
+}
+
+/// A sweep requeued with members queued or running is not claimed until they have ended, or
+/// until one of them failed; its members name it, and it lists them.
+fn a_sweep_waits_for_its_members(f: &Fixture) {
+    let store = &*f.store;
+    let sweep = enqueue(store, 1);
+    let claimed = store.claim("w", 60.0, 3).unwrap().unwrap();
+    assert_eq!(claimed.id, sweep.id);
+    let member = |n: usize| match store.enqueue_in("", 0, new_job(n), Some(sweep.id)).unwrap() {
+        Enqueued::New(j) => j,
+        other => panic!("expected New, got {other:?}"),
+    };
+    let (a, b) = (member(2), member(3));
+    assert_eq!(a.sweep, Some(sweep.id));
+    assert_eq!(
+        ids_of(&store.sweep_members(sweep.id).unwrap()),
+        vec![a.id, b.id]
+    );
+    assert!(store.sweep_members(a.id).unwrap().is_empty());
+    store.set_members(sweep.id, &[a.id, b.id, a.id]).unwrap();
+    assert!(store.requeue(sweep.id, "w").unwrap());
+    let back = store.get(sweep.id).unwrap().unwrap();
+    assert_eq!(back.status, JobStatus::Queued);
+    assert_eq!(back.members, vec![a.id, b.id, a.id]);
+    assert_eq!(back.attempt, claimed.attempt - 1);
+    // The members are claimed, oldest first; the sweep not while one of them is unfinished.
+    assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, a.id);
+    assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, b.id);
+    assert!(store.claim("w", 60.0, 3).unwrap().is_none());
+    store.finish(a.id, JobStatus::Succeeded, None).unwrap();
+    assert!(store.claim("w", 60.0, 3).unwrap().is_none());
+    store.finish(b.id, JobStatus::Succeeded, None).unwrap();
+    assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, sweep.id);
+    // A failed member makes its sweep claimable while others still run.
+    let other = enqueue(store, 4);
+    assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, other.id);
+    let (c, d) = (
+        match store.enqueue_in("", 0, new_job(5), Some(other.id)).unwrap() {
+            Enqueued::New(j) => j,
+            e => panic!("{e:?}"),
+        },
+        match store.enqueue_in("", 0, new_job(6), Some(other.id)).unwrap() {
+            Enqueued::New(j) => j,
+            e => panic!("{e:?}"),
+        },
+    );
+    assert!(store.requeue(other.id, "w").unwrap());
+    assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, c.id);
+    assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, d.id);
+    store
+        .finish(
+            c.id,
+            JobStatus::Failed,
+            Some(serde_json::json!({"title": "x"})),
+        )
+        .unwrap();
+    assert_eq!(store.claim("w", 60.0, 3).unwrap().unwrap().id, other.id);
 }

@@ -619,7 +619,8 @@ def test_a_sweep_as_a_dataframe(client: Client) -> None:
     scene["friction"] = {"law": "tresca", "g": 1}
     scene["solver"] = {"linear": "direct"}
     done = dict(scene, friction={"law": "tresca", "g": 0.05})
-    one = client.submit(done).wait(progress=False, timeout=60).summary()
+    first = client.submit(done).wait(progress=False, timeout=60)
+    one = first.summary()
     df = client.sweep(
         scene, {"/friction/g": [0.05, 1, 2], "/damage/kappa": [0.5, 0.1]}, progress=False, timeout=60
     )
@@ -629,6 +630,9 @@ def test_a_sweep_as_a_dataframe(client: Client) -> None:
     assert list(df["cached"]) == [True, False, False, False, False, False]
     assert df.attrs["computed"] == 5 and df.attrs["mode"] == "grid"
     assert df["w_V"][0] == one["final"]["w_V"] and df["slip_nodes"][0] > 0
+    # Every member is a job: the one taken is the earlier job, the others are the sweep's.
+    assert df["job"][0] == first.id
+    assert client.job(df["job"][1]).resource["links"]["sweep"] == f"/jobs/{df.attrs['job']}"
     job = client.job(df.attrs["job"])
     assert job.sweep_table().equals(df)
     with pytest.raises(ApiError) as e:

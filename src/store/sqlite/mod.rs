@@ -243,6 +243,64 @@ const MIGRATIONS: &[&str] = &[
     CREATE INDEX jobs_mesh ON jobs (mesh) WHERE mesh IS NOT NULL;
     CREATE INDEX jobs_owner_status ON jobs (owner, status, seq);
     ",
+    // Version 6: sweeps whose members are jobs. A member job names the sweep that created it
+    // (`sweep`); a sweep lists its members' job ids in member order (`members`, JSON). A
+    // queued sweep is claimable only while none of its members is queued or running, or once
+    // one of them failed or was cancelled. Rebuilt so that the checkpoint blob stays last.
+    "
+    CREATE TABLE jobs_v6 (
+        id               TEXT PRIMARY KEY NOT NULL,
+        seq              INTEGER NOT NULL UNIQUE,
+        status           TEXT NOT NULL
+                         CHECK (status IN ('queued', 'running', 'succeeded', 'failed', 'cancelled')),
+        scene            TEXT NOT NULL,
+        scene_hash       TEXT NOT NULL,
+        owner            TEXT NOT NULL DEFAULT '',
+        idempotency_key  TEXT,
+        request_hash     TEXT,
+        created_at       REAL NOT NULL,
+        started_at       REAL,
+        finished_at      REAL,
+        step             INTEGER NOT NULL DEFAULT 0,
+        steps            INTEGER NOT NULL DEFAULT 0,
+        last_residual    REAL,
+        error            TEXT,
+        cancel_requested INTEGER NOT NULL DEFAULT 0,
+        attempt          INTEGER NOT NULL DEFAULT 0,
+        worker           TEXT,
+        lease_until      REAL,
+        checkpoint_step  INTEGER,
+        claim_step       INTEGER,
+        stalls           INTEGER NOT NULL DEFAULT 0,
+        mesh             TEXT,
+        stored_bytes     INTEGER NOT NULL DEFAULT 0,
+        linear_path      TEXT CHECK (linear_path IN ('direct', 'multigrid')),
+        predicted_bytes  INTEGER CHECK (predicted_bytes >= 0),
+        sweep            TEXT,
+        members          TEXT,
+        checkpoint       BLOB,
+        UNIQUE (owner, idempotency_key),
+        CHECK ((linear_path IS NULL) = (predicted_bytes IS NULL))
+    );
+    INSERT INTO jobs_v6 (id, seq, status, scene, scene_hash, owner, idempotency_key,
+                         request_hash, created_at, started_at, finished_at, step, steps,
+                         last_residual, error, cancel_requested, attempt, worker, lease_until,
+                         checkpoint_step, claim_step, stalls, mesh, stored_bytes, linear_path,
+                         predicted_bytes, checkpoint)
+        SELECT id, seq, status, scene, scene_hash, owner, idempotency_key,
+               request_hash, created_at, started_at, finished_at, step, steps,
+               last_residual, error, cancel_requested, attempt, worker, lease_until,
+               checkpoint_step, claim_step, stalls, mesh, stored_bytes, linear_path,
+               predicted_bytes, checkpoint
+        FROM jobs;
+    DROP TABLE jobs;
+    ALTER TABLE jobs_v6 RENAME TO jobs;
+    CREATE INDEX jobs_status_seq ON jobs (status, seq);
+    CREATE INDEX jobs_scene_hash ON jobs (scene_hash);
+    CREATE INDEX jobs_mesh ON jobs (mesh) WHERE mesh IS NOT NULL;
+    CREATE INDEX jobs_owner_status ON jobs (owner, status, seq);
+    CREATE INDEX jobs_sweep ON jobs (sweep) WHERE sweep IS NOT NULL;
+    ",
 ];
 
 /// Columns of a [`MeshRecord`] (plus `seq`), in the order [`RawMesh::from_row`] reads them.
@@ -252,7 +310,8 @@ const MESH_COLS: &str = "id, bytes, created_at, summary, seq";
 /// The checkpoint blob is deliberately absent.
 const COLS: &str = "id, status, scene, scene_hash, idempotency_key, request_hash, created_at, \
      started_at, finished_at, step, steps, last_residual, error, cancel_requested, attempt, \
-     worker, lease_until, checkpoint_step, seq, owner, linear_path, predicted_bytes";
+     worker, lease_until, checkpoint_step, seq, owner, linear_path, predicted_bytes, sweep, \
+     members";
 
 impl From<rusqlite::Error> for StoreError {
     fn from(e: rusqlite::Error) -> StoreError {
@@ -314,6 +373,8 @@ impl RawJob {
             owner: r.get(19)?,
             linear_path: r.get(20)?,
             predicted_bytes: r.get(21)?,
+            sweep: r.get(22)?,
+            members: r.get(23)?,
         })
     }
 }
@@ -446,7 +507,11 @@ impl SqliteStore {
                                 WHERE status = 'running' AND COALESCE(lease_until, 0) >= ?1
                                 GROUP BY owner) r ON r.owner = j.owner
                      LEFT JOIN owner_turns t ON t.owner = j.owner
-                     WHERE (j.status = 'queued' AND j.cancel_requested = 0)
+                     WHERE (j.status = 'queued' AND j.cancel_requested = 0
+                            AND (NOT EXISTS (SELECT 1 FROM jobs m WHERE m.sweep = j.id
+                                             AND m.status IN ('queued', 'running'))
+                                 OR EXISTS (SELECT 1 FROM jobs m WHERE m.sweep = j.id
+                                            AND m.status IN ('failed', 'cancelled'))))
                         OR (j.status = 'running' AND COALESCE(j.lease_until, 0) < ?1)
                      ORDER BY COALESCE(r.n, 0), COALESCE(t.last_claim, 0), j.seq LIMIT 1",
                     params![now],
@@ -598,11 +663,12 @@ impl Store for SqliteStore {
     /// a different request; the API answers 409/422). The look-up and the insert share one
     /// immediate transaction, so two concurrent submissions with the same key cannot both
     /// insert (the UNIQUE constraint would stop the second one anyway).
-    fn enqueue_for(
+    fn enqueue_in(
         &self,
         owner: &str,
         stored_bytes: u64,
         job: NewJob,
+        sweep: Option<Uuid>,
     ) -> Result<Enqueued, StoreError> {
         let scene = json_text(&job.scene)?;
         let steps = to_i64(job.steps, "steps")?;
@@ -639,8 +705,9 @@ impl Store for SqliteStore {
         tx.execute(
             "INSERT INTO jobs (id, seq, status, scene, scene_hash, idempotency_key, request_hash,
                                created_at, step, steps, cancel_requested, attempt, mesh, owner,
-                               stored_bytes, linear_path, predicted_bytes)
-             VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6, ?7, 0, ?8, 0, 0, ?9, ?10, ?11, ?12, ?13)",
+                               stored_bytes, linear_path, predicted_bytes, sweep)
+             VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6, ?7, 0, ?8, 0, 0, ?9, ?10, ?11, ?12, ?13,
+                     ?14)",
             params![
                 id.to_string(),
                 seq,
@@ -654,13 +721,34 @@ impl Store for SqliteStore {
                 owner,
                 stored_bytes,
                 linear_path,
-                predicted_bytes
+                predicted_bytes,
+                sweep.map(|s| s.to_string())
             ],
         )?;
         let record = select_by_id(&tx, id)?
             .ok_or_else(|| StoreError::Db(format!("job {id} missing right after insert")))?;
         tx.commit()?;
         Ok(Enqueued::New(record))
+    }
+
+    fn sweep_members(&self, sweep: Uuid) -> Result<Vec<JobRecord>, StoreError> {
+        let conn = self.lock();
+        let mut stmt = conn.prepare_cached(&format!(
+            "SELECT {COLS} FROM jobs WHERE sweep = ?1 ORDER BY seq"
+        ))?;
+        let raws: Vec<RawJob> = stmt
+            .query_map(params![sweep.to_string()], RawJob::from_row)?
+            .collect::<rusqlite::Result<_>>()?;
+        raws.into_iter().map(RawJob::into_record).collect()
+    }
+
+    fn set_members(&self, id: Uuid, members: &[Uuid]) -> Result<(), StoreError> {
+        let members = json_text(&serde_json::json!(members))?;
+        self.lock().execute(
+            "UPDATE jobs SET members = ?2 WHERE id = ?1",
+            params![id.to_string(), members],
+        )?;
+        Ok(())
     }
 
     /// The full record (without the checkpoint blob), None if absent. Progress comes from

@@ -294,15 +294,17 @@ class Client:
         progress: bool = True,
         timeout: Optional[float] = None,
     ) -> "pandas.DataFrame":
-        """Runs a parameter sweep as one job and returns its table as a DataFrame (needs the
+        """Runs a parameter sweep (a job whose members run as jobs of their own), waits, and
+        returns its table as a DataFrame (needs the
         pandas extra): ``scene`` (a preset name or a scene document) with the values of
         ``vary`` (JSON pointers into the scene, e.g. ``{"/friction/g": [0.5, 1, 2],
         "/damage/kappa": [0.1, 0.5]}``) substituted, every combination (``mode="grid"``, the
         first pointer slowest) or the i-th values together (``"zip"``). One row per member:
         a column per pointer, ``w_V``, ``u_V``, ``zeta_L2``, ``zeta_min`` (at T),
         ``min_zeta`` (over the run), ``slip_nodes``, ``max_slip_speed`` (at T), ``steps``,
-        ``wall_s``, ``cached`` (taken from an earlier job of the same scene). ``attrs`` has
-        the job's id (``job``) and the sweep's ``name``, ``mode`` and ``computed``. A bad
+        ``wall_s``, ``cached`` (taken from an earlier job of the same scene), ``job`` (the
+        member's job id). ``attrs`` has the sweep's job id (``job``) and the sweep's
+        ``name``, ``mode`` and ``computed``. A bad
         pointer or value raises :class:`ApiError` 422 at ``/sweep/vary/<pointer>``."""
         sweep: Dict[str, Any] = {
             "scene": scene if isinstance(scene, str) else dict(scene),

@@ -283,19 +283,21 @@ impl SweepSpec {
             })
     }
 
-    /// Every member against `limits` (alone: members run one after another), the steps of
-    /// all together against the step limit: the first that does not fit, or the total steps
-    /// and the largest member.
+    /// Every member against `limits` as a job of its own (a service runs each member as one:
+    /// nodes, memory and the steps it stores), the steps of all together against the step
+    /// limit: the first that does not fit, or the total steps and the largest member.
     pub fn admit(&self, limits: &Limits) -> Result<(usize, Fit), LimitError> {
         let per_run = Limits {
-            max_stored_bytes: None,
             max_steps: None,
             ..*limits
         };
         let at = Pointers {
             mesh: self.size_pointer(&["/mesh", "/domain"]),
             steps: self.size_pointer(&["/time"]),
-            output: String::new(),
+            output: match self.size_pointer(&["/output"]) {
+                p if p.contains("/vary/") => p,
+                _ => format!("{}/scene/output", self.at),
+            },
             solver: None,
         };
         let mut largest: Option<Fit> = None;
@@ -365,6 +367,10 @@ pub struct SweepRow {
     pub wall_s: f64,
     /// Taken from an earlier computation, not computed by this sweep.
     pub cached: bool,
+    /// The id of the job the row's figures come from, when the member ran as a job of the
+    /// service ([`assemble`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub job: Option<String>,
 }
 
 /// The quantities of a row that a plot can show.
@@ -418,6 +424,7 @@ impl SweepRow {
             wall_s: summary["timing"]["solve_s"].as_f64().unwrap_or(0.0)
                 + summary["timing"]["setup_s"].as_f64().unwrap_or(0.0),
             cached: false,
+            job: None,
         })
     }
 
@@ -454,6 +461,58 @@ pub struct SweepResult {
 /// An earlier computation of a member's scene, if the caller knows one: its summary and its
 /// state after the last step.
 pub type Known<'a> = dyn Fn(&Value) -> Option<(Value, State)> + 'a;
+
+/// One member as computed elsewhere (a job of its own): the run's summary and last state,
+/// whether this sweep computed it (false: taken from an earlier computation) and the id of
+/// the job it comes from.
+pub struct Computed {
+    pub summary: Value,
+    pub state: State,
+    pub computed: bool,
+    pub job: String,
+}
+
+/// The table of a sweep whose members ran elsewhere, one [`Computed`] per member in member
+/// order (equal members may share a job: a repeated job is counted as computed once, and
+/// its later rows are `cached`). A summary without the figures of a row is an error naming
+/// the member.
+pub fn assemble(
+    spec: &SweepSpec,
+    members: Vec<Computed>,
+    seconds: f64,
+) -> Result<SweepResult, String> {
+    let mut rows = Vec::with_capacity(members.len());
+    let mut seen: Vec<String> = Vec::new();
+    for (i, (m, c)) in spec.members.iter().zip(members).enumerate() {
+        let mut row = SweepRow::from_run(&c.summary, &c.state, m.problem.dim())
+            .map_err(|e| format!("member {i} ({}): {e}", spec.describe(m)))?;
+        row.cached = !c.computed || seen.contains(&c.job);
+        seen.push(c.job.clone());
+        row.member = i;
+        row.values = spec
+            .vary
+            .iter()
+            .zip(&m.values)
+            .map(|((p, _), v)| (p.clone(), v.clone()))
+            .collect();
+        row.job = Some(c.job);
+        rows.push(row);
+    }
+    let computed = rows.iter().filter(|r| !r.cached).count();
+    Ok(SweepResult {
+        kind: "sweep".into(),
+        name: spec.name.clone(),
+        mode: spec.mode,
+        vary: spec
+            .vary
+            .iter()
+            .map(|(p, v)| json!({"pointer": p, "values": v}))
+            .collect(),
+        rows,
+        computed,
+        seconds,
+    })
+}
 
 /// Runs the members one after another (each on all of `exec`'s threads), taking a member
 /// from `known` or from an equal earlier member when it can; `progress(done, total)` after

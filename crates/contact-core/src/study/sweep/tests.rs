@@ -116,6 +116,15 @@ fn the_largest_member_decides_admission() {
         })
         .unwrap_err();
     assert_eq!((steps.needed, steps.allowed), (8, 7));
+    // Each member is held to the stored-bytes limit of a job of its own (its output).
+    let stored = spec
+        .admit(&Limits {
+            max_stored_bytes: Some(1),
+            ..Limits::default()
+        })
+        .unwrap_err();
+    assert_eq!(stored.pointer, "/sweep/scene/output");
+    assert!(spec.admit(&Limits::default()).is_ok());
 }
 
 /// A 3 × 2 sweep gives the rows of six single runs, bit for bit; an equal member is computed
