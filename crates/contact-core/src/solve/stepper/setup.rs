@@ -4,7 +4,7 @@
 //! reads it.
 
 use super::{DamagePart, Simulation, State, VelocityPart};
-use crate::fem::{assembly, DofMap, Geometry};
+use crate::fem::{assembly, DofMap, Geometry, NodeCells};
 use crate::laws::Tensor;
 use crate::linalg::{Csr, LinearPath};
 use crate::mesh::Mesh;
@@ -157,6 +157,7 @@ impl<const D: usize> Simulation<D> {
             damage,
             eps: vec![Tensor::zeros(); nt],
             b: vec![Tensor::zeros(); nt],
+            cells: NodeCells::new(&mesh),
             setup_seconds: prepared_seconds + start.elapsed().as_secs_f64(),
             linear,
             predicted_bytes,
