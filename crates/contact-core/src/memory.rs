@@ -183,7 +183,11 @@ fn terms(c: &Counts) -> Terms {
     let n = c.d * c.nodes;
     let nnz_k = c.d * c.d * c.nodes * c.stencil;
     let nnz_h = c.nodes * c.stencil;
-    let per_cell = 8.0 * ((c.d + 1.0) + (c.d + 1.0) * c.d + 1.0 + 2.0 * c.d * c.d);
+    // Vertices, gradients, measure, ε and B per cell, and the cells around each node that
+    // the step's element scatters gather over (fem::NodeCells: a u32 per cell and vertex,
+    // an offset per node).
+    let per_cell =
+        8.0 * ((c.d + 1.0) + (c.d + 1.0) * c.d + 1.0 + 2.0 * c.d * c.d) + 4.0 * (c.d + 1.0);
     // Element matrices (D(D+1))² per cell as (row, col, value) triplets while assembling,
     // 24 bytes each, beside their (col, value) copy bucketed by row in Csr::from_triplets.
     let assembly = 40.0 * c.cells * (c.d * (c.d + 1.0)).powi(2);
@@ -194,7 +198,7 @@ fn terms(c: &Counts) -> Terms {
     Terms {
         n,
         nnz_k,
-        base: 8.0 * c.d * c.nodes + per_cell * c.cells + vectors + operators,
+        base: 8.0 * (c.d + 1.0) * c.nodes + per_cell * c.cells + vectors + operators,
         assembly,
     }
 }

@@ -13,6 +13,7 @@
 
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
+use crate::linalg::par;
 use crate::mesh::Mesh;
 use crate::problem::{BoundaryKind, BoundaryPart};
 
@@ -175,12 +176,14 @@ impl<const D: usize> DofMap<D> {
 
     /// Scatter a free-DOF vector into a global Cartesian nodal vector (fixed DOFs zero).
     pub fn to_global(&self, free: &[f64], global: &mut [f64]) {
-        for (g, s) in global.iter_mut().zip(&self.slot) {
-            *g = match *s {
-                Slot::Free(f) => free[f],
-                Slot::Fixed => 0.0,
-            };
-        }
+        par::for_each_chunk_mut(global, par::VECTOR_CHUNK, |start, chunk| {
+            for (g, s) in chunk.iter_mut().zip(&self.slot[start..]) {
+                *g = match *s {
+                    Slot::Free(f) => free[f],
+                    Slot::Fixed => 0.0,
+                };
+            }
+        });
         for fr in &self.frames {
             let local: [f64; D] = std::array::from_fn(|r| global[D * fr.node + r]);
             for c in 0..D {

@@ -9,7 +9,7 @@
 
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
-use super::Geometry;
+use super::{Geometry, NodeCells};
 use crate::laws::Tensor;
 use crate::linalg::par;
 use crate::mesh::Mesh;
@@ -251,44 +251,44 @@ pub fn find_non_finite<const D: usize>(
     None
 }
 
-/// Adds −(B_T, ε(ψ_a e_c)) = −|T| (B_T ∇ψ_a)_c for per-element stresses `b` (B symmetric).
+/// Adds −(B_T, ε(ψ_a e_c)) = −|T| (B_T ∇ψ_a)_c for per-element stresses `b` (B symmetric,
+/// one per cell) into `out` (D per node, interleaved): gathered node by node over `cells`
+/// ([`NodeCells::gather`]), each node's cells subtracted in cell order, so the same bits as
+/// the loop over cells on any thread count.
 pub fn add_stress_divergence<const D: usize>(
-    mesh: &Mesh<D>,
+    cells: &NodeCells,
     geo: &Geometry<D>,
     b: &[Tensor<D>],
     out: &mut [f64],
 ) {
-    for (e, cell) in mesh.cells().enumerate() {
-        let (s, vol) = (&b[e], geo.measure[e]);
-        for (a, &n) in cell.iter().enumerate() {
-            let g = geo.grads(e)[a];
-            for c in 0..D {
-                let mut v = 0.0;
-                for k in 0..D {
-                    v += s[(c, k)] * g[k];
-                }
-                out[D * n + c] -= vol * v;
+    cells.gather(out, D, |e, a, out| {
+        let (s, vol, g) = (&b[e], geo.measure[e], geo.grads(e)[a]);
+        for c in 0..D {
+            let mut v = 0.0;
+            for k in 0..D {
+                v += s[(c, k)] * g[k];
             }
+            out[c] -= vol * v;
         }
-    }
+    });
 }
 
 /// F_i = ∫_Ω φ_T(ζ) ψ_i by the cell rule of [`cell_rule`] (triangles: the 3 edge
 /// midpoints, weights |T|/3; tetrahedra: the 4-point rule, weights |T|/4), with ζ
 /// interpolated linearly to the points and the strain constant on T
 /// (docs/src/explanation/numerics.md#damage-source-vector). `phi(e, ζ)` is the source on element e at
-/// damage value ζ.
+/// damage value ζ; `out` has one entry per node.
 pub fn damage_source<const D: usize>(
     mesh: &Mesh<D>,
+    cells: &NodeCells,
     geo: &Geometry<D>,
     zeta: &[f64],
     phi: impl Fn(usize, f64) -> f64 + Sync,
     out: &mut [f64],
 ) {
-    out.iter_mut().for_each(|v| *v = 0.0);
-    // The source values at the points (φ reads the cell's strain) split over the pool's
-    // threads in fixed chunks of cells; the scatter then adds them in cell order, so the sum
-    // at every node is the serial one, bit for bit, whatever the thread count.
+    // The source values at the points (φ reads the cell's strain), once per point in fixed
+    // chunks of cells; each node then gathers its cells' shares in cell order, point by
+    // point: the cell loop's sums bit for bit, whatever the thread count.
     let rule = cell_rule(D);
     let q = rule.len();
     let mut at_points = vec![0.0; mesh.n_cells() * q];
@@ -310,23 +310,24 @@ pub fn damage_source<const D: usize>(
             }
         },
     );
-    for (e, (cell, f)) in mesh.cells().zip(at_points.chunks(q)).enumerate() {
+    out.iter_mut().for_each(|v| *v = 0.0);
+    cells.gather(out, 1, |e, a, out| {
+        let f = &at_points[q * e..q * (e + 1)];
         if D == 2 {
-            // Edge a's midpoint, between vertices a and a + 1.
+            // Edge p runs from vertex p to vertex p + 1: vertex a lies on edges a and a − 1,
+            // taken in increasing p.
             let w = geo.measure[e] / 3.0;
-            for (a, f) in f.iter().enumerate() {
-                let (i, j) = (cell[a], cell[(a + 1) % 3]);
-                out[i] += 0.5 * w * f;
-                out[j] += 0.5 * w * f;
+            for (p, f) in f.iter().enumerate() {
+                if p == a || (p + 1) % 3 == a {
+                    out[0] += 0.5 * w * f;
+                }
             }
         } else {
             for ((l, _), f) in rule.iter().zip(f) {
-                for (a, &n) in cell.iter().enumerate() {
-                    out[n] += l[a] * f;
-                }
+                out[0] += l[a] * f;
             }
         }
-    }
+    });
 }
 
 #[cfg(test)]
@@ -334,6 +335,104 @@ mod tests {
     use super::*;
     use crate::expr::Expr;
     use crate::problem::{MeshPattern, ScalarField, Segment, Support};
+
+    /// The element loops of [`add_stress_divergence`] and [`damage_source`] cell by cell:
+    /// their serial forms.
+    fn serial_scatters<const D: usize>(
+        mesh: &Mesh<D>,
+        geo: &Geometry<D>,
+        b: &[Tensor<D>],
+        zeta: &[f64],
+        phi: impl Fn(usize, f64) -> f64,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let mut div = vec![0.25; D * mesh.n_nodes()];
+        for (e, cell) in mesh.cells().enumerate() {
+            for (a, &n) in cell.iter().enumerate() {
+                let g = geo.grads(e)[a];
+                for c in 0..D {
+                    let mut v = 0.0;
+                    for k in 0..D {
+                        v += b[e][(c, k)] * g[k];
+                    }
+                    div[D * n + c] -= geo.measure[e] * v;
+                }
+            }
+        }
+        let rule = cell_rule(D);
+        let mut src = vec![0.0; mesh.n_nodes()];
+        for (e, cell) in mesh.cells().enumerate() {
+            let f: Vec<f64> = rule
+                .iter()
+                .map(|(l, wq)| {
+                    let z: f64 = cell.iter().enumerate().map(|(a, &n)| l[a] * zeta[n]).sum();
+                    if D == 2 {
+                        phi(e, z)
+                    } else {
+                        wq * geo.measure[e] * phi(e, z)
+                    }
+                })
+                .collect();
+            if D == 2 {
+                let w = geo.measure[e] / 3.0;
+                for (a, f) in f.iter().enumerate() {
+                    let (i, j) = (cell[a], cell[(a + 1) % 3]);
+                    src[i] += 0.5 * w * f;
+                    src[j] += 0.5 * w * f;
+                }
+            } else {
+                for ((l, _), f) in rule.iter().zip(&f) {
+                    for (a, &n) in cell.iter().enumerate() {
+                        src[n] += l[a] * f;
+                    }
+                }
+            }
+        }
+        (div, src)
+    }
+
+    /// The gathered scatters on 1, 2 and 4 threads are their serial forms bit for bit, on
+    /// data of no common scale per cell and node (another order of the sums would show).
+    fn gathers_are_the_cell_loops<const D: usize>(mesh: &Mesh<D>) {
+        use crate::linalg::par::Threads;
+        assert!(
+            mesh.n_nodes() > 3 * par::ROW_CHUNK,
+            "several chunks of nodes"
+        );
+        let geo = Geometry::new(mesh);
+        let wave = |i: usize, k: usize| ((3 * i + k) as f64).sin() * 10f64.powi((i % 7) as i32 - 3);
+        let b: Vec<Tensor<D>> = (0..mesh.n_cells())
+            .map(|e| Tensor::<D>::from_fn(|r, c| wave(e, r.min(c) * D + r.max(c))))
+            .collect();
+        let zeta: Vec<f64> = (0..mesh.n_nodes())
+            .map(|i| 0.5 + 0.5 * wave(i, 1).sin())
+            .collect();
+        let phi = |e: usize, z: f64| (1.0 - z) / (z + 0.1) - wave(e, 2);
+        let (div, src) = serial_scatters(mesh, &geo, &b, &zeta, phi);
+        let cells = NodeCells::new(mesh);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for t in [1, 2, 4] {
+            let (mut d, mut f) = (
+                vec![0.25; D * mesh.n_nodes()],
+                vec![f64::NAN; mesh.n_nodes()],
+            );
+            Threads::new(t).install(|| {
+                add_stress_divergence(&cells, &geo, &b, &mut d);
+                damage_source(mesh, &cells, &geo, &zeta, phi, &mut f);
+            });
+            assert_eq!(bits(&d), bits(&div), "(B, ε(ψ)) on {t} threads");
+            assert_eq!(bits(&f), bits(&src), "F on {t} threads");
+        }
+    }
+
+    #[test]
+    fn gathered_scatters_are_the_cell_loops_bit_for_bit_in_2d() {
+        gathers_are_the_cell_loops(&Mesh::rectangle(2.0, 1.0, 14, 9, MeshPattern::Cross));
+    }
+
+    #[test]
+    fn gathered_scatters_are_the_cell_loops_bit_for_bit_in_3d() {
+        gathers_are_the_cell_loops(&Mesh::cuboid(2.0, 1.0, 1.0, 8, 4, 4));
+    }
 
     #[test]
     fn constant_and_linear_loads_integrate_exactly() {

@@ -4,6 +4,7 @@
 pub mod assembly;
 pub mod dofs;
 pub mod element;
+pub mod incidence;
 pub mod loads;
 pub mod multilevel;
 pub mod norms;
@@ -12,3 +13,4 @@ pub mod rigid_modes;
 
 pub use dofs::{DofMap, Slot};
 pub use element::Geometry;
+pub use incidence::NodeCells;

@@ -223,6 +223,29 @@ pub fn zip_apply(y: &mut [f64], x: &[f64], f: impl Fn(f64, f64) -> f64 + Sync + 
     });
 }
 
+/// y ← x, in chunks on the pool's threads.
+pub fn copy(y: &mut [f64], x: &[f64]) {
+    assert_eq!(x.len(), y.len());
+    for_each_chunk_mut(y, VECTOR_CHUNK, |start, yc| {
+        let n = yc.len();
+        yc.copy_from_slice(&x[start..start + n]);
+    });
+}
+
+/// yᵢ ← v, in chunks on the pool's threads.
+pub fn fill(y: &mut [f64], v: f64) {
+    for_each_chunk_mut(y, VECTOR_CHUNK, |_, yc| yc.fill(v));
+}
+
+/// min aᵢ (+∞ for an empty vector).
+pub fn min(a: &[f64]) -> f64 {
+    map_ranges(a.len(), VECTOR_CHUNK, |r| {
+        a[r].iter().fold(f64::INFINITY, |m, &v| m.min(v))
+    })
+    .into_iter()
+    .fold(f64::INFINITY, f64::min)
+}
+
 /// Calls `f(segment, piece)` for the pieces of `y` between consecutive `bounds` (increasing,
 /// from 0 to `y.len()`): a split where chunks must end at given indices (node blocks).
 pub fn for_each_segment_mut(
@@ -272,12 +295,13 @@ mod tests {
     fn reductions_are_the_same_bits_for_every_thread_count() {
         let n = 5 * VECTOR_CHUNK + 123;
         let (a, b) = (vector(n, 1), vector(n, 2));
-        let one = (dot(&a, &b), max_abs(&a));
+        let one = (dot(&a, &b), max_abs(&a), min(&a));
         for t in [2, 3, 4] {
-            let many = Threads::new(t).install(|| (dot(&a, &b), max_abs(&a)));
+            let many = Threads::new(t).install(|| (dot(&a, &b), max_abs(&a), min(&a)));
             assert_eq!(one.0.to_bits(), many.0.to_bits(), "{t} threads");
-            assert_eq!(one.1, many.1);
+            assert_eq!((one.1, one.2), (many.1, many.2));
         }
+        assert_eq!(one.2, a.iter().cloned().fold(f64::INFINITY, f64::min));
         // And the chunked sum is the plain sum to rounding.
         let plain: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
         assert!((one.0 - plain).abs() <= 1e-12 * n as f64);
@@ -299,6 +323,11 @@ mod tests {
             })
         });
         assert!(y.iter().enumerate().all(|(i, &v)| v == i as f64));
+        let x = vector(n, 3);
+        Threads::new(2).install(|| copy(&mut y, &x));
+        assert_eq!(y, x);
+        Threads::new(2).install(|| fill(&mut y, 0.25));
+        assert!(y.iter().all(|&v| v == 0.25));
     }
 
     #[test]

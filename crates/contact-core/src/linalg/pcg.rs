@@ -107,7 +107,7 @@ pub fn solve(
     let mut negative_curvature = false;
     if x.iter().all(|&v| v == 0.0) {
         // A cold start: r = b, without a product.
-        r.copy_from_slice(b);
+        par::copy(r, b);
     } else {
         residual(a, b, x, r);
     }
@@ -117,7 +117,7 @@ pub fn solve(
             break;
         }
         precond.apply(r, z);
-        p.copy_from_slice(z);
+        par::copy(p, z);
         let mut rz = dot(r, z);
         while iterations < max_iterations {
             a.apply(p, q);

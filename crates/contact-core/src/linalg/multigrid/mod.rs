@@ -440,7 +440,7 @@ impl VCycle {
         let h = self.hierarchy.clone();
         if l == h.levels.len() {
             let w = &mut self.work[l];
-            w.x.copy_from_slice(&w.b);
+            par::copy(&mut w.x, &w.b);
             self.coarse.solve_in_place(&mut w.x);
             return;
         }
@@ -451,7 +451,7 @@ impl VCycle {
         };
         {
             let w = &mut self.work[l];
-            w.x.iter_mut().for_each(|v| *v = 0.0);
+            par::fill(&mut w.x, 0.0);
             let LevelWork { b, x, r, d, t } = w;
             level.smoother.smooth(a, b, x, r, d, t, true);
             // t ← b − A x, restricted into the next level's right-hand side.
@@ -472,9 +472,9 @@ impl VCycle {
 
 impl Preconditioner for VCycle {
     fn apply(&mut self, r: &[f64], z: &mut [f64]) {
-        self.work[0].b.copy_from_slice(r);
+        par::copy(&mut self.work[0].b, r);
         self.cycle(0);
-        z.copy_from_slice(&self.work[0].x);
+        par::copy(z, &self.work[0].x);
     }
 }
 

@@ -288,7 +288,7 @@ impl Chebyshev {
         let mut rho = 1.0 / sigma;
         // r = D⁻¹ (b − A x)
         if zero_start {
-            t.copy_from_slice(b);
+            par::copy(t, b);
         } else {
             a.apply(x, t);
             par::zip_apply(t, b, |t, b| b - t);

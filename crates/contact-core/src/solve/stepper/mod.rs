@@ -25,7 +25,7 @@ use super::smallness::SmallnessReport;
 use super::velocity::VelocityStep;
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::a_posteriori::{Estimator, Parts, StepData, StepEstimate};
-use crate::fem::{loads, norms, DofMap, Geometry};
+use crate::fem::{loads, norms, DofMap, Geometry, NodeCells};
 use crate::laws::constitutive::elastic_stress;
 use crate::laws::damage_source::phi;
 use crate::laws::Tensor;
@@ -124,6 +124,7 @@ struct StepInput<'a, const D: usize> {
     problem: &'a Problem,
     mesh: &'a Mesh<D>,
     geo: &'a Geometry<D>,
+    cells: &'a NodeCells,
     dofs: &'a DofMap<D>,
     settings: &'a SolverSettings,
     mass: &'a Csr,
@@ -148,13 +149,13 @@ impl VelocityPart {
     /// at t_n. A load that is not finite is reported at the formula responsible.
     fn assemble_load<const D: usize>(&mut self, s: &StepInput<D>) -> Result<(), SolveError> {
         let load = &mut self.load;
-        load.iter_mut().for_each(|v| *v = 0.0);
+        par::fill(load, 0.0);
         loads::add_body_force(s.mesh, s.geo, &s.problem.body_force, s.t, load);
         loads::add_tractions(s.mesh, &s.problem.boundary, s.t, load);
         if load.iter().any(|v| !v.is_finite()) {
             return Err(load_fault(s.problem, s.mesh, s.t, s.n));
         }
-        loads::add_stress_divergence(s.mesh, s.geo, s.b, load);
+        loads::add_stress_divergence(s.cells, s.geo, s.b, load);
         Ok(())
     }
 }
@@ -198,15 +199,14 @@ impl DamagePart {
             .source;
         loads::damage_source(
             s.mesh,
+            s.cells,
             s.geo,
             s.zeta_prev,
             |e, z| phi(&source, &s.eps[e], z),
             &mut self.f,
         );
         s.mass.mul_vec(s.zeta_prev, &mut self.g);
-        for (g, f) in self.g.iter_mut().zip(&self.f) {
-            *g = *g / s.k + f;
-        }
+        par::zip_apply(&mut self.g, &self.f, |g, f| g / s.k + f);
         if self.g.iter().all(|g| g.is_finite()) {
             return Ok(());
         }
@@ -251,6 +251,8 @@ pub struct Simulation<const D: usize = 2> {
     estimate: Option<StepEstimate>,
     /// w_{n−1} while the estimate of step n is computed (empty without an estimator).
     w_prev: Vec<f64>,
+    /// The cells around each node: the element scatters of a step gather over them.
+    cells: NodeCells,
     pub setup_seconds: f64,
     /// The linear path taken and its predicted peak bytes ([`crate::memory`]).
     pub linear: LinearPath,
@@ -360,6 +362,7 @@ impl<const D: usize> Simulation<D> {
             problem: &self.problem,
             mesh: &self.mesh,
             geo: &self.geo,
+            cells: &self.cells,
             dofs: &self.dofs,
             settings: &self.settings,
             mass: &self.mass,
@@ -405,9 +408,7 @@ impl<const D: usize> Simulation<D> {
             };
             self.estimate = Some(estimator.step(&self.problem, &self.mesh, &self.geo, &data));
         }
-        for (u, w) in self.state.u.iter_mut().zip(&self.w) {
-            *u += k * w;
-        }
+        par::zip_apply(&mut self.state.u, &self.w, |u, w| u + k * w);
         if let Some(d) = &self.damage {
             self.state.zeta.copy_from_slice(&d.next);
         }
@@ -445,12 +446,7 @@ impl<const D: usize> Simulation<D> {
             w_v: w2.sqrt(),
             u_v: u2.sqrt(),
             zeta_l2: norms::mass_norm(&self.mass, &self.state.zeta, &mut scratch),
-            zeta_min: self
-                .state
-                .zeta
-                .iter()
-                .cloned()
-                .fold(f64::INFINITY, f64::min),
+            zeta_min: par::min(&self.state.zeta),
             velocity,
             damage,
             slip_nodes: self

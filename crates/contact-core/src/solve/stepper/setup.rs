@@ -5,7 +5,7 @@
 
 use super::{DamagePart, Simulation, State, VelocityPart};
 use crate::a_posteriori::Estimator;
-use crate::fem::{assembly, DofMap, Geometry};
+use crate::fem::{assembly, DofMap, Geometry, NodeCells};
 use crate::laws::Tensor;
 use crate::linalg::{Csr, LinearPath};
 use crate::mesh::Mesh;
@@ -167,6 +167,7 @@ impl<const D: usize> Simulation<D> {
                 true => vec![0.0; D * nn],
                 false => Vec::new(),
             },
+            cells: NodeCells::new(&mesh),
             setup_seconds: prepared_seconds + start.elapsed().as_secs_f64(),
             linear,
             predicted_bytes,
