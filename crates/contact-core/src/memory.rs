@@ -61,6 +61,8 @@ struct Counts {
     geometric: bool,
     /// The boundary has a Γ3 part.
     contact: bool,
+    /// The run computes the a posteriori estimate ([`crate::a_posteriori`]).
+    estimate: bool,
     /// Nodes of the coarsest geometric level when it is a given mesh (a refined body's
     /// base); 0 when the levels go down to a few cells (generated meshes).
     coarse_nodes: f64,
@@ -92,6 +94,7 @@ fn counts(p: &Problem) -> Counts {
         cells,
         stencil: if d == 2 { 7.0 } else { 15.0 },
         damage: p.damage.is_some(),
+        estimate: p.output.estimate,
         coarse_nodes: match &p.body {
             Some(b) if b.refine > 0 => b.base.n_nodes() as f64,
             _ => 0.0,
@@ -188,6 +191,20 @@ fn terms(c: &Counts) -> Terms {
     // an offset per node).
     let per_cell =
         8.0 * ((c.d + 1.0) + (c.d + 1.0) * c.d + 1.0 + 2.0 * c.d * c.d) + 4.0 * (c.d + 1.0);
+    // The a posteriori estimate: (d + 1)/2 interior facets per cell (two cells, a normal,
+    // |F| and h_F) with the hash map that pairs them at set-up, h_T, the step's per-cell σ,
+    // ∇ζ, |ε(w)|² and eight indicators, and the cell indicators with their stored copy;
+    // w_{n−1} and the checkpoint's w per node.
+    let (estimate_cell, estimate_node) = match c.estimate {
+        true => (
+            (c.d + 1.0) / 2.0 * (32.0 + 8.0 * c.d + 60.0)
+                + 8.0
+                + 8.0 * (c.d * c.d + c.d + 9.0)
+                + 16.0,
+            16.0 * c.d,
+        ),
+        false => (0.0, 0.0),
+    };
     // Element matrices (D(D+1))² per cell as (row, col, value) triplets while assembling,
     // 24 bytes each, beside their (col, value) copy bucketed by row in Csr::from_triplets.
     let assembly = 40.0 * c.cells * (c.d * (c.d + 1.0)).powi(2);
@@ -198,7 +215,10 @@ fn terms(c: &Counts) -> Terms {
     Terms {
         n,
         nnz_k,
-        base: 8.0 * (c.d + 1.0) * c.nodes + per_cell * c.cells + vectors + operators,
+        base: (8.0 * (c.d + 1.0) + estimate_node) * c.nodes
+            + (per_cell + estimate_cell) * c.cells
+            + vectors
+            + operators,
         assembly,
     }
 }
@@ -441,6 +461,23 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_a_posteriori_estimate_is_counted_only_when_asked() {
+        let mut doc = crate::scene::presets::get("box-exp3").unwrap();
+        doc["mesh"]["h"] = serde_json::json!("1/8");
+        let plain = crate::scene::validate(&doc).unwrap();
+        let mut asked = plain.clone();
+        asked.output.estimate = true;
+        let (a, b) = (predict(&plain), predict(&asked));
+        // box-exp3 at 1/8 has 6 · 16 · 8 · 8 cells and 17 · 9 · 9 nodes; in 3D the estimate holds
+        // 2 · (32 + 24 + 60) + 8 + 8 · 21 + 16 = 424 bytes a cell and 48 a node.
+        let (cells, nodes) = (6.0 * 16.0 * 8.0 * 8.0, 17.0 * 9.0 * 9.0);
+        let extra = 424.0 * cells + 48.0 * nodes;
+        for (x, y) in [(a.direct, b.direct), (a.multigrid, b.multigrid)] {
+            assert!(((y - x) as f64 - extra).abs() < 1.0, "{x} → {y}, {extra}");
+        }
+    }
 
     #[test]
     fn byte_counts_parse_with_suffixes() {
