@@ -175,7 +175,7 @@ fn a_resumed_run_estimates_as_an_uninterrupted_one() {
     first.step().unwrap();
     let state = first.checkpoint_state();
     assert_eq!(state.w.len(), first.w.len(), "the checkpoint keeps w_n");
-    let mut resumed = Simulation::<2>::new(p, SolverSettings::default()).unwrap();
+    let mut resumed = Simulation::<2>::new(p.clone(), SolverSettings::default()).unwrap();
     resumed.restore(state);
     for r in &reports[2..] {
         let again = resumed.step().unwrap();
@@ -184,6 +184,21 @@ fn a_resumed_run_estimates_as_an_uninterrupted_one() {
     }
     let fields = resumed.fields();
     assert_eq!(fields.estimate.unwrap().len(), resumed.mesh.n_cells());
+    // From a state without w_n (a run that did not estimate): no time indicator for the
+    // first step, the spatial parts as before.
+    let mut state = first.checkpoint_state();
+    state.w.clear();
+    let mut blind = Simulation::<2>::new(p, SolverSettings::default()).unwrap();
+    blind.restore(state);
+    let (e, whole) = (
+        blind.step().unwrap().estimate.unwrap(),
+        reports[2].estimate.unwrap(),
+    );
+    assert_eq!(e.velocity.time, 0.0);
+    assert_eq!(
+        (e.velocity.jump, e.velocity.traction, e.damage),
+        (whole.velocity.jump, whole.velocity.traction, whole.damage)
+    );
 }
 
 #[test]

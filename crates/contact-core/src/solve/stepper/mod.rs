@@ -249,8 +249,11 @@ pub struct Simulation<const D: usize = 2> {
     /// indicators of the last step.
     estimator: Option<Box<Estimator<D>>>,
     estimate: Option<StepEstimate>,
-    /// w_{n−1} while the estimate of step n is computed (empty without an estimator).
+    /// w_{n−1} while the estimate of step n is computed (empty without an estimator), and
+    /// whether `w` holds the last step's velocity (not before the first step, nor after a
+    /// restore from a state without it): the time indicator is 0 where it does not.
     w_prev: Vec<f64>,
+    w_known: bool,
     /// The cells around each node: the element scatters of a step gather over them.
     cells: NodeCells,
     pub setup_seconds: f64,
@@ -308,7 +311,8 @@ impl<const D: usize> Simulation<D> {
         }
         state.damage_before.clear();
         let w = std::mem::take(&mut state.w);
-        if w.len() == self.w.len() {
+        self.w_known = w.len() == self.w.len();
+        if self.w_known {
             self.w = w;
         }
         self.state = state;
@@ -400,13 +404,14 @@ impl<const D: usize> Simulation<D> {
                 k,
                 m_a: self.smallness.m_a,
                 w: &self.w,
-                w_prev: (n > 1).then_some(self.w_prev.as_slice()),
+                w_prev: self.w_known.then_some(self.w_prev.as_slice()),
                 b: &self.b,
                 eps: &self.eps,
                 zeta_prev: &self.state.zeta,
                 zeta,
             };
             self.estimate = Some(estimator.step(&self.problem, &self.mesh, &self.geo, &data));
+            self.w_known = true;
         }
         par::zip_apply(&mut self.state.u, &self.w, |u, w| u + k * w);
         if let Some(d) = &self.damage {

@@ -167,6 +167,7 @@ impl<const D: usize> Simulation<D> {
                 true => vec![0.0; D * nn],
                 false => Vec::new(),
             },
+            w_known: false,
             cells: NodeCells::new(&mesh),
             setup_seconds: prepared_seconds + start.elapsed().as_secs_f64(),
             linear,
