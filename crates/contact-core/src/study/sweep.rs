@@ -273,6 +273,32 @@ fn member_errors(
 }
 
 impl SweepSpec {
+    /// A member's varied values by pointer: its row's `values`.
+    fn values_of(&self, m: &Member) -> Map<String, Value> {
+        self.vary
+            .iter()
+            .zip(&m.values)
+            .map(|((p, _), v)| (p.clone(), v.clone()))
+            .collect()
+    }
+
+    /// The sweep's result from its rows, wherever its members ran.
+    fn result(&self, rows: Vec<SweepRow>, computed: usize, seconds: f64) -> SweepResult {
+        SweepResult {
+            kind: "sweep".into(),
+            name: self.name.clone(),
+            mode: self.mode,
+            vary: self
+                .vary
+                .iter()
+                .map(|(p, v)| json!({"pointer": p, "values": v}))
+                .collect(),
+            rows,
+            computed,
+            seconds,
+        }
+    }
+
     /// The pointer a member's size is set at: a varied mesh or time field, else the scene.
     fn size_pointer(&self, prefixes: &[&str]) -> String {
         self.vary
@@ -489,29 +515,12 @@ pub fn assemble(
         row.cached = !c.computed || seen.contains(&c.job);
         seen.push(c.job.clone());
         row.member = i;
-        row.values = spec
-            .vary
-            .iter()
-            .zip(&m.values)
-            .map(|((p, _), v)| (p.clone(), v.clone()))
-            .collect();
+        row.values = spec.values_of(m);
         row.job = Some(c.job);
         rows.push(row);
     }
     let computed = rows.iter().filter(|r| !r.cached).count();
-    Ok(SweepResult {
-        kind: "sweep".into(),
-        name: spec.name.clone(),
-        mode: spec.mode,
-        vary: spec
-            .vary
-            .iter()
-            .map(|(p, v)| json!({"pointer": p, "values": v}))
-            .collect(),
-        rows,
-        computed,
-        seconds,
-    })
+    Ok(spec.result(rows, computed, seconds))
 }
 
 /// Runs the members one after another (each on all of `exec`'s threads), taking a member
@@ -567,27 +576,10 @@ pub fn run(
             done += m.problem.steps;
         }
         row.member = i;
-        row.values = spec
-            .vary
-            .iter()
-            .zip(&m.values)
-            .map(|((p, _), v)| (p.clone(), v.clone()))
-            .collect();
+        row.values = spec.values_of(m);
         rows.push(row);
     }
-    Ok(SweepResult {
-        kind: "sweep".into(),
-        name: spec.name.clone(),
-        mode: spec.mode,
-        vary: spec
-            .vary
-            .iter()
-            .map(|(p, v)| json!({"pointer": p, "values": v}))
-            .collect(),
-        rows,
-        computed,
-        seconds: started.elapsed().as_secs_f64(),
-    })
+    Ok(spec.result(rows, computed, started.elapsed().as_secs_f64()))
 }
 
 /// One member's run: its summary (JSON) and its state after the last step.
