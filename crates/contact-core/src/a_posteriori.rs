@@ -76,10 +76,13 @@ pub struct DamageParts {
     pub time: f64,
 }
 
-/// One step's estimate: the cell indicators η_T and the parts.
+/// One step's estimate: the cell indicators η_T, their spatial velocity parts (the square
+/// root of the element, jump, traction and friction squares: what an adaptive study marks
+/// by, since refining the mesh does not reduce the time part) and the parts.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepEstimate {
     pub cells: Vec<f64>,
+    pub velocity: Vec<f64>,
     pub parts: Parts,
 }
 
@@ -439,6 +442,10 @@ fn finish<const D: usize>(cells: &[Cell<D>], damage: bool) -> StepEstimate {
         cells: cells
             .iter()
             .map(|c| c.parts.iter().sum::<f64>().sqrt())
+            .collect(),
+        velocity: cells
+            .iter()
+            .map(|c| c.parts[..4].iter().sum::<f64>().sqrt())
             .collect(),
         parts: Parts::from_squares(&sum, w_v2, damage),
     }

@@ -23,6 +23,7 @@
 pub mod any;
 pub mod bisect;
 pub mod cuboid;
+pub mod export;
 pub mod import;
 pub mod polygon;
 pub mod quality;

@@ -14,6 +14,7 @@
 //! - [`target`] runs a study with a target error instead of a ladder: pilot levels, the
 //!   [`plan`] (error and cost models, the cheapest (h, k)), the chosen run and its check.
 
+pub mod adapt;
 pub mod compare;
 pub mod format;
 pub mod levels;

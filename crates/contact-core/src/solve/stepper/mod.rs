@@ -322,6 +322,11 @@ impl<const D: usize> Simulation<D> {
         self.state.step >= self.problem.steps
     }
 
+    /// The a posteriori estimate of the last step, when the scene's output asks for one.
+    pub fn step_estimate(&self) -> Option<&StepEstimate> {
+        self.estimate.as_ref()
+    }
+
     /// Advances one time step of Problem 3.1, from (u_{n−1}, ζ_{n−1}) only: B_{n−1}, then the
     /// velocity step (3.13) ∥ the damage step (3.10), then u_n and ζ_n, then the step's norms.
     pub fn step(&mut self) -> Result<StepReport, SolveError> {

@@ -1,0 +1,191 @@
+use super::*;
+use crate::study::target::Discard;
+
+fn parse(doc: Value) -> Result<AdaptSpec, ValidationErrors> {
+    parse_with(&doc, "/study", &scene::Bundled).map(|(s, _)| s)
+}
+
+fn pointer(doc: Value) -> String {
+    parse(doc).unwrap_err().0[0].pointer.clone()
+}
+
+#[test]
+fn bad_requests_name_their_field() {
+    let ok = json!({"scene": "l-bracket", "adapt": {"target": 0.05}});
+    assert!(parse(ok).is_ok());
+    for (doc, at) in [
+        (
+            json!({"scene": "l-bracket", "adapt": {}}),
+            "/study/adapt/target",
+        ),
+        (
+            json!({"scene": "l-bracket", "adapt": {"target": 1.5}}),
+            "/study/adapt/target",
+        ),
+        (
+            json!({"scene": "l-bracket", "adapt": {"target": 0.1, "theta": 0}}),
+            "/study/adapt/theta",
+        ),
+        (
+            json!({"scene": "l-bracket", "adapt": {"target": 0.1, "quantity": "zeta"}}),
+            "/study/adapt/quantity",
+        ),
+        (
+            json!({"scene": "l-bracket", "adapt": {"target": 0.1, "max_nodes": 2.5}}),
+            "/study/adapt/max_nodes",
+        ),
+        (
+            json!({"scene": "l-bracket", "adapt": {"target": 0.1, "tagret": 1}}),
+            "/study/adapt/tagret",
+        ),
+        (
+            json!({"scene": "l-bracket", "adapt": {"target": 0.1}, "reference": {"refine": 0}}),
+            "/study/reference/refine",
+        ),
+        (
+            json!({"scene": "l-bracket", "adapt": {"target": 0.1}, "reference": {"h": "1/64"}}),
+            "/study/reference/h",
+        ),
+        (
+            json!({"scene": "l-bracket", "adapt": {"target": 0.1}, "h": ["1/4"]}),
+            "/study/h",
+        ),
+        (
+            json!({"scene": "no-such", "adapt": {"target": 0.1}}),
+            "/study/scene",
+        ),
+        (
+            json!({"scene": {"domain": {"width": -1}}, "adapt": {"target": 0.1}}),
+            "/study/scene/domain/width",
+        ),
+    ] {
+        assert_eq!(pointer(doc.clone()), at, "{doc}");
+    }
+}
+
+/// The l-bracket on a coarse mesh with a short time interval: small enough for a unit test.
+fn small_bracket(target: f64, max_cycles: usize, reference: Option<usize>) -> AdaptSpec {
+    let mut scene = crate::scene::presets::get("l-bracket").unwrap();
+    scene["mesh"]["h"] = json!("1/4");
+    scene["time"] = json!({"t_end": 0.25, "k": "1/16"});
+    scene["output"] = json!({"every": 0, "last": true, "fields": ["w"]});
+    let mut doc = json!({"scene": scene, "adapt": {"target": target, "max_cycles": max_cycles, "max_nodes": 4000}});
+    if let Some(r) = reference {
+        doc["reference"] = json!({"refine": r});
+    }
+    parse(doc).unwrap()
+}
+
+fn exec() -> Execution {
+    Execution {
+        threads: 1,
+        settings: Default::default(),
+    }
+}
+
+#[test]
+fn cycles_refine_where_marked_and_the_estimate_falls() {
+    let spec = small_bracket(1e-6, 4, Some(2));
+    let r = run(
+        &spec,
+        exec(),
+        Limits::default(),
+        &|_, _| ControlFlow::Continue(()),
+        &mut Discard,
+    )
+    .unwrap();
+    eprintln!("{}", r.text_table());
+    assert_eq!(r.stopped, Stop::MaxCycles);
+    assert!(!r.reached);
+    assert_eq!(r.cycles.len(), 4);
+    for w in r.cycles.windows(2) {
+        assert!(w[1].nodes > w[0].nodes, "{:?}", r.cycles);
+        assert!(w[1].estimate < w[0].estimate, "{:?}", r.cycles);
+        // Dörfler with θ = 1/2 marks a minority of the cells on a mesh with a singularity.
+        assert!(w[0].marked.unwrap() < w[0].cells);
+    }
+    // Every cycle is within the reference's depth 2·2, so each has a true error, and it falls.
+    let errors: Vec<f64> = r.cycles.iter().map(|c| c.error.unwrap()).collect();
+    assert!(errors.windows(2).all(|w| w[1] < w[0]), "{errors:?}");
+    // The uniform line starts at the first cycle and stops before the reference's depth.
+    assert_eq!(r.uniform[0].nodes, r.cycles[0].nodes);
+    assert!(r.uniform.iter().all(|u| u.generation < 4));
+    assert_eq!(r.summary.mesh.nodes, r.cycles[3].nodes);
+    match &r.final_mesh {
+        AnyMesh::Plane(m) => assert_eq!(m.n_nodes(), r.cycles[3].nodes),
+        AnyMesh::Solid(_) => panic!("the bracket is plane"),
+    }
+}
+
+#[test]
+fn a_reachable_target_stops_the_cycles() {
+    let first = run(
+        &small_bracket(0.95, 1, None),
+        exec(),
+        Limits::default(),
+        &|_, _| ControlFlow::Continue(()),
+        &mut Discard,
+    )
+    .unwrap();
+    assert_eq!(first.stopped, Stop::Target, "{}", first.text_table());
+    assert!(first.reached && first.cycles.len() == 1);
+    // A target between the first two cycles' estimates takes exactly two.
+    let two = run(
+        &small_bracket(1e-6, 2, None),
+        exec(),
+        Limits::default(),
+        &|_, _| ControlFlow::Continue(()),
+        &mut Discard,
+    )
+    .unwrap();
+    let target = 0.5 * (two.cycles[0].estimate + two.cycles[1].estimate);
+    let r = run(
+        &small_bracket(target, 6, None),
+        exec(),
+        Limits::default(),
+        &|_, _| ControlFlow::Continue(()),
+        &mut Discard,
+    )
+    .unwrap();
+    assert_eq!(
+        (r.stopped, r.cycles.len()),
+        (Stop::Target, 2),
+        "{}",
+        r.text_table()
+    );
+}
+
+#[test]
+fn the_node_budget_ends_the_cycles_before_it_is_passed() {
+    let mut spec = small_bracket(1e-6, 40, None);
+    spec.uniform = false;
+    spec.max_nodes = 200;
+    let r = run(
+        &spec,
+        exec(),
+        Limits::default(),
+        &|_, _| ControlFlow::Continue(()),
+        &mut Discard,
+    )
+    .unwrap();
+    assert_eq!(r.stopped, Stop::MaxNodes);
+    assert!(r.cycles.iter().all(|c| c.nodes <= 200));
+    assert_eq!(r.uniform.len(), 1);
+}
+
+#[test]
+fn the_reference_is_admitted_at_its_pointer() {
+    let spec = small_bracket(0.1, 3, Some(6));
+    let limits = Limits {
+        max_nodes: Some(20_000),
+        ..Limits::default()
+    };
+    let e = spec.admit(&limits, "/study").unwrap_err();
+    assert_eq!(e.pointer, "/study/reference/refine");
+    let mut spec = small_bracket(0.1, 3, None);
+    spec.max_nodes = 50_000;
+    assert_eq!(
+        spec.admit(&limits, "/study").unwrap_err().pointer,
+        "/study/adapt/max_nodes"
+    );
+}
