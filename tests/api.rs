@@ -1107,6 +1107,85 @@ fn target_studies_over_http() {
     );
 }
 
+/// An adaptive study over HTTP: its cycles in the summary, its final mesh stored as an
+/// uploaded mesh of the owner and downloadable, its last cycle served as a simulation on it
+/// (fields with the indicators, VTU), the report; a bad θ refused at its pointer.
+#[test]
+fn adaptive_studies_over_http() {
+    let dir = temp_dir("adapt");
+    let server = Server::start(&dir, 2);
+    let a = server.addr;
+    let mut scene = contact_core::scene::presets::get("l-bracket").unwrap();
+    scene["mesh"]["h"] = json!("1/4");
+    scene["time"] = json!({"t_end": 0.25, "k": "1/16"});
+    scene["output"] = json!({"every": 0, "last": true, "fields": ["w", "zeta"]});
+    let r = post_json(
+        a,
+        "/jobs",
+        &json!({"study": {"scene": scene, "adapt": {"target": 0.75, "max_nodes": 2000},
+                           "reference": {"refine": 2}}}),
+    );
+    assert_eq!(r.status, 202, "{}", String::from_utf8_lossy(&r.body));
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let done = wait_status(a, &id, &["succeeded", "failed"], Duration::from_secs(120));
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert_eq!(
+        done["links"]["fields"],
+        format!("/jobs/{id}/fields?step=last")
+    );
+    let s = get(a, &format!("/jobs/{id}/summary")).json();
+    assert_eq!(s["kind"], "adapt");
+    assert_eq!(s["stopped"], "target", "{s}");
+    let cycles = s["cycles"].as_array().unwrap();
+    assert!(cycles.len() >= 2, "{s}");
+    let last = cycles.last().unwrap();
+    assert!(last["estimate"].as_f64().unwrap() <= 0.75, "{s}");
+    assert!(cycles[0]["error"].as_f64().unwrap() > 0.0, "{s}");
+    let nodes = last["nodes"].as_u64().unwrap() as usize;
+    assert_eq!(s["summary"]["mesh"]["nodes"], nodes);
+    // The final mesh: an uploaded mesh of the caller, with the last cycle's nodes.
+    let mesh = s["final_mesh"]["id"].as_str().unwrap();
+    let m = get(a, &format!("/meshes/{mesh}")).json();
+    assert_eq!(m["summary"]["nodes"], nodes, "{m}");
+    let file = get(a, &format!("/meshes/{mesh}/file"));
+    assert_eq!(file.status, 200);
+    assert!(String::from_utf8(file.body)
+        .unwrap()
+        .starts_with("$MeshFormat\n2.2"));
+    // The last cycle's stored step, on that mesh, with its indicators.
+    let f = get(
+        a,
+        &format!("/jobs/{id}/fields?step=last&mesh=1&fields=w,estimate"),
+    );
+    assert_eq!(f.status, 200, "{}", String::from_utf8_lossy(&f.body));
+    let f = f.json();
+    assert_eq!(f["mesh"]["nodes"].as_array().unwrap().len(), nodes);
+    assert_eq!(f["n"], 4);
+    let eta = f["estimate"].as_array().unwrap();
+    assert_eq!(eta.len(), last["cells"].as_u64().unwrap() as usize);
+    assert_eq!(get(a, &format!("/jobs/{id}/fields/last.vtu")).status, 200);
+    let svg = String::from_utf8(get(a, &format!("/jobs/{id}/report.svg")).body).unwrap();
+    assert!(
+        svg.starts_with("<svg") && svg.contains("adaptive cycles"),
+        "{svg}"
+    );
+    let text = String::from_utf8(get(a, &format!("/jobs/{id}/summary?format=text")).body).unwrap();
+    assert!(
+        text.contains("cycle 1") && text.contains("reference"),
+        "{text}"
+    );
+
+    let p = assert_problem(
+        &post_json(
+            a,
+            "/jobs",
+            &json!({"study": {"scene": "l-bracket", "adapt": {"target": 0.1, "theta": 2}}}),
+        ),
+        422,
+    );
+    assert_eq!(p["errors"][0]["pointer"], "/study/adapt/theta", "{p}");
+}
+
 #[test]
 fn study_jobs_and_error_estimates_over_http() {
     let dir = temp_dir("study");

@@ -188,6 +188,47 @@ fn a_target_study_file_prints_the_choice_or_the_reason() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `contact-sim study` of an adaptive study file: the cycles as JSON, and with --report-dir
+/// its report, table and final mesh, which imports as a mesh with the last cycle's nodes.
+#[test]
+fn an_adaptive_study_file_writes_its_final_mesh() {
+    let dir = std::env::temp_dir().join(format!("contact-sim-cli-adapt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("adapt.json");
+    let mut scene = contact_core::scene::presets::get("l-bracket").unwrap();
+    scene["mesh"]["h"] = serde_json::json!("1/4");
+    scene["time"] = serde_json::json!({"t_end": 0.25, "k": "1/16"});
+    let doc = serde_json::json!({"study": {"name": "a", "scene": scene,
+        "adapt": {"target": 0.01, "max_cycles": 3, "uniform": false}}});
+    std::fs::write(&file, doc.to_string()).unwrap();
+    let reports = dir.join("reports");
+    let out = bin()
+        .args(["study", "--threads", "1", "--report-dir"])
+        .arg(&reports)
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (v["kind"].as_str(), v["stopped"].as_str()),
+        (Some("adapt"), Some("max_cycles")),
+        "{v}"
+    );
+    let nodes = v["cycles"][2]["nodes"].as_u64().unwrap() as usize;
+    let msh = std::fs::read(reports.join("a.msh")).unwrap();
+    let mesh = contact_core::mesh::import::import_any(&msh).unwrap();
+    assert_eq!(mesh.n_nodes(), nodes);
+    assert!(std::fs::read_to_string(reports.join("a.txt"))
+        .unwrap()
+        .contains("cycle 2"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `contact-sim study --max-nodes N --max-job-memory B`: a target out of reach of the limits
 /// is refused after the cheap pilot runs and before the expensive run (exit code 1, naming
 /// the limit, the run it would need with its predicted time, and the best error reachable

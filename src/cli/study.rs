@@ -1,4 +1,4 @@
-//! `contact-sim study`: convergence and target studies from files and presets, each read,
+//! `contact-sim study`: convergence, target and adaptive studies from files and presets, each read,
 //! limited and run by the core's [`contact_core::study::request`] (as the service does), one
 //! after the other; studies of one scene share their reference run through one cache.
 
@@ -24,7 +24,8 @@ pub struct StudyArgs {
     /// most one run per thread. The numbers are the same bits for every count.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1024))]
     pub threads: Option<u64>,
-    /// Also write NAME.json, NAME.txt and NAME.svg (the report plots) per study here.
+    /// Also write NAME.json, NAME.txt and NAME.svg (the report plots) per study here, and an
+    /// adaptive study's final mesh as NAME.msh.
     #[arg(long = "report-dir")]
     pub report_dir: Option<PathBuf>,
     /// Per-job limit on mesh nodes. A study one of whose runs known in advance (a ladder's
@@ -169,8 +170,9 @@ fn documents(files: &[PathBuf], presets: &[String]) -> Result<Vec<(String, Value
     Ok(docs)
 }
 
-/// NAME.json, NAME.txt and NAME.svg per study in `dir`, NAME the study's name with anything
-/// but ASCII letters, digits and '-' replaced by '_'.
+/// NAME.json, NAME.txt and NAME.svg per study in `dir` (and an adaptive study's final mesh
+/// as NAME.msh), NAME the study's name with anything but ASCII letters, digits and '-'
+/// replaced by '_'.
 fn write_reports(dir: &Path, results: &[Outcome]) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
     for r in results {
@@ -178,6 +180,9 @@ fn write_reports(dir: &Path, results: &[Outcome]) -> std::io::Result<()> {
         std::fs::write(dir.join(format!("{stem}.json")), pretty(&r.to_json()))?;
         std::fs::write(dir.join(format!("{stem}.txt")), r.text_table())?;
         std::fs::write(dir.join(format!("{stem}.svg")), r.report_svg())?;
+        if let Some(msh) = r.final_msh() {
+            std::fs::write(dir.join(format!("{stem}.msh")), msh)?;
+        }
     }
     Ok(())
 }

@@ -47,14 +47,16 @@ const ESTIMATES_FILE: &str = "estimates.json";
 /// starts, [`contact_core::output::stored::encode_state`]), what a continuation starts from
 /// ([`crate::continuation`]).
 pub const STATE_FILE: &str = "state.bin";
-/// Target studies only: the scene document of the chosen run, whose stored steps the job's
-/// fields, VTU, PVD and archive serve.
+/// Target and adaptive studies only: the scene document of the chosen run (an adaptive
+/// study's last cycle, on its final mesh stored as an uploaded mesh of the job's owner),
+/// whose stored steps the job's fields, VTU, PVD and archive serve.
 pub const CHOSEN_SCENE_FILE: &str = "chosen_scene.json";
 
-/// A stored study document is a target study (`{"study": {"target": ...}}`): it also has
-/// the chosen run's fields.
-pub fn is_target_study(doc: &serde_json::Value) -> bool {
-    doc.get("study").is_some_and(study::is_target)
+/// A stored study document is a target study (`{"study": {"target": ...}}`) or an
+/// adaptive one (`{"study": {"adapt": ...}}`): it also has the chosen run's fields.
+pub fn has_chosen_run(doc: &serde_json::Value) -> bool {
+    doc.get("study")
+        .is_some_and(|s| study::is_target(s) || study::adapt::is_adapt(s))
 }
 
 /// A stored job document is a study when it has a top-level `study` object, or a sweep's

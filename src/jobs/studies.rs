@@ -25,7 +25,7 @@ use std::time::Instant;
 use uuid::Uuid;
 
 impl Runtime {
-    /// A ladder or target study ([`study::request`]): no per-step checkpoints (a resumed
+    /// A ladder, target or adaptive study ([`study::request`]): no per-step checkpoints (a resumed
     /// study starts over; its reference may still be cached), progress over all runs' steps,
     /// the lease renewed about once a second from the computing threads, under the per-job
     /// limits it was admitted under. A target study's chosen run writes its stored steps as
@@ -58,12 +58,28 @@ impl Runtime {
                 serde_json::to_vec_pretty(v).expect("a JSON value serialises")
             };
             let mut files = Vec::new();
+            let mut summary = outcome.to_json();
             if let Some(scene) = outcome.chosen_scene() {
                 files.push((CHOSEN_SCENE_FILE, pretty(scene)));
             }
+            // An adaptive study's final mesh becomes an uploaded mesh of the job's owner: its
+            // last cycle is then served as a simulation on it, and the file is downloadable.
+            if let (Some(msh), study::request::Request::Adapt { spec, .. }) =
+                (outcome.final_msh(), &request)
+            {
+                let (mesh, _) = self
+                    .meshes
+                    .upload_for(&job.owner, msh.as_bytes())
+                    .map_err(|p| StudyError::Output(std::io::Error::other(p.detail)))?;
+                files.push((CHOSEN_SCENE_FILE, pretty(&spec.scene_on(&mesh.id))));
+                summary["final_mesh"] = serde_json::json!({
+                    "id": mesh.id,
+                    "file": format!("/meshes/{}/file", mesh.id),
+                });
+            }
             files.push((TABLE_FILE, outcome.text_table().into_bytes()));
             files.push((REPORT_FILE, outcome.report_svg().into_bytes()));
-            files.push((SUMMARY_FILE, pretty(&outcome.to_json())));
+            files.push((SUMMARY_FILE, pretty(&summary)));
             Ok(files)
         })
     }

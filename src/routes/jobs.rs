@@ -46,7 +46,7 @@ pub fn job_view(rec: &JobRecord, state: &AppState) -> Value {
             links["table_csv"] = json!(format!("{base}/table.csv"));
             links["plot"] = json!(format!("{base}/plot.svg"));
         }
-        if crate::jobs::is_target_study(&rec.scene) {
+        if crate::jobs::has_chosen_run(&rec.scene) {
             // The chosen run's results, served as a simulation's.
             links["fields"] = json!(format!("{base}/fields?step=last"));
             links["mesh"] = json!(format!("{base}/mesh"));

@@ -10,8 +10,8 @@
 use super::query::Params;
 use super::{blocking, load_job, parse_id};
 use crate::jobs::{
-    is_study, is_sweep, is_target_study, parse_step_file, step_file, CHOSEN_SCENE_FILE,
-    REPORT_FILE, SUMMARY_FILE, TABLE_CSV_FILE, TABLE_FILE,
+    has_chosen_run, is_study, is_sweep, parse_step_file, step_file, CHOSEN_SCENE_FILE, REPORT_FILE,
+    SUMMARY_FILE, TABLE_CSV_FILE, TABLE_FILE,
 };
 use crate::meshes::Meshes;
 use crate::problem::Problem;
@@ -68,7 +68,7 @@ async fn succeeded(state: &AppState, id: &str) -> Result<JobRecord, Problem> {
 /// run's.
 async fn simulation(state: &AppState, id: &str) -> Result<JobRecord, Problem> {
     let mut rec = load_job(state, parse_id(id)?).await?;
-    if is_target_study(&rec.scene) {
+    if has_chosen_run(&rec.scene) {
         require_succeeded(&rec)?;
         let bytes = result_file(state, &rec, CHOSEN_SCENE_FILE).await?;
         rec.scene = serde_json::from_slice(&bytes)

@@ -3,6 +3,7 @@
 //! Plain SVG 1.1 text, no fonts or scripts, so it renders the same in browsers and viewers.
 
 use super::format::fraction;
+use crate::study::adapt::AdaptResult;
 use crate::study::{StudyResult, TargetResult, Vary};
 use std::fmt::Write;
 
@@ -394,6 +395,84 @@ fn target_lines(out: &mut String, panel: &Panel, target: f64, safety_factor: f64
             y + dy
         );
     }
+}
+
+/// The report of an adaptive study: the relative estimate (circles) and the true error
+/// (squares, with a reference) of the cycles (blue) and of the uniform line (grey) against
+/// the unknowns, with a slope −1/2 guide (the order of P1 on a smooth solution in 2D;
+/// −1/3 in 3D), and against the wall time of each run.
+pub fn adapt_report(r: &AdaptResult) -> String {
+    const COLOR_U: &str = "#888888";
+    let rows = || r.cycles.iter().chain(&r.uniform);
+    let ys = || rows().flat_map(|c| [Some(c.estimate), c.error]).flatten();
+    let left = Panel {
+        left: LEFTS[0],
+        x: LogAxis::over(rows().map(|c| c.unknowns as f64)),
+        y: LogAxis::over(ys()),
+    };
+    let right = Panel {
+        left: LEFTS[1],
+        x: LogAxis::over(rows().map(|c| c.seconds)),
+        y: LogAxis::over(ys()),
+    };
+    let last = r.cycles.last().expect("an adaptive study has a cycle");
+    let mut out = format!(
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" viewBox="0 0 {W} {H}" font-family="sans-serif">
+<title>{}</title>
+<rect width="{W}" height="{H}" fill="white"/>
+<text x="{}" y="24" text-anchor="middle" font-size="17">{}: target {:.3e}, {} after {} cycles ({} unknowns, estimate {:.3e})</text>
+"##,
+        esc(&r.name),
+        W / 2.0,
+        esc(&r.name),
+        r.target,
+        if r.reached { "reached" } else { "not reached" },
+        r.cycles.len(),
+        last.unknowns,
+        last.estimate,
+    );
+    left.frame(
+        &mut out,
+        "estimate and error vs unknowns",
+        "velocity unknowns",
+    );
+    right.frame(&mut out, "work–precision", "wall time per run [s]");
+    let dim_order = match r.final_mesh.dim() {
+        2 => -0.5,
+        _ => -1.0 / 3.0,
+    };
+    let pick = |rows: &[super::adapt::Row], x: fn(&super::adapt::Row) -> f64, err: bool| {
+        rows.iter()
+            .filter_map(|c| Some((x(c), if err { c.error? } else { c.estimate })))
+            .collect::<Vec<_>>()
+    };
+    let unknowns = |c: &super::adapt::Row| c.unknowns as f64;
+    let seconds = |c: &super::adapt::Row| c.seconds;
+    if let Some(&(x0, y0)) = pick(&r.cycles, unknowns, false).last() {
+        left.slope(&mut out, dim_order, x0, y0);
+    }
+    for (panel, x) in [(&left, unknowns as fn(&_) -> f64), (&right, seconds)] {
+        panel.series(&mut out, &pick(&r.uniform, x, false), COLOR_U, false);
+        panel.series(&mut out, &pick(&r.uniform, x, true), COLOR_U, true);
+        panel.series(&mut out, &pick(&r.cycles, x, false), COLOR_W, false);
+        panel.series(&mut out, &pick(&r.cycles, x, true), COLOR_W, true);
+    }
+    let ly = H - 22.0;
+    let _ = write!(
+        out,
+        r##"<circle cx="90" cy="{ly}" r="4" fill="{COLOR_W}"/><text x="100" y="{:.0}" font-size="13">adaptive cycles</text>
+<circle cx="250" cy="{ly}" r="4" fill="{COLOR_U}"/><text x="260" y="{:.0}" font-size="13">uniform refinement</text>
+<circle cx="440" cy="{ly}" r="4" fill="#444"/><text x="450" y="{:.0}" font-size="13">relative estimate of w</text>
+<rect x="636.5" y="{:.1}" width="7" height="7" fill="#444"/><text x="650" y="{:.0}" font-size="13">true error (against the reference)</text>
+</svg>
+"##,
+        ly + 4.0,
+        ly + 4.0,
+        ly + 4.0,
+        ly - 3.5,
+        ly + 4.0,
+    );
+    out
 }
 
 #[cfg(test)]

@@ -11,6 +11,7 @@
 //! - [`Request::execute`]: the study under the same limits (each run's set-up refuses a path
 //!   that does not fit; concurrent runs share the memory limit, [`super::schedule`]).
 
+use super::adapt::{self, AdaptResult, AdaptSpec};
 use super::sweep::{self, Known, SweepResult, SweepSpec};
 use super::target::{self, Sink, TargetSpec};
 use super::{Execution, Plan, ReferenceCache, StudyError, StudyResult, TargetResult};
@@ -30,6 +31,9 @@ pub enum Request {
     Target { spec: TargetSpec, at: String },
     /// Members of one scene with values substituted at JSON pointers ([`super::sweep`]).
     Sweep(Box<SweepSpec>),
+    /// Cycles of run, estimate, mark and refine to a target estimate ([`super::adapt`]).
+    /// `at` as for a target.
+    Adapt { spec: Box<AdaptSpec>, at: String },
 }
 
 /// Reads the sweep object `doc` at `at` (`/sweep`), as [`parse`] reads a study.
@@ -50,6 +54,16 @@ pub fn parse(
     at: &str,
     files: &dyn MeshFiles,
 ) -> Result<(Request, Value), ValidationErrors> {
+    if adapt::is_adapt(doc) {
+        let (spec, expanded) = adapt::parse_with(doc, at, files)?;
+        return Ok((
+            Request::Adapt {
+                spec: Box::new(spec),
+                at: at.to_string(),
+            },
+            expanded,
+        ));
+    }
     if target::is_target(doc) {
         let (spec, expanded) = target::parse_with(doc, at, files)?;
         Ok((
@@ -94,6 +108,7 @@ pub enum Outcome {
     Ladder(Box<StudyResult>),
     Target(Box<TargetResult>),
     Sweep(Box<SweepResult>),
+    Adapt(Box<AdaptResult>),
 }
 
 impl Request {
@@ -103,6 +118,7 @@ impl Request {
             Request::Ladder(plan) => &plan.name,
             Request::Target { spec, .. } => &spec.name,
             Request::Sweep(spec) => &spec.name,
+            Request::Adapt { spec, .. } => &spec.name,
         }
     }
 
@@ -203,6 +219,10 @@ impl Request {
                 let (steps, largest) = spec.admit(limits)?;
                 Ok(Admission { steps, largest })
             }
+            Request::Adapt { spec, at } => {
+                let (steps, largest) = spec.admit(limits, at)?;
+                Ok(Admission { steps, largest })
+            }
         }
     }
 
@@ -231,6 +251,8 @@ impl Request {
             Request::Sweep(spec) => {
                 sweep::run(spec, exec, cx.progress, known).map(|r| Outcome::Sweep(Box::new(r)))
             }
+            Request::Adapt { spec, .. } => adapt::run(spec, exec, cx.limits, cx.progress, cx.sink)
+                .map(|r| Outcome::Adapt(Box::new(r))),
         }
     }
 }
@@ -241,6 +263,7 @@ impl Outcome {
             Outcome::Ladder(r) => &r.name,
             Outcome::Target(r) => &r.name,
             Outcome::Sweep(r) => &r.name,
+            Outcome::Adapt(r) => &r.name,
         }
     }
 
@@ -250,6 +273,7 @@ impl Outcome {
             Outcome::Ladder(r) => serde_json::to_value(r),
             Outcome::Target(r) => serde_json::to_value(r),
             Outcome::Sweep(r) => serde_json::to_value(r),
+            Outcome::Adapt(r) => serde_json::to_value(r),
         }
         .expect("a study result serialises")
     }
@@ -260,6 +284,7 @@ impl Outcome {
             Outcome::Ladder(r) => r.text_table(),
             Outcome::Target(r) => r.text_table(),
             Outcome::Sweep(r) => r.text_table(),
+            Outcome::Adapt(r) => r.text_table(),
         }
     }
 
@@ -273,14 +298,24 @@ impl Outcome {
                 let first = r.vary[0]["pointer"].as_str().unwrap_or_default();
                 sweep::plot_svg(r, "w_V", first).unwrap_or_default()
             }
+            Outcome::Adapt(r) => super::report_svg::adapt_report(r),
         }
     }
 
-    /// A target study's chosen run's scene document (None for a ladder).
+    /// A target study's chosen run's scene document (None for a ladder; an adaptive study's
+    /// is [`AdaptSpec::scene_on`] its final mesh, once that is stored somewhere).
     pub fn chosen_scene(&self) -> Option<&Value> {
         match self {
-            Outcome::Ladder(_) | Outcome::Sweep(_) => None,
+            Outcome::Ladder(_) | Outcome::Sweep(_) | Outcome::Adapt(_) => None,
             Outcome::Target(r) => Some(&r.scene),
+        }
+    }
+
+    /// An adaptive study's final mesh as a gmsh MSH 2.2 file.
+    pub fn final_msh(&self) -> Option<String> {
+        match self {
+            Outcome::Adapt(r) => Some(r.final_msh()),
+            _ => None,
         }
     }
 }

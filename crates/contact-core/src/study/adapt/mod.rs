@@ -96,7 +96,9 @@ pub struct AdaptSpec {
     /// The relative estimate of w to reach.
     pub target: f64,
     pub theta: f64,
-    pub max_nodes: usize,
+    /// Given: refused at admission above the per-job node limit. None: the smaller of
+    /// [`DEFAULT_MAX_NODES`] and that limit.
+    pub max_nodes: Option<usize>,
     pub max_cycles: usize,
     /// Run the uniform line beside the cycles.
     pub uniform: bool,
@@ -185,12 +187,15 @@ pub fn parse_with(
             )),
         },
     };
-    let max_nodes = count(
-        "max_nodes",
-        DEFAULT_MAX_NODES,
-        4,
-        crate::mesh::import::MAX_NODES as u64,
-    )?;
+    let max_nodes = match adapt.get("max_nodes") {
+        None => None,
+        Some(_) => Some(count(
+            "max_nodes",
+            DEFAULT_MAX_NODES,
+            4,
+            crate::mesh::import::MAX_NODES as u64,
+        )?),
+    };
     let max_cycles = count("max_cycles", DEFAULT_MAX_CYCLES, 1, 40)?;
     let uniform = match adapt.get("uniform") {
         None => true,
@@ -251,9 +256,12 @@ pub fn parse_with(
     expanded.insert("scene".into(), scene_doc.clone());
     expanded.insert(
         "adapt".into(),
-        json!({"target": target, "quantity": "w", "theta": theta, "max_nodes": max_nodes,
+        json!({"target": target, "quantity": "w", "theta": theta,
                "max_cycles": max_cycles, "uniform": uniform}),
     );
+    if let Some(n) = max_nodes {
+        expanded["adapt"]["max_nodes"] = json!(n);
+    }
     if let Some(r) = reference {
         expanded.insert("reference".into(), json!({"refine": r}));
     }
@@ -304,17 +312,18 @@ impl AdaptSpec {
                 largest = fit;
             }
         }
-        if let Some(max) = limits.max_nodes.filter(|&m| self.max_nodes > m) {
-            return Err(LimitError {
-                pointer: format!("{at}/adapt/max_nodes"),
-                limit: admission::Limit::Nodes,
-                needed: self.max_nodes as u64,
-                allowed: max as u64,
-                message: format!(
-                    "max_nodes is {}, more than the per-job limit of {max} nodes",
-                    self.max_nodes
-                ),
-            });
+        if let (Some(n), Some(max)) = (self.max_nodes, limits.max_nodes) {
+            if n > max {
+                return Err(LimitError {
+                    pointer: format!("{at}/adapt/max_nodes"),
+                    limit: admission::Limit::Nodes,
+                    needed: n as u64,
+                    allowed: max as u64,
+                    message: format!(
+                        "max_nodes is {n}, more than the per-job limit of {max} nodes"
+                    ),
+                });
+            }
         }
         if let Some(max) = limits.max_steps.filter(|&m| steps > m) {
             return Err(LimitError {
@@ -501,6 +510,9 @@ fn run_in<const D: usize>(
         })
     })?;
     let fits = |p: &Problem| crate::memory::choose(p, limits.max_memory).is_ok();
+    let max_nodes = spec
+        .max_nodes
+        .unwrap_or(DEFAULT_MAX_NODES.min(limits.max_nodes.unwrap_or(DEFAULT_MAX_NODES)));
 
     // The reference first: every cycle's true error is measured on it as the cycle ends.
     let reference = match spec.reference {
@@ -560,7 +572,7 @@ fn run_in<const D: usize>(
         let mut next = bisection.clone();
         let step = next.refine(&marked);
         cycles[i].marked = Some(marked.len());
-        if step.mesh.n_nodes() > spec.max_nodes {
+        if step.mesh.n_nodes() > max_nodes {
             break Stop::MaxNodes;
         }
         if !fits(&on_mesh(&spec.base, &step.mesh, String::new())) {
@@ -588,7 +600,7 @@ fn run_in<const D: usize>(
                 b.mesh(),
                 format!("uniform, h/{}", 1 << (depth / D)),
             );
-            if b.mesh().n_nodes() > spec.max_nodes.max(last_nodes) || !fits(&problem) {
+            if b.mesh().n_nodes() > max_nodes.max(last_nodes) || !fits(&problem) {
                 break;
             }
             total.fetch_add(steps, Ordering::Relaxed);
@@ -606,11 +618,12 @@ fn run_in<const D: usize>(
         }
     }
     Ok(AdaptResult {
+        kind: "adapt",
         name: spec.name.clone(),
         quantity: "w",
         target: spec.target,
         theta: spec.theta,
-        max_nodes: spec.max_nodes,
+        max_nodes,
         reached: stop == Stop::Target,
         stopped: stop,
         reference: reference.map(|r| r.row),

@@ -100,6 +100,8 @@ impl Row {
 /// A finished adaptive study.
 #[derive(Debug, Clone, Serialize)]
 pub struct AdaptResult {
+    /// "adapt".
+    pub kind: &'static str,
     pub name: String,
     pub quantity: &'static str,
     pub target: f64,

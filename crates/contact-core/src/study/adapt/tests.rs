@@ -159,7 +159,7 @@ fn a_reachable_target_stops_the_cycles() {
 fn the_node_budget_ends_the_cycles_before_it_is_passed() {
     let mut spec = small_bracket(1e-6, 40, None);
     spec.uniform = false;
-    spec.max_nodes = 200;
+    spec.max_nodes = Some(200);
     let r = run(
         &spec,
         exec(),
@@ -183,7 +183,7 @@ fn the_reference_is_admitted_at_its_pointer() {
     let e = spec.admit(&limits, "/study").unwrap_err();
     assert_eq!(e.pointer, "/study/reference/refine");
     let mut spec = small_bracket(0.1, 3, None);
-    spec.max_nodes = 50_000;
+    spec.max_nodes = Some(50_000);
     assert_eq!(
         spec.admit(&limits, "/study").unwrap_err().pointer,
         "/study/adapt/max_nodes"
