@@ -311,6 +311,25 @@ def test_a_target_study_gives_the_chosen_run(client: Client) -> None:
     assert f.w is not None and len(f.w) > 0
 
 
+def test_an_adaptive_study_as_a_dataframe(client: Client) -> None:
+    scene = client.preset("l-bracket")
+    scene["mesh"]["h"] = "1/4"
+    scene["time"] = {"t_end": 0.25, "k": "1/16"}
+    scene["output"] = {"every": 0, "last": True, "fields": ["w"]}
+    job = client.adapt(scene, target=0.01, max_cycles=3, reference_refine=2)
+    df = job.wait(progress=False, timeout=120).adapt_table()
+    cycles = df[df["run"] == "cycle"]
+    assert list(cycles["index"]) == [0, 1, 2]
+    assert cycles["nodes"].is_monotonic_increasing
+    assert cycles["estimate"].is_monotonic_decreasing and cycles["error"].is_monotonic_decreasing
+    assert df.attrs["stopped"] == "max_cycles" and not df.attrs["reached"]
+    assert (df["run"] == "reference").sum() == 1
+    # The last cycle is served as a simulation on the final mesh, an uploaded mesh of ours.
+    mesh = client.mesh(df.attrs["final_mesh"]["id"])
+    assert mesh["summary"]["nodes"] == cycles["nodes"].iloc[-1]
+    assert job.fields().w.size == 2 * cycles["nodes"].iloc[-1]
+
+
 def test_study_table_as_dataframe(client: Client) -> None:
     study = {
         "study": {

@@ -264,6 +264,42 @@ class Client:
             study["name"] = name
         return self.submit({"study": study})
 
+    def adapt(
+        self,
+        scene: Union[str, Mapping[str, Any]],
+        target: float,
+        theta: float = 0.5,
+        max_nodes: Optional[int] = None,
+        max_cycles: Optional[int] = None,
+        uniform: bool = True,
+        reference_refine: Optional[int] = None,
+        name: Optional[str] = None,
+    ) -> "Job":
+        """Submits an adaptive study: ``scene`` (a preset name or a scene document) run on
+        meshes refined by bisection where its a posteriori estimate is largest (Dörfler's
+        marking with share ``theta``), until the velocity's relative estimate over the run is
+        at most ``target``, the next mesh would pass ``max_nodes`` or ``max_cycles`` cycles
+        ran. ``uniform`` also runs the initial mesh refined uniformly up to the last cycle's
+        size; ``reference_refine`` r measures every run's true error against the initial mesh
+        refined uniformly to h/2^r. The job's summary has ``cycles``, ``uniform``,
+        ``reference``, ``reached``, ``stopped`` and ``final_mesh`` (an uploaded mesh of
+        yours); its fields, VTU and archive are the last cycle's. :meth:`Job.adapt_table`
+        gives the rows as a DataFrame."""
+        adapt: Dict[str, Any] = {"target": target, "theta": theta, "uniform": uniform}
+        if max_nodes is not None:
+            adapt["max_nodes"] = max_nodes
+        if max_cycles is not None:
+            adapt["max_cycles"] = max_cycles
+        study: Dict[str, Any] = {
+            "scene": scene if isinstance(scene, str) else dict(scene),
+            "adapt": adapt,
+        }
+        if reference_refine is not None:
+            study["reference"] = {"refine": reference_refine}
+        if name is not None:
+            study["name"] = name
+        return self.submit({"study": study})
+
     def continue_(
         self,
         job: Union[str, "Job"],
@@ -587,6 +623,30 @@ class Job:
         df.index.name = "member"
         df.attrs["job"] = self.id
         for key in ("name", "mode", "computed"):
+            df.attrs[key] = s.get(key)
+        return df
+
+    def adapt_table(self) -> "pandas.DataFrame":
+        """An adaptive study's runs as a DataFrame, one row per run: ``run`` ("cycle", "uniform"
+        or "reference"), ``index`` (the cycle, or the uniform line's halvings of h),
+        ``nodes``, ``cells``, ``unknowns``, ``generation``, ``estimate`` (relative),
+        ``estimate_abs``, ``time_share``, ``error`` (true, relative; NaN without a reference),
+        ``marked`` and ``seconds``. ``attrs`` has ``reached``, ``stopped``, ``target`` and
+        ``final_mesh``. Needs the pandas extra."""
+        import pandas as pd
+
+        s = self.summary()
+        if s.get("kind") != "adapt":
+            raise ValueError(f"job {self.id} is not an adaptive study")
+        records = []
+        for run, rows in (("cycle", s["cycles"]), ("uniform", s["uniform"])):
+            for i, row in enumerate(rows):
+                records.append({"run": run, "index": i, **row})
+        if s.get("reference"):
+            records.append({"run": "reference", "index": 0, **s["reference"]})
+        df = pd.DataFrame.from_records(records)
+        df.attrs["job"] = self.id
+        for key in ("name", "reached", "stopped", "target", "theta", "final_mesh"):
             df.attrs[key] = s.get(key)
         return df
 
