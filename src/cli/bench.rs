@@ -41,6 +41,11 @@ pub struct BenchArgs {
     /// nested dissection, at each level.
     #[arg(long)]
     pub orderings: bool,
+    /// Instead: adaptive against uniform refinement at equal true error on the l-bracket,
+    /// the plate with a hole, paper-exp3 and paper-convergence (unknowns and times; the
+    /// studies' tables on stderr).
+    #[arg(long)]
+    pub adapt: bool,
 }
 
 pub fn main(args: BenchArgs) -> ExitCode {
@@ -51,6 +56,25 @@ pub fn main(args: BenchArgs) -> ExitCode {
         return match bench::tables(repeat, threads) {
             Ok(r) => {
                 outln!("{}", pretty(&r));
+                ExitCode::SUCCESS
+            }
+            Err(e) => fail(1, &e.to_string()),
+        };
+    }
+    if args.adapt {
+        let threads = args
+            .threads
+            .first()
+            .map_or_else(contact_core::linalg::par::Threads::available, |&t| {
+                t as usize
+            });
+        return match contact_core::harness::adaptivity::gains(threads) {
+            Ok(g) => {
+                for r in &g {
+                    eprintln!("{}", r.table);
+                }
+                eprintln!("{}", contact_core::harness::adaptivity::table(&g));
+                outln!("{}", pretty(&g));
                 ExitCode::SUCCESS
             }
             Err(e) => fail(1, &e.to_string()),

@@ -15,7 +15,8 @@
 //!     run the scene on M_i to t = T, estimating every step          (3.10) ∥ (3.13)
 //!     a_T = k Σ_n η_{T,n}²   the velocity's spatial indicators over the run
 //!     η = the velocity's whole estimate (time part too) / (k Σ_n |w_n|²_V)^½
-//!     stop if η ≤ target, or i = max_cycles
+//!     stop if η ≤ target, or i = max_cycles, or the time part dominates η (its square more
+//!         than half of η²: only a smaller k reduces it)
 //!     M = Dörfler(a, θ)                                              [`dorfler`]
 //!     M_{i+1} = bisection of M_i refining M, closed                  [`crate::mesh::bisect`]
 //!     stop (M_i final) if M_{i+1} has more than max_nodes nodes or does not fit the memory limit
@@ -564,6 +565,9 @@ fn run_in<const D: usize>(
         }
         if i + 1 >= spec.max_cycles {
             break Stop::MaxCycles;
+        }
+        if cycles[i].time_share > std::f64::consts::FRAC_1_SQRT_2 {
+            break Stop::TimeStep;
         }
         let marked = dorfler::mark(&squares, spec.theta);
         if marked.is_empty() {

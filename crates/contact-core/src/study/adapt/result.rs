@@ -17,6 +17,9 @@ pub enum Stop {
     MaxNodes,
     /// `max_cycles` cycles ran.
     MaxCycles,
+    /// The estimate is above the target, but its time part is the larger (its square more
+    /// than half of the whole): refining the mesh no longer reduces it much; k must.
+    TimeStep,
     /// The next mesh's run would not fit the per-job memory limit.
     Memory,
     /// Every indicator is zero (w ≡ 0): refining cannot change the estimate.
@@ -29,6 +32,7 @@ impl Stop {
             Stop::Target => "the estimate met the target",
             Stop::MaxNodes => "the next mesh would pass max_nodes",
             Stop::MaxCycles => "max_cycles cycles ran",
+            Stop::TimeStep => "the time part dominates the estimate: refine k, not the mesh",
             Stop::Memory => "the next mesh would not fit the memory limit",
             Stop::NothingToRefine => "every indicator is zero",
         }

@@ -189,3 +189,27 @@ fn the_reference_is_admitted_at_its_pointer() {
         "/study/adapt/max_nodes"
     );
 }
+
+#[test]
+fn a_dominant_time_part_ends_the_cycles() {
+    // With k = T/2 the time part overtakes the spatial parts after a few cycles; refining
+    // the mesh further would not bring the estimate down.
+    let mut scene = small_bracket(1e-6, 40, None).scene;
+    scene["time"] = json!({"t_end": 1, "k": "1/2"});
+    let spec = parse(json!({"scene": scene, "adapt": {"target": 1e-6, "max_cycles": 40, "max_nodes": 20000, "uniform": false}})).unwrap();
+    let r = run(
+        &spec,
+        exec(),
+        Limits::default(),
+        &|_, _| ControlFlow::Continue(()),
+        &mut Discard,
+    )
+    .unwrap();
+    assert_eq!(r.stopped, Stop::TimeStep, "{}", r.text_table());
+    let (last, before) = r.cycles.split_last().unwrap();
+    assert!(last.time_share > std::f64::consts::FRAC_1_SQRT_2);
+    assert!(before
+        .iter()
+        .all(|c| c.time_share <= std::f64::consts::FRAC_1_SQRT_2));
+    assert!(!before.is_empty());
+}
