@@ -9,7 +9,11 @@
 //    error_model, pilots, safety_factor, seconds} (showTarget), or for a parameter sweep
 //    {kind: "sweep", name, mode, vary: [{pointer, values}], rows: [{member, values, w_V, u_V,
 //     zeta_L2, zeta_min, min_zeta, slip_nodes, max_slip_speed, steps, wall_s, cached}],
-//     computed, seconds} (showSweep, its plot the server's /jobs/{id}/plot.svg).
+//     computed, seconds} (showSweep, its plot the server's /jobs/{id}/plot.svg), or for an
+//    adaptive study {kind: "adapt", name, quantity, target, theta, max_nodes, reached,
+//    stopped, cycles: [Row], uniform: [Row], reference: Row (optional), summary,
+//    final_mesh: {id, file}} with Row {nodes, cells, unknowns, generation, estimate,
+//    estimate_abs, time_share, error (optional), marked (optional), seconds} (showAdapt).
 
 import * as api from './api.js';
 import { el, fmt, fmtStep, fmtSeconds } from './util.js';
@@ -43,6 +47,26 @@ function sized(a) {
   return api.keyedLink(a);
 }
 
+/** Why an adaptive study's cycles ended, in words (its summary's `stopped`). */
+const STOPPED = {
+  target: 'the estimate met the target',
+  max_nodes: 'the next mesh would have had more than max_nodes nodes',
+  max_cycles: 'the largest number of cycles (max_cycles) ran',
+  memory: 'the next mesh\'s run would not fit the memory limit of a job',
+  nothing_to_refine: 'every error indicator is zero, so refining cannot change the estimate',
+};
+
+/** The sentence on an adaptive study's outcome: target reached or not, and why it stopped. */
+function adaptOutcome(s) {
+  const cycles = (s.cycles || []).length;
+  const last = s.cycles?.[cycles - 1];
+  const why = STOPPED[s.stopped] || s.stopped;
+  return `Target ${fmt(s.target)} for the relative estimate of ${s.quantity || 'w'} `
+    + `${s.reached ? 'reached' : 'not reached'} after ${cycles} ${cycles === 1 ? 'cycle' : 'cycles'} `
+    + `(last estimate ${fmt(last?.estimate)}, ${last?.nodes ?? '–'} nodes; θ = ${s.theta}, at most ${s.max_nodes} nodes): `
+    + `the cycles stopped because ${why}.`;
+}
+
 export class StudyView {
   constructor(root) {
     this.root = root;
@@ -73,6 +97,10 @@ export class StudyView {
     }
     if (s.kind === 'sweep') {
       this.showSweep(job, s);
+      return;
+    }
+    if (s.kind === 'adapt') {
+      this.showAdapt(job, s, report);
       return;
     }
     const ref = s.reference || {};
@@ -169,6 +197,62 @@ export class StudyView {
             .map((h) => el('th', { scope: 'col' }, h)))),
           el('tbody', {}, rows))),
       img,
+    );
+    api.keyedImage(img, report);
+    this.root.dataset.state = 'ready';
+  }
+
+  /**
+   * An adaptive study (summary kind "adapt"): whether the target was reached and why the
+   * cycles stopped, one table row per run (the cycles, the uniform line beside them, the
+   * reference), the server's report, the final mesh, and the last cycle's run, served like a
+   * simulation's (fields, VTU archive).
+   */
+  showAdapt(job, s, report) {
+    const id = job.id;
+    const short = id.slice(0, 8);
+    const num = (x) => el('td', { class: 'num' }, x);
+    const pct = (x) => (typeof x === 'number' ? `${(100 * x).toFixed(0)} %` : '–');
+    // "—" (not "–"): the value does not exist for this run (no reference, or the last cycle
+    // marks nothing), rather than a number that failed to come.
+    const optional = (x, f) => (x === null || x === undefined ? '—' : f(x));
+    const row = (label, r) => el('tr', {},
+      el('th', { scope: 'row' }, label),
+      num(String(r.nodes)), num(String(r.unknowns)), num(String(r.generation)),
+      num(fmt(r.estimate)), num(pct(r.time_share)),
+      num(optional(r.error, fmt)), num(optional(r.marked, String)),
+      num(fmt(r.seconds, 3)));
+    const rows = [
+      ...(s.cycles || []).map((r, i) => row(`cycle ${i}`, r)),
+      ...(s.uniform || []).map((r, i) => row(`uniform h/${2 ** i}`, r)),
+      ...(s.reference ? [row('reference', s.reference)] : []),
+    ];
+    const heads = ['run', 'nodes', 'unknowns', 'deepest bisection', 'estimate', 'time part', 'true error', 'marked', 'time [s]'];
+    const mesh = s.final_mesh?.file;
+    const img = el('img', { class: 'report', alt: 'estimate and true error against the number of nodes, adaptive cycles beside uniform refinement' });
+    this.root.replaceChildren(
+      el('div', { class: 'view-head' },
+        el('h2', {}, s.name || job.scene || 'adaptive study', ' ', el('small', {}, short)),
+        el('nav', { class: 'downloads', 'aria-label': 'downloads' },
+          api.keyedLink(el('a', { id: 'dl-summary', href: `/jobs/${id}/summary`, download: `adapt-${short}.json` }, 'summary JSON')),
+          api.keyedLink(el('a', { id: 'dl-report', href: report, download: `report-${short}.svg` }, 'report SVG')),
+          api.keyedLink(el('a', { id: 'dl-table', href: `/jobs/${id}/summary?format=text`, download: `adapt-${short}.txt` }, 'text table')),
+          ...(mesh ? [sized(el('a', { id: 'dl-final-mesh', href: mesh, download: `adapt-${short}.msh` }, 'final mesh (MSH)'))] : []),
+          // The last cycle's run is served like a simulation's, as a target study's chosen
+          // run is: its fields (with the mesh) and its VTU archive.
+          api.keyedLink(el('a', { id: 'dl-last-fields', href: job.links?.fields || `/jobs/${id}/fields?step=last`, download: `adapt-${short}-fields.json` }, 'last cycle\'s fields (JSON)')),
+          api.keyedLink(el('a', { href: `/jobs/${id}/archive.tar`, download: `contact-sim-${id}.tar` }, 'last cycle (VTU archive)')))),
+      el('p', { class: 'run-info', id: 'adapt-outcome' }, adaptOutcome(s)),
+      // As the ladder's table: it fits the panel on a wide screen, and on a narrow one
+      // scrolls sideways inside its frame (focusable, so the keyboard scrolls it) and says so.
+      el('div', { class: 'table-wrap', tabindex: '0', role: 'region', 'aria-label': 'adaptive runs (scrolls sideways)' },
+        el('table', { class: 'study', id: 'adapt-table' },
+          el('caption', { class: 'scroll-note' }, 'Scroll sideways for every column →'),
+          el('thead', {}, el('tr', {}, heads.map((h) => el('th', { scope: 'col' }, h)))),
+          el('tbody', {}, rows))),
+      el('div', { class: 'report-wrap', id: 'report-wrap', tabindex: '0', role: 'region', 'aria-label': 'report (scrolls sideways on a narrow screen)' },
+        el('p', { class: 'scroll-note' }, 'Scroll sideways for the whole report →'),
+        img),
     );
     api.keyedImage(img, report);
     this.root.dataset.state = 'ready';

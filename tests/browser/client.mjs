@@ -41,6 +41,9 @@
 //    sessionStorage, and sent on every request, the event stream included; never in a URL.
 // 10. A real target study: the view states the chosen h and k, the predicted and estimated
 //    error and the fit as the summary has them; the work–precision report draws the chosen run.
+// 12. A real sweep: a table row per member, the plot the menus ask for.
+// 13. A real adaptive study (l-bracket): a row per cycle, the uniform line and the
+//    reference, the outcome in words, a table that fits its panel, the report, the final mesh.
 // Throughout: axe-core checks WCAG 2.2 A/AA (contrast, target sizes, names) on each state of
 // the page, and no request of the anonymous page carries an Authorization header.
 
@@ -2103,9 +2106,59 @@ async function testSweepView() {
   await page.close();
 }
 
+/**
+ * A real adaptive study (the l-bracket at h = 1/4, target 0.75: 3 cycles in well under a
+ * second): a table row per cycle, then the uniform line and the reference; the sentence says
+ * the target was reached and why the cycles stopped; every column of the table is inside its
+ * panel at 1280 px (nothing to scroll to); the report is embedded; the final mesh is offered
+ * as adapt-<id8>.msh and the last cycle's fields are linked.
+ */
+async function testAdaptView() {
+  console.log('test 13: adaptive study view (a real adaptive study)');
+  const scene = await (await context.request.get(`${base}/presets/l-bracket`)).json();
+  scene.mesh.h = '1/4';
+  scene.time = { t_end: 0.25, k: '1/16' };
+  scene.output = { every: 0, last: true, fields: ['w'] };
+  const id = await runJob({ study: { scene, adapt: { target: 0.75, max_nodes: 2000 }, reference: { refine: 2 } } }, 'the adaptive study');
+  const s = await (await context.request.get(`${base}/jobs/${id}/summary`)).json();
+  check(s.kind === 'adapt' && s.reached && s.stopped === 'target' && s.cycles.length >= 2, `summary of kind adapt, ${s.cycles.length} cycles, stopped: ${s.stopped}`);
+  const page = await openPage(async () => {}, `#job=${id}`);
+  await page.waitForSelector(`#viewer[data-state="ready"][data-job="${id}"]`, { timeout: 10_000 });
+  const rows = await page.$$eval('#adapt-table tbody tr', (trs) => trs.map((tr) => [...tr.cells].map((x) => x.textContent)));
+  const labels = rows.map((r) => r[0]);
+  const expected = [...s.cycles.map((_, i) => `cycle ${i}`), ...s.uniform.map((_, i) => `uniform h/${2 ** i}`), 'reference'];
+  check(labels.includes('cycle 0') && labels.includes('cycle 1') && labels[labels.length - 1] === 'reference' && JSON.stringify(labels) === JSON.stringify(expected),
+    `a row per cycle, the uniform line and the reference: ${labels.join(', ')}`);
+  const c0 = rows[0];
+  check(c0[1] === String(s.cycles[0].nodes) && c0[2] === String(s.cycles[0].unknowns) && c0[7] === String(s.cycles[0].marked),
+    `cycle 0's nodes, unknowns and marked cells as in the summary: ${c0.join(' | ')}`);
+  check(rows[s.cycles.length - 1][7] === '—', 'the last cycle marks nothing: "—"');
+  const outcome = await page.textContent('#adapt-outcome');
+  check(/target 0\.75 .*reached/i.test(outcome) && !outcome.includes('not reached') && outcome.includes('the estimate met the target'),
+    `the sentence says the target was reached and why the cycles stopped: "${outcome}"`);
+  // No column cut: the table is no wider than its frame, and every heading is inside the panel.
+  const fit = await page.$eval('#viewer .table-wrap', (w) => {
+    const panel = document.querySelector('#viewer').getBoundingClientRect();
+    const right = Math.max(...[...w.querySelectorAll('th, td')].map((c) => c.getBoundingClientRect().right));
+    return { scroll: w.scrollWidth, client: w.clientWidth, right, edge: Math.min(panel.right, w.getBoundingClientRect().right), page: document.documentElement.scrollWidth };
+  });
+  check(fit.scroll <= fit.client + 1 && fit.right <= fit.edge + 1 && fit.page <= 1280,
+    `every column of the table fits its panel (${fit.scroll} px in ${fit.client}; last column ends at ${fit.right.toFixed(0)} of ${fit.edge.toFixed(0)})`);
+  await page.waitForFunction(() => document.querySelector('#viewer img.report')?.naturalWidth > 0, null, { timeout: 10_000 });
+  check((await page.getAttribute('#viewer img.report', 'src')) === `/jobs/${id}/report.svg`, 'the report SVG is embedded');
+  const mesh = await page.$eval('#dl-final-mesh', (a) => [a.getAttribute('href'), a.getAttribute('download')]);
+  check(mesh[0] === s.final_mesh.file && mesh[1] === `adapt-${id.slice(0, 8)}.msh`, `the final mesh is offered as ${mesh[1]} (${mesh[0]})`);
+  const fields = await page.getAttribute('#dl-last-fields', 'href');
+  check(fields.startsWith(`/jobs/${id}/fields?step=last`) && (await context.request.get(`${base}${fields}`)).status() === 200, `the last cycle's fields are linked (${fields})`);
+  check((await page.getAttribute('#dl-table', 'href')) === `/jobs/${id}/summary?format=text`, 'the text table is linked');
+  await page.screenshot({ path: path.join(outDir, 'client-adapt.png'), fullPage: true });
+  await axeCheck(page, 'on the adaptive study view');
+  await page.close();
+}
+
 // CLIENT_TESTS=5,7 runs only those sections (while working on one); all by default.
 const only = process.env.CLIENT_TESTS ? new Set(process.env.CLIENT_TESTS.split(',').map(Number)) : null;
-const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys, testNewcomer, testTargetView, testContinue, testSweepView];
+const sections = [testSimulation, testInvalidScene, testLiveJob, testStudyView, testAnyMesh, testMeshUpload, testViewer3d, testApiKeys, testNewcomer, testTargetView, testContinue, testSweepView, testAdaptView];
 
 let failed = false;
 try {
