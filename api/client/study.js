@@ -52,6 +52,7 @@ const STOPPED = {
   target: 'the estimate met the target',
   max_nodes: 'the next mesh would have had more than max_nodes nodes',
   max_cycles: 'the largest number of cycles (max_cycles) ran',
+  time_step: 'the estimate\'s time part dominates it: refining the mesh no longer reduces it, a smaller time step k would',
   memory: 'the next mesh\'s run would not fit the memory limit of a job',
   nothing_to_refine: 'every error indicator is zero, so refining cannot change the estimate',
 };
