@@ -22,18 +22,18 @@ use serde_json::{json, Value};
 use std::ops::ControlFlow;
 
 /// A run's mesh, w at every step, and the estimate over the run.
-struct Level {
-    mesh: Mesh<2>,
+struct Level<const D: usize> {
+    mesh: Mesh<D>,
     w: Vec<Vec<f64>>,
     estimate: Parts,
     k: f64,
 }
 
-fn level(p: Problem) -> Level {
+fn level<const D: usize>(p: Problem) -> Level<D> {
     let k = p.k();
     let mut w = Vec::new();
     let mut mesh = None;
-    let summary = run::<2>(p, SolverSettings::default(), |sim: &Simulation<2>, _| {
+    let summary = run::<D>(p, SolverSettings::default(), |sim: &Simulation<D>, _| {
         w.push(sim.w.clone());
         mesh.get_or_insert_with(|| sim.mesh.clone());
         ControlFlow::Continue(())
@@ -50,12 +50,12 @@ fn level(p: Problem) -> Level {
 /// (k Σ_n |w(t_n) − w_h(t_n)|²_V)^½ over the coarse level's steps, with the reference's w
 /// at the same times (its steps a whole number of times shorter) and the coarse w
 /// interpolated onto its (nested) mesh.
-fn true_error(coarse: &Level, reference: &Level) -> f64 {
+fn true_error<const D: usize>(coarse: &Level<D>, reference: &Level<D>) -> f64 {
     let geo = Geometry::new(&reference.mesh);
     let r = (coarse.k / reference.k).round() as usize;
     let mut sum = 0.0;
     for (n, w) in coarse.w.iter().enumerate() {
-        let fine = prolongate(&coarse.mesh, w, 2, &reference.mesh).unwrap();
+        let fine = prolongate(&coarse.mesh, w, D, &reference.mesh).unwrap();
         let d: Vec<f64> = reference.w[(n + 1) * r - 1]
             .iter()
             .zip(&fine)
@@ -96,12 +96,12 @@ fn scene(preset: &str, at: At) -> Problem {
 }
 
 /// The estimates and true errors of `levels` against `reference`.
-fn ladder(preset: &str, levels: &[At], reference: At) -> Vec<(f64, f64)> {
-    let reference = level(scene(preset, reference));
+fn ladder<const D: usize>(preset: &str, levels: &[At], reference: At) -> Vec<(f64, f64)> {
+    let reference = level::<D>(scene(preset, reference));
     levels
         .iter()
         .map(|&at| {
-            let l = level(scene(preset, at));
+            let l = level::<D>(scene(preset, at));
             let row = (l.estimate.velocity.total, true_error(&l, &reference));
             eprintln!(
                 "{preset}, k = {}: estimate {:.4e}, true error {:.4e}, index {:.3}",
@@ -133,7 +133,7 @@ fn check_band(preset: &str, rows: &[(f64, f64)]) {
 
 #[test]
 fn the_estimate_follows_the_true_error_on_the_convergence_scene() {
-    let rows = ladder(
+    let rows = ladder::<2>(
         "paper-convergence",
         &[
             At::Rectangle("1/4"),
@@ -153,7 +153,7 @@ fn the_estimate_follows_the_true_error_on_the_convergence_scene() {
 
 #[test]
 fn the_efficiency_index_stays_in_its_band_at_a_re_entrant_corner() {
-    let rows = ladder(
+    let rows = ladder::<2>(
         "l-bracket",
         &[
             At::Refined(0, "1/4"),
@@ -163,6 +163,17 @@ fn the_efficiency_index_stays_in_its_band_at_a_re_entrant_corner() {
         At::Refined(5, "1/64"),
     );
     check_band("l-bracket", &rows);
+}
+
+/// The 3D box of experiment 3 (Kuhn tetrahedra, nested in the reference's lattice).
+#[test]
+fn the_efficiency_index_stays_in_its_band_on_the_box() {
+    let rows = ladder::<3>(
+        "box-exp3",
+        &[At::Rectangle("1/2"), At::Rectangle("1/4")],
+        At::Rectangle("1/16"),
+    );
+    check_band("box-exp3", &rows);
 }
 
 #[test]
