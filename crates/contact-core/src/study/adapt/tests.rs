@@ -213,3 +213,69 @@ fn a_dominant_time_part_ends_the_cycles() {
         .all(|c| c.time_share <= std::f64::consts::FRAC_1_SQRT_2));
     assert!(!before.is_empty());
 }
+
+/// The final mesh, exported and read back as an uploaded mesh would be.
+struct Uploaded(Vec<u8>);
+
+impl scene::MeshFiles for Uploaded {
+    fn load(&self, _: &str) -> Result<AnyMesh, String> {
+        crate::mesh::import::import_any(&self.0).map_err(|e| e.to_string())
+    }
+}
+
+/// [`AdaptSpec::scene_on`] the exported final mesh validates, on rectangles, boxes, polygons
+/// and imported meshes alike, and runs on the same nodes, cells and boundary parts.
+#[test]
+fn the_scene_on_the_final_mesh_validates_for_every_kind_of_body() {
+    for (preset, mesh) in [
+        ("paper-exp3", json!({"h": "1/4"})),
+        ("l-bracket", json!({"h": "1/4"})),
+        ("plate-with-hole", json!({"refine": 0})),
+        ("box-exp3", json!({"h": "1/2"})),
+    ] {
+        let mut scene = crate::scene::presets::get(preset).unwrap();
+        scene["mesh"] = mesh;
+        scene["time"] = json!({"t_end": 0.125, "k": "1/16"});
+        let spec = parse(
+            json!({"scene": scene, "adapt": {"target": 1e-6, "max_cycles": 2, "uniform": false}}),
+        )
+        .unwrap();
+        let r = run(
+            &spec,
+            exec(),
+            Limits::default(),
+            &|_, _| ControlFlow::Continue(()),
+            &mut Discard,
+        )
+        .unwrap();
+        let files = Uploaded(r.final_msh().into_bytes());
+        let p = scene::validate_with(&spec.scene_on("final"), &files)
+            .unwrap_or_else(|e| panic!("{preset}: {e}"));
+        let (again, before) = (p.any_mesh().unwrap(), &r.final_mesh);
+        assert_eq!(again.n_nodes(), before.n_nodes(), "{preset}");
+        assert_eq!(again.n_cells(), before.n_cells(), "{preset}");
+        let parts = |m: &AnyMesh| -> Vec<Option<usize>> {
+            let mut v: Vec<(Vec<usize>, Option<usize>)> = match m {
+                AnyMesh::Plane(m) => m
+                    .facets
+                    .iter()
+                    .map(|f| (sorted(&f.nodes), f.part))
+                    .collect(),
+                AnyMesh::Solid(m) => m
+                    .facets
+                    .iter()
+                    .map(|f| (sorted(&f.nodes), f.part))
+                    .collect(),
+            };
+            v.sort();
+            v.into_iter().map(|(_, p)| p).collect()
+        };
+        assert_eq!(parts(&again), parts(before), "{preset}: boundary parts");
+    }
+}
+
+fn sorted(nodes: &[usize]) -> Vec<usize> {
+    let mut v = nodes.to_vec();
+    v.sort_unstable();
+    v
+}
