@@ -161,8 +161,23 @@ fn node_levels<const D: usize>(mesh: &Mesh<D>, coarse_nodes: usize) -> Vec<NodeL
                     for i in 0..nc {
                         visit(&[(i, 1.0)]);
                     }
+                    // A midpoint of two coarse nodes (red refinement), or, after bisections,
+                    // of nodes made earlier in the same level: the mean of their stencils.
+                    let mut made: Vec<Vec<(usize, f64)>> = Vec::new();
                     for &[a, b] in &nest.midpoints {
-                        visit(&[(a, 0.5), (b, 0.5)]);
+                        let mut w: Vec<(usize, f64)> = Vec::with_capacity(2);
+                        for end in [a, b] {
+                            match end.checked_sub(nc) {
+                                None => add(&mut w, end, 0.5),
+                                Some(k) => {
+                                    for &(c, x) in &made[k] {
+                                        add(&mut w, c, 0.5 * x);
+                                    }
+                                }
+                            }
+                        }
+                        visit(&w);
+                        made.push(w);
                     }
                 })
             })
@@ -216,6 +231,14 @@ fn node_levels<const D: usize>(mesh: &Mesh<D>, coarse_nodes: usize) -> Vec<NodeL
         }
     }
     levels
+}
+
+/// Adds weight `x` of coarse node `c` to the stencil `w`.
+fn add(w: &mut Vec<(usize, f64)>, c: usize, x: f64) {
+    match w.iter_mut().find(|e| e.0 == c) {
+        Some(e) => e.1 += x,
+        None => w.push((c, x)),
+    }
 }
 
 /// The prolongators of the node levels, finest first, and each coarser level's blocks.
@@ -344,6 +367,37 @@ mod tests {
             .refine()
             .refine();
         prolongators_reproduce_linear_fields(&refined, 2);
+    }
+
+    /// Bisected meshes nest too: levels whose midpoints have earlier midpoints as ends (a
+    /// node made by the second of several bisections) prolongate linear fields exactly.
+    #[test]
+    fn chains_of_bisections_prolongate_exactly() {
+        fn chained<const D: usize>(mesh: Mesh<D>, rounds: usize) -> Mesh<D> {
+            let mut b = crate::mesh::bisect::Bisection::new(&mesh);
+            let mut midpoints = Vec::new();
+            for r in 0..rounds {
+                let marked: Vec<usize> =
+                    (0..b.mesh().n_cells()).filter(|c| c % 3 != r % 3).collect();
+                midpoints.extend(b.refine(&marked).midpoints.iter().map(|&(_, e)| e));
+            }
+            let mut fine = b.mesh().clone();
+            let n0 = mesh.n_nodes();
+            assert!(
+                midpoints.iter().any(|e| e.iter().any(|&v| v >= n0)),
+                "chained ends"
+            );
+            fine.nesting = vec![crate::mesh::Nesting {
+                coarse_nodes: n0,
+                midpoints,
+            }];
+            fine
+        }
+        prolongators_reproduce_linear_fields(
+            &chained(Mesh::rectangle(2.0, 1.0, 4, 2, MeshPattern::Diagonal), 3),
+            1,
+        );
+        prolongators_reproduce_linear_fields(&chained(Mesh::cuboid(1.0, 1.0, 1.0, 2, 2, 2), 4), 1);
     }
 
     /// A P1-type operator on `mesh` with `b` DOFs per node: DOFs p ≠ q coupled when their

@@ -210,9 +210,11 @@ fn refinements<'a, const D: usize>(coarse: &Mesh<D>, fine: &'a Mesh<D>) -> Optio
 /// A red refinement's nodal values: coarse nodes keep theirs, midpoints take the mean.
 fn refined(nest: &Nesting, coarse_values: &[f64], comps: usize) -> Vec<f64> {
     let mut out = coarse_values[..nest.coarse_nodes * comps].to_vec();
+    // The ends of a midpoint are coarse nodes (red refinement) or, after bisections,
+    // midpoints made before it: both are in `out` already.
     for &[a, b] in &nest.midpoints {
         for c in 0..comps {
-            out.push(0.5 * (coarse_values[comps * a + c] + coarse_values[comps * b + c]));
+            out.push(0.5 * (out[comps * a + c] + out[comps * b + c]));
         }
     }
     out

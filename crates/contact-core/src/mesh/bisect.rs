@@ -75,7 +75,9 @@
 //! [`Mesh::grid`] and [`Mesh::lattice`] are None and its [`Mesh::nesting`] is empty: the
 //! multigrid levels built from `nesting` assume that its last entry accounts for every
 //! node of the mesh, which a red refinement followed by bisections no longer satisfies. The
-//! relation between a bisected mesh and the previous one is described by its [`Step`].
+//! relation between a bisected mesh and the previous one is described by its [`Step`]; an
+//! adaptive study (`crate::study::adapt`) composes the steps of several cycles into levels
+//! of `nesting` (midpoints whose ends may be earlier midpoints) for its runs' multigrid.
 
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 

@@ -106,7 +106,9 @@ impl Group {
 
 /// How one red refinement relates to its coarse mesh: the first `coarse_nodes` nodes are the
 /// coarse nodes, node `coarse_nodes + k` is the midpoint of coarse edge `midpoints[k]`, and
-/// the children of coarse cell c are cells 2^D·c .. 2^D·c + 2^D − 1.
+/// the children of coarse cell c are cells 2^D·c .. 2^D·c + 2^D − 1. The levels of an
+/// adaptive study's bisected meshes use the same form for their nodes (a midpoint's ends may
+/// then be earlier midpoints; the cells are not related this way).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Nesting {
     pub coarse_nodes: usize,

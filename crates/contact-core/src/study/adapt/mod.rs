@@ -389,6 +389,46 @@ fn on_mesh<const D: usize>(base: &Problem, mesh: &Mesh<D>, source: String) -> Pr
     p
 }
 
+/// The geometric multigrid levels of the cycle whose mesh has the last of `sizes` nodes:
+/// earlier cycles' meshes, each at least 2^d times coarser than the next (as a red
+/// refinement is), down to the initial mesh and then its own red refinements' levels. The
+/// meshes are nested: bisection keeps every node and appends midpoints (`midpoints[k]` made
+/// node n0 + k), so a level is the node count of an earlier cycle and the midpoints since.
+/// Empty (smoothed aggregation) while no earlier cycle is coarse enough.
+fn levels<const D: usize>(
+    initial: &Mesh<D>,
+    midpoints: &[[usize; 2]],
+    sizes: &[usize],
+) -> Vec<crate::mesh::Nesting> {
+    let n0 = initial.n_nodes();
+    let n = *sizes.last().expect("the cycle's own size");
+    let mut chosen = vec![n];
+    while let Some(c) = sizes
+        .iter()
+        .copied()
+        .filter(|&c| c << D <= *chosen.last().expect("not empty"))
+        .max()
+    {
+        chosen.push(c);
+    }
+    if chosen.len() == 1 {
+        return Vec::new();
+    }
+    let mut out = if chosen.last() == Some(&n0) {
+        initial.nesting.clone()
+    } else {
+        Vec::new()
+    };
+    for pair in chosen.windows(2).rev() {
+        let (fine, coarse) = (pair[0], pair[1]);
+        out.push(crate::mesh::Nesting {
+            coarse_nodes: coarse,
+            midpoints: midpoints[coarse - n0..fine - n0].to_vec(),
+        });
+    }
+    out
+}
+
 /// What one run gives the study: the velocity's squared indicators over the run per cell,
 /// w at the kept steps, and its summary.
 struct Ran {
@@ -543,9 +583,15 @@ fn run_in<const D: usize>(
     let mut bisection = Bisection::new(&initial);
     let mut cycles: Vec<Row> = Vec::new();
     let mut last: Option<(Ran, Mesh<D>)>;
+    // The midpoints that made every node after the initial mesh's, in node order, and the
+    // node count of each cycle's mesh: the multigrid levels of the next.
+    let mut midpoints: Vec<[usize; 2]> = Vec::new();
+    let mut sizes: Vec<usize> = Vec::new();
     let stop = loop {
         let i = cycles.len();
-        let mesh = bisection.mesh().clone();
+        let mut mesh = bisection.mesh().clone();
+        sizes.push(mesh.n_nodes());
+        mesh.nesting = levels(&initial, &midpoints, &sizes);
         let problem = on_mesh(&spec.base, &mesh, format!("adaptive cycle {i}"));
         sink.restart().map_err(StudyError::Output)?;
         total.fetch_add(steps, Ordering::Relaxed);
@@ -582,6 +628,7 @@ fn run_in<const D: usize>(
         if !fits(&on_mesh(&spec.base, &step.mesh, String::new())) {
             break Stop::Memory;
         }
+        midpoints.extend(step.midpoints.iter().map(|&(_, ends)| ends));
         bisection = next;
     };
     let (final_run, final_mesh) = last.expect("an adaptive study runs its first cycle");

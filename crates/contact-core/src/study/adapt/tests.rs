@@ -279,3 +279,20 @@ fn sorted(nodes: &[usize]) -> Vec<usize> {
     v.sort_unstable();
     v
 }
+
+/// Levels are earlier cycles at least 2^d times coarser, down to the initial mesh, with the
+/// midpoints made in between.
+#[test]
+fn multigrid_levels_are_earlier_cycles_2_to_the_d_times_coarser() {
+    let initial = Mesh::<2>::rectangle(1.0, 1.0, 2, 2, crate::mesh::MeshPattern::Diagonal);
+    let n0 = initial.n_nodes(); // 9
+    let sizes = [n0, 14, 20, 37, 60, 90, 150];
+    let mids: Vec<[usize; 2]> = (n0..150).map(|k| [k - 1, k - 2]).collect();
+    let l = levels(&initial, &mids, &sizes);
+    // 150 → the largest ≤ 150/4 is 37 → the largest ≤ 9.25 is 9 (the initial mesh).
+    let coarse: Vec<usize> = l.iter().map(|n| n.coarse_nodes).collect();
+    assert_eq!(coarse, [9, 37]);
+    assert_eq!(l[0].midpoints, mids[..37 - 9]);
+    assert_eq!(l[1].midpoints, mids[37 - 9..]);
+    assert!(levels(&initial, &mids[..5], &sizes[..2]).is_empty());
+}
