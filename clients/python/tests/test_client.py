@@ -327,7 +327,8 @@ def test_an_adaptive_study_as_a_dataframe(client: Client) -> None:
     # The last cycle is served as a simulation on the final mesh, an uploaded mesh of ours.
     mesh = client.mesh(df.attrs["final_mesh"]["id"])
     assert mesh["summary"]["nodes"] == cycles["nodes"].iloc[-1]
-    assert job.fields().w.size == 2 * cycles["nodes"].iloc[-1]
+    w = job.fields().w
+    assert w is not None and w.size == 2 * cycles["nodes"].iloc[-1]
 
 
 def test_study_table_as_dataframe(client: Client) -> None:
