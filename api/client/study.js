@@ -177,6 +177,7 @@ export class StudyView {
         el('nav', { class: 'downloads', 'aria-label': 'downloads' },
           api.keyedLink(el('a', { href: `/jobs/${id}/summary`, download: `target-${id.slice(0, 8)}.json` }, 'summary JSON')),
           api.keyedLink(el('a', { href: report, download: `report-${id.slice(0, 8)}.svg` }, 'report SVG')),
+          ...(s.final_mesh?.file ? [sized(el('a', { id: 'dl-final-mesh', href: s.final_mesh.file, download: `target-${id.slice(0, 8)}.msh` }, 'adaptive mesh (MSH)'))] : []),
           api.keyedLink(el('a', { href: `/jobs/${id}/archive.tar`, download: `contact-sim-${id}.tar` }, 'chosen run (VTU archive)')))),
       el('p', { class: 'run-info', id: 'target-choice' },
         `Target ${s.target_error} in ${s.quantity}: h = ${fmtStep(c.h)}, k = ${fmtStep(c.k)}`,
@@ -189,6 +190,10 @@ export class StudyView {
         c.predicted_error > s.target_error && c.check_passed
           ? ` The fitted model predicted more than the target here; the run's own (2h, 2k) error estimate, ${fmt(c.estimated_error)}, is below it, and that check decides.`
           : ''),
+      // Which meshes the chosen run is on: the uniform level, or an adaptive mesh with fewer
+      // nodes and an estimate no larger (target.meshes "auto"), and why.
+      el('p', { class: 'run-info', id: 'target-meshes' },
+        `Meshes: ${s.meshes?.taken || 'uniform'}${s.meshes?.reason ? ` (${s.meshes.reason})` : ''}.`),
       el('p', { class: 'run-info', id: 'target-fit' },
         `Error model ${fmt(m.h?.coefficient)}·h^${order(m.h?.order)} + ${fmt(m.k?.coefficient)}·k^${order(m.k?.order)} `,
         `from ${(s.pilots || []).length} pilot runs; safety factor ${s.safety_factor}.`),

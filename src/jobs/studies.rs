@@ -59,23 +59,24 @@ impl Runtime {
             };
             let mut files = Vec::new();
             let mut summary = outcome.to_json();
-            if let Some(scene) = outcome.chosen_scene() {
-                files.push((CHOSEN_SCENE_FILE, pretty(scene)));
-            }
-            // An adaptive study's final mesh becomes an uploaded mesh of the job's owner: its
-            // last cycle is then served as a simulation on it, and the file is downloadable.
-            if let (Some(msh), study::request::Request::Adapt { spec, .. }) =
-                (outcome.final_msh(), &request)
-            {
+            // An adaptive mesh (an adaptive study's final one, or the one a target study took)
+            // becomes an uploaded mesh of the job's owner: the study's run is then served as
+            // a simulation on it, and the file is downloadable.
+            if let Some(msh) = outcome.final_msh() {
                 let (mesh, _) = self
                     .meshes
                     .upload_for(&job.owner, msh.as_bytes())
                     .map_err(|p| StudyError::Output(std::io::Error::other(p.detail)))?;
-                files.push((CHOSEN_SCENE_FILE, pretty(&spec.scene_on(&mesh.id))));
+                let scene = outcome
+                    .scene_on(&mesh.id)
+                    .expect("a final mesh has its scene");
+                files.push((CHOSEN_SCENE_FILE, pretty(&scene)));
                 summary["final_mesh"] = serde_json::json!({
                     "id": mesh.id,
                     "file": format!("/meshes/{}/file", mesh.id),
                 });
+            } else if let Some(scene) = outcome.chosen_scene() {
+                files.push((CHOSEN_SCENE_FILE, pretty(scene)));
             }
             files.push((TABLE_FILE, outcome.text_table().into_bytes()));
             files.push((REPORT_FILE, outcome.report_svg().into_bytes()));

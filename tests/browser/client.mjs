@@ -1973,7 +1973,7 @@ async function testTargetView() {
   console.log('test 10: target study view (a real target study job)');
   const request = context.request;
   const submit = await request.post(`${base}/jobs`, {
-    data: { study: { name: 'target view', scene: 'paper-convergence', target: { error: 0.2, quantity: 'w' } } },
+    data: { study: { name: 'target view', scene: 'paper-convergence', target: { error: 0.2, quantity: 'w', meshes: 'auto' } } },
   });
   check(submit.status() === 202, `target study accepted (${submit.status()})`);
   const id = (await submit.json()).id;
@@ -2002,6 +2002,13 @@ async function testTargetView() {
   check(choice.includes('check passed'), 'the check by the (2h, 2k) error bar is said to pass');
   check((c.predicted_error > 0.2) === choice.includes('predicted more than the target'),
     `a predicted error above the target is explained (${c.predicted_error})`);
+  // Which meshes the chosen run is on, and why, as the summary says; the adaptive mesh is
+  // offered exactly when it was taken.
+  const meshes = await page.textContent('#target-meshes');
+  check(s.meshes.policy === 'auto' && meshes === `Meshes: ${s.meshes.taken} (${s.meshes.reason}).`,
+    `the meshes taken are said: "${meshes}"`);
+  check((s.meshes.taken === 'adaptive') === ((await page.$('#dl-final-mesh')) !== null),
+    `the adaptive mesh is offered exactly when taken (${s.meshes.taken})`);
   const fit = await page.textContent('#target-fit');
   const m = s.error_model;
   const a = numberAfter(fit, 'Error model ');

@@ -311,6 +311,26 @@ def test_a_target_study_gives_the_chosen_run(client: Client) -> None:
     assert f.w is not None and len(f.w) > 0
 
 
+def test_a_target_study_may_take_an_adaptive_mesh(client: Client) -> None:
+    # The l-bracket's re-entrant corner: an adaptive mesh with fewer nodes than the uniform
+    # level that passed its check, and an estimate no larger, is taken and served.
+    job = client.target("l-bracket", 0.1, meshes="auto").wait(timeout=180, progress=False)
+    s = job.summary()
+    m = s["meshes"]
+    assert m["policy"] == "auto" and m["taken"] == "adaptive", m["reason"]
+    last = m["cycles"][-1]
+    assert last["nodes"] < m["uniform_nodes"]
+    assert s["run"]["mesh"]["nodes"] == last["nodes"]
+    mesh = client.mesh(s["final_mesh"]["id"])
+    assert mesh["summary"]["nodes"] == last["nodes"]
+    w = job.fields().w
+    assert w is not None and w.size == 2 * last["nodes"]
+    # Adaptive meshes are compared by the velocity's estimate: not for u.
+    with pytest.raises(ApiError) as e:
+        client.target("l-bracket", 0.1, quantity="u", meshes="auto")
+    assert e.value.status == 422
+
+
 def test_an_adaptive_study_as_a_dataframe(client: Client) -> None:
     scene = client.preset("l-bracket")
     scene["mesh"]["h"] = "1/4"

@@ -267,3 +267,72 @@ fn an_unreachable_target_is_refused_with_the_reason() {
         "{err}"
     );
 }
+
+/// `"meshes": "auto"` on the l-bracket, whose re-entrant corner at (1, 0.5) is where the
+/// error concentrates: the study takes the adaptive mesh at the chosen k, which has fewer
+/// nodes than the uniform level that passed its check and an estimate (spatial part) no
+/// larger; the served run is that mesh's (its summary is the last cycle's, run again), and
+/// the mesh is exported. The uniform attempt stays in the report as the level checked.
+#[test]
+fn a_target_study_takes_an_adaptive_mesh_where_it_is_cheaper() {
+    let doc = json!({"scene": "l-bracket",
+                     "target": {"error": 0.1, "quantity": "w", "meshes": "auto"}});
+    let r = go(doc, Limits::default()).unwrap();
+    eprintln!("{}", r.text_table());
+    let m = &r.meshes;
+    assert_eq!(m.taken, "adaptive", "{}", m.reason);
+    assert!(r.chosen.check_passed);
+    let (last, uniform_nodes, eta_u) = (
+        m.cycles.last().unwrap(),
+        m.uniform_nodes.unwrap(),
+        m.uniform_estimate.unwrap(),
+    );
+    assert!(last.nodes < uniform_nodes && last.space_estimate() <= eta_u);
+    assert!(
+        m.cycles[..m.cycles.len() - 1]
+            .iter()
+            .all(|c| c.space_estimate() > eta_u),
+        "the first cycle as accurate is taken"
+    );
+    assert_eq!(r.run.mesh.nodes, last.nodes);
+    let est = r.run.estimate.expect("the adaptive run is estimated");
+    assert_eq!(
+        est.relative_w, last.estimate,
+        "the run again is the cycle's run"
+    );
+    let msh = r.final_msh().expect("the adaptive mesh is exported");
+    assert!(msh.starts_with("$MeshFormat"));
+    assert!(r.text_table().contains("meshes: adaptive"));
+    let outcome = contact_core::study::request::Outcome::Target(Box::new(r.clone()));
+    assert!(outcome.report_svg().contains("meshes: adaptive"));
+    assert_eq!(outcome.final_msh().as_deref(), Some(msh.as_str()));
+    let on = outcome
+        .scene_on("m")
+        .expect("the run's scene on the stored mesh");
+    assert_eq!(
+        (&on["domain"], &on["mesh"], &on["time"]["N"]),
+        (
+            &json!({"mesh": "m"}),
+            &json!({"refine": 0}),
+            &json!(r.chosen.steps)
+        )
+    );
+
+    // Uniform meshes unless asked: nothing else is run, and the report says so.
+    let uniform = go(
+        json!({"scene": "l-bracket", "target": {"error": 0.1, "quantity": "w"}}),
+        Limits::default(),
+    )
+    .unwrap();
+    assert_eq!(uniform.meshes.taken, "uniform");
+    assert!(uniform.meshes.cycles.is_empty() && uniform.final_msh().is_none());
+    assert_eq!(
+        (
+            uniform.chosen.h,
+            uniform.chosen.steps,
+            uniform.run.mesh.nodes
+        ),
+        (r.chosen.h, r.chosen.steps, uniform_nodes),
+        "the same walk"
+    );
+}

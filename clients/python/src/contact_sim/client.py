@@ -248,15 +248,23 @@ class Client:
         quantity: str = "w",
         budget_s: Optional[float] = None,
         name: Optional[str] = None,
+        meshes: str = "uniform",
     ) -> "Job":
         """Submits a target study: the cheapest run of ``scene`` (a preset name or a scene
         document) whose relative error at t = T in ``quantity`` ("w", "u" or "zeta") is below
         ``error``, within ``budget_s`` seconds if given. The job's summary has the choice
         (``chosen``), the fitted models and the pilots; its fields, VTU and archive are the
-        chosen run's. A target out of reach fails the job with the reason in its error."""
+        chosen run's. A target out of reach fails the job with the reason in its error.
+        With ``meshes="auto"`` (quantity "w" only) the chosen run may be on an adaptive mesh
+        with fewer nodes and an a posteriori estimate no larger than the uniform level's; the
+        summary's ``meshes`` says which was taken and why, and ``final_mesh`` names the
+        adaptive mesh stored."""
+        target: Dict[str, Any] = {"error": error, "quantity": quantity}
+        if meshes != "uniform":
+            target["meshes"] = meshes
         study: Dict[str, Any] = {
             "scene": scene if isinstance(scene, str) else dict(scene),
-            "target": {"error": error, "quantity": quantity},
+            "target": target,
         }
         if budget_s is not None:
             study["budget_s"] = budget_s

@@ -12,8 +12,16 @@
 //! Coordinates are written with Rust's shortest round-trip formatting, so the nodes read
 //! back are bit for bit the nodes written.
 
-use super::Mesh;
+use super::{AnyMesh, Mesh};
 use std::fmt::Write as _;
+
+/// [`msh`] of a mesh of either dimension.
+pub fn any_msh(mesh: &AnyMesh) -> String {
+    match mesh {
+        AnyMesh::Plane(m) => msh(m),
+        AnyMesh::Solid(m) => msh(m),
+    }
+}
 
 /// The MSH 2.2 ASCII text of `mesh` (module doc).
 pub fn msh<const D: usize>(mesh: &Mesh<D>) -> String {

@@ -316,6 +316,13 @@ pub fn target_report(r: &TargetResult) -> String {
         c.estimated_error,
         c.seconds,
     );
+    let _ = writeln!(
+        out,
+        r#"<text x="{}" y="42" text-anchor="middle" font-size="12">meshes: {} ({})</text>"#,
+        W / 2.0,
+        r.meshes.taken,
+        esc(&r.meshes.reason)
+    );
     panel.frame(
         &mut out,
         "work–precision (predicted frontier, pilots, chosen run)",

@@ -302,8 +302,8 @@ impl Outcome {
         }
     }
 
-    /// A target study's chosen run's scene document (None for a ladder; an adaptive study's
-    /// is [`AdaptSpec::scene_on`] its final mesh, once that is stored somewhere).
+    /// A target study's chosen run's scene document (None for a ladder; a run on an adaptive
+    /// mesh has [`Outcome::scene_on`] that mesh, once it is stored somewhere).
     pub fn chosen_scene(&self) -> Option<&Value> {
         match self {
             Outcome::Ladder(_) | Outcome::Sweep(_) | Outcome::Adapt(_) => None,
@@ -311,11 +311,26 @@ impl Outcome {
         }
     }
 
-    /// An adaptive study's final mesh as a gmsh MSH 2.2 file.
+    /// The adaptive mesh the study's run is on (an adaptive study's final mesh, a target
+    /// study's when it took an adaptive one) as a gmsh MSH 2.2 file.
     pub fn final_msh(&self) -> Option<String> {
         match self {
             Outcome::Adapt(r) => Some(r.final_msh()),
-            _ => None,
+            Outcome::Target(r) => r.final_msh(),
+            Outcome::Ladder(_) | Outcome::Sweep(_) => None,
+        }
+    }
+
+    /// The scene document of the study's run once [`Outcome::final_msh`] is stored as the
+    /// mesh called `mesh` ([`super::spec::scene_on_mesh`]); None without a final mesh.
+    pub fn scene_on(&self, mesh: &str) -> Option<Value> {
+        match self {
+            Outcome::Adapt(r) => Some(super::spec::scene_on_mesh(&r.scene, mesh)),
+            Outcome::Target(r) => r
+                .final_mesh
+                .is_some()
+                .then(|| super::spec::scene_on_mesh(&r.scene, mesh)),
+            Outcome::Ladder(_) | Outcome::Sweep(_) => None,
         }
     }
 }

@@ -372,6 +372,47 @@ pub(super) fn scene_document(
     }
 }
 
+/// The scene of a study document, validated as given (its `error_estimate`, which a study
+/// replaces, left out) with the meshes it names looked up in `files`; errors point into
+/// `{at}/scene`.
+pub(super) fn given_scene(
+    scene_doc: &Value,
+    at: &str,
+    files: &dyn scene::MeshFiles,
+) -> Result<Problem, ValidationErrors> {
+    let mut given = scene_doc.clone();
+    if let Some(o) = given.as_object_mut() {
+        o.remove("error_estimate");
+    }
+    scene::validate_with(&given, files).map_err(|ValidationErrors(es)| {
+        ValidationErrors(
+            es.into_iter()
+                .map(|e| FieldError {
+                    pointer: format!("{at}/scene{}", e.pointer),
+                    message: e.message,
+                })
+                .collect(),
+        )
+    })
+}
+
+/// A study's scene document run on a stored mesh called `mesh` (an adaptive mesh, uploaded):
+/// the same scene with `domain` that mesh, unrefined, its output estimating, without the
+/// (2h, 2k) error estimate; its time grid is the document's.
+pub fn scene_on_mesh(scene: &Value, mesh: &str) -> Value {
+    let mut d = scene.clone();
+    if let Some(o) = d.as_object_mut() {
+        o.remove("error_estimate");
+        o.insert("domain".into(), json!({"mesh": mesh}));
+        o.insert("mesh".into(), json!({"refine": 0}));
+        let output = o.entry("output").or_insert_with(|| json!({}));
+        if let Some(out) = output.as_object_mut() {
+            out.insert("estimate".into(), json!(true));
+        }
+    }
+    d
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -46,7 +46,7 @@ mod result;
 
 pub use result::{AdaptResult, Row, Stop};
 
-use super::spec::{field_error, scene_document, study_name};
+use super::spec::{field_error, given_scene, scene_document, study_name};
 use super::target::Sink;
 use super::{Execution, StudyError};
 use crate::admission::{self, Fit, LimitError, Limits, Pointers};
@@ -54,7 +54,7 @@ use crate::mesh::bisect::Bisection;
 use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::{Body, Problem};
 use crate::run::{Hooks, Run, RunError};
-use crate::scene::{self, FieldError, ValidationErrors};
+use crate::scene::{self, ValidationErrors};
 use crate::solve::stepper::StepReport;
 use nested::Reference;
 use serde_json::{json, Map, Value};
@@ -105,6 +105,11 @@ pub struct AdaptSpec {
     pub uniform: bool,
     /// `reference.refine`: the true error is measured on the initial mesh bisected r·d times.
     pub reference: Option<usize>,
+    /// The target bounds the estimate's spatial part ([`Row::space_estimate`]), and the
+    /// cycles do not stop for a dominant time part: how a target study compares adaptive
+    /// meshes with a uniform one at the same k (`crate::study::target`). False for a
+    /// request's adaptive study.
+    pub spatial: bool,
 }
 
 /// Reads an adaptive study (`doc` at JSON pointer `at`), with the meshes a scene names looked
@@ -235,21 +240,7 @@ pub fn parse_with(
         }
     };
     let scene_doc = scene_document(obj, at)?;
-    let at_scene = format!("{at}/scene");
-    let mut given_doc = scene_doc.clone();
-    if let Some(o) = given_doc.as_object_mut() {
-        o.remove("error_estimate");
-    }
-    let base = scene::validate_with(&given_doc, files).map_err(|ValidationErrors(es)| {
-        ValidationErrors(
-            es.into_iter()
-                .map(|e| FieldError {
-                    pointer: format!("{at_scene}{}", e.pointer),
-                    message: e.message,
-                })
-                .collect(),
-        )
-    })?;
+    let base = given_scene(&scene_doc, at, files)?;
     let mut expanded = Map::new();
     if let Some(n) = &name {
         expanded.insert("name".into(), json!(n));
@@ -276,6 +267,7 @@ pub fn parse_with(
         max_cycles,
         uniform,
         reference,
+        spatial: false,
     };
     Ok((spec, Value::Object(expanded)))
 }
@@ -361,26 +353,21 @@ impl AdaptSpec {
     /// The scene document run on a stored mesh called `mesh` (the final mesh, uploaded):
     /// the same scene with `domain` that mesh, unrefined, its output estimating.
     pub fn scene_on(&self, mesh: &str) -> Value {
-        let mut d = self.scene.clone();
-        if let Some(o) = d.as_object_mut() {
-            o.remove("error_estimate");
-            o.insert("domain".into(), json!({"mesh": mesh}));
-            o.insert("mesh".into(), json!({"refine": 0}));
-            let output = o.entry("output").or_insert_with(|| json!({}));
-            if let Some(out) = output.as_object_mut() {
-                out.insert("estimate".into(), json!(true));
-            }
-        }
-        d
+        super::spec::scene_on_mesh(&self.scene, mesh)
     }
 }
 
 /// The scene on `mesh`, estimating every step, without the (2h, 2k) error estimate.
 fn on_mesh<const D: usize>(base: &Problem, mesh: &Mesh<D>, source: String) -> Problem {
+    on_any_mesh(base, AnyMesh::from_mesh(mesh.clone()), source)
+}
+
+/// [`on_mesh`] for a mesh of either dimension.
+pub(crate) fn on_any_mesh(base: &Problem, mesh: AnyMesh, source: String) -> Problem {
     let mut p = base.clone();
     p.body = Some(Arc::new(Body {
         source,
-        base: AnyMesh::from_mesh(mesh.clone()),
+        base: mesh,
         refine: 0,
     }));
     p.cells_per_unit = 0;
@@ -603,7 +590,11 @@ fn run_in<const D: usize>(
             ran.seconds,
             error(&bisection, &ran.w),
         ));
-        let estimate = cycles[i].estimate;
+        let estimate = if spec.spatial {
+            cycles[i].space_estimate()
+        } else {
+            cycles[i].estimate
+        };
         let squares = ran.squares.clone();
         last = Some((ran, mesh));
         if estimate <= spec.target {
@@ -612,7 +603,7 @@ fn run_in<const D: usize>(
         if i + 1 >= spec.max_cycles {
             break Stop::MaxCycles;
         }
-        if cycles[i].time_share > std::f64::consts::FRAC_1_SQRT_2 {
+        if !spec.spatial && cycles[i].time_share > std::f64::consts::FRAC_1_SQRT_2 {
             break Stop::TimeStep;
         }
         let marked = dorfler::mark(&squares, spec.theta);
@@ -681,6 +672,7 @@ fn run_in<const D: usize>(
         cycles,
         uniform,
         summary: final_run.summary,
+        scene: spec.scene.clone(),
         final_mesh: AnyMesh::from_mesh(final_mesh),
     })
 }

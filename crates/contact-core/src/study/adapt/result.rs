@@ -69,7 +69,7 @@ pub struct Row {
 }
 
 impl Row {
-    pub(super) fn new(
+    pub(crate) fn new(
         summary: &Summary,
         generation: usize,
         seconds: f64,
@@ -101,6 +101,14 @@ impl Row {
     }
 }
 
+impl Row {
+    /// The spatial part of the relative estimate, √(estimate² − time part²): what refining
+    /// the mesh reduces.
+    pub fn space_estimate(&self) -> f64 {
+        self.estimate * (1.0 - self.time_share * self.time_share).max(0.0).sqrt()
+    }
+}
+
 /// A finished adaptive study.
 #[derive(Debug, Clone, Serialize)]
 pub struct AdaptResult {
@@ -123,6 +131,9 @@ pub struct AdaptResult {
     pub uniform: Vec<Row>,
     /// The last cycle's run: the study's result run.
     pub summary: Summary,
+    /// The study's scene document (its last cycle's run is this scene on `final_mesh`).
+    #[serde(skip)]
+    pub scene: serde_json::Value,
     #[serde(skip)]
     pub final_mesh: AnyMesh,
 }
@@ -130,10 +141,7 @@ pub struct AdaptResult {
 impl AdaptResult {
     /// The last cycle's mesh as a gmsh MSH 2.2 file ([`export::msh`]).
     pub fn final_msh(&self) -> String {
-        match &self.final_mesh {
-            AnyMesh::Plane(m) => export::msh(m),
-            AnyMesh::Solid(m) => export::msh(m),
-        }
+        export::any_msh(&self.final_mesh)
     }
 
     /// The cycles, the uniform line and the reference as text.

@@ -3,7 +3,7 @@
 //!
 //! ```json
 //! {"name": "...", "scene": {...} | "paper-convergence",
-//!  "target": {"error": 0.05, "quantity": "w"}, "budget_s": 60}
+//!  "target": {"error": 0.05, "quantity": "w", "meshes": "uniform" | "auto"}, "budget_s": 60}
 //! ```
 //!
 //! 1. Pilot levels: an h-ladder n0, 2n0, 4n0 at 4N0 steps and a k-ladder N0, 2N0, 4N0 at
@@ -23,6 +23,10 @@
 //!    per doubling of the work; each such step adds a point to the model, which is fitted
 //!    again. Each step at least doubles the work, so the walk costs at most about twice its
 //!    last level.
+//! 5. With `"meshes": "auto"` ([`adaptive`]): adaptive meshes at the chosen k, from the
+//!    coarsest pilot mesh, refined until their estimate's spatial part is at most the chosen
+//!    uniform run's; the first such mesh with fewer nodes than the uniform level's replaces
+//!    it as the chosen run. The result's `meshes` says which was taken, and why.
 
 use super::levels::{self, LevelRun, Snapshot, StatsAccumulator, Work};
 use super::plan::{self, Candidate, CostModel, ErrorModel, Timing};
@@ -34,7 +38,7 @@ use crate::fem::{assembly, norms, Geometry};
 use crate::output::Summary;
 use crate::problem::{MeshPattern, Problem};
 use crate::run::{Hooks, Run, RunError};
-use crate::scene::{self, FieldError, ValidationErrors};
+use crate::scene::{self, ValidationErrors};
 use crate::solve::stepper::{StepFields, StepReport};
 use serde::Serialize;
 use serde_json::{json, Map, Value};
@@ -43,12 +47,14 @@ use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
+mod adaptive;
+mod chosen;
 mod planner;
 mod result;
 mod walk;
 
 use planner::Planner;
-pub use result::{Attempt, Companion, PilotRow, TargetResult};
+pub use result::{Attempt, Companion, MeshChoice, PilotRow, TargetResult};
 use walk::run_in;
 pub use walk::{difference, relative_difference};
 
@@ -69,6 +75,7 @@ const MAX_DOUBLINGS: u32 = 12;
 /// Coarsest resolutions tried for a rectangle or box (cells per unit length).
 const COARSEST: [usize; 4] = [2, 4, 8, 16];
 const FIELDS: &[&str] = &["name", "scene", "target", "budget_s"];
+const TARGET_FIELDS: &[&str] = &["error", "quantity", "meshes"];
 
 /// A study document is a target study when it has a `target`.
 pub fn is_target(doc: &Value) -> bool {
@@ -97,6 +104,17 @@ impl Quantity {
     }
 }
 
+/// Which meshes the chosen run may be on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Meshes {
+    /// The uniform refinements of the walk (the default).
+    Uniform,
+    /// The walk's uniform level, or an adaptive mesh at its k where that has fewer nodes
+    /// and an estimate no larger ([`adaptive`]).
+    Auto,
+}
+
 /// A target study's pilot ladders: resolutions n of the h-ladder (run at `s_h` steps) and
 /// step counts N of the k-ladder (run at resolution `n_k`).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -118,6 +136,7 @@ pub struct TargetSpec {
     pub n0: usize,
     pub quantity: Quantity,
     pub error: f64,
+    pub meshes: Meshes,
     pub budget_s: Option<f64>,
 }
 
@@ -216,10 +235,13 @@ pub fn parse_with(
         ));
     };
     for k in target.keys() {
-        if k != "error" && k != "quantity" {
+        if !TARGET_FIELDS.contains(&k.as_str()) {
             return Err(err(
                 &format!("/target/{k}"),
-                format!("unknown field {k:?} (allowed: error, quantity)"),
+                format!(
+                    "unknown field {k:?} (allowed: {})",
+                    TARGET_FIELDS.join(", ")
+                ),
             ));
         }
     }
@@ -246,6 +268,25 @@ pub fn parse_with(
             }
         },
     };
+    let meshes = match target.get("meshes") {
+        None => Meshes::Uniform,
+        Some(v) => match v.as_str() {
+            Some("uniform") => Meshes::Uniform,
+            Some("auto") if quantity == Quantity::W => Meshes::Auto,
+            Some("auto") => {
+                return Err(err(
+                    "/target/meshes",
+                    format!("adaptive meshes are compared by the velocity's a posteriori estimate: \"auto\" needs quantity \"w\", not \"{}\"", quantity.name()),
+                ))
+            }
+            _ => {
+                return Err(err(
+                    "/target/meshes",
+                    format!("meshes must be \"uniform\" or \"auto\", got {v}"),
+                ))
+            }
+        },
+    };
     let budget_s = match obj.get("budget_s") {
         None => None,
         Some(v) => match v.as_f64() {
@@ -259,23 +300,8 @@ pub fn parse_with(
         },
     };
     let scene_doc = super::spec::scene_document(obj, at)?;
-    let at_scene = format!("{at}/scene");
-    let relocate = |ValidationErrors(es): ValidationErrors| {
-        ValidationErrors(
-            es.into_iter()
-                .map(|e| FieldError {
-                    pointer: format!("{at_scene}{}", e.pointer),
-                    message: e.message,
-                })
-                .collect(),
-        )
-    };
     // The scene as given: its own errors, and whether it is a given mesh.
-    let mut as_given = scene_doc.clone();
-    if let Some(o) = as_given.as_object_mut() {
-        o.remove("error_estimate");
-    }
-    let given = scene::validate_with(&as_given, files).map_err(relocate)?;
+    let given = super::spec::given_scene(&scene_doc, at, files)?;
     if given.pattern == MeshPattern::Cross {
         return Err(err(
             "/scene/mesh/pattern",
@@ -297,6 +323,7 @@ pub fn parse_with(
         n0: 1,
         quantity,
         error,
+        meshes,
         budget_s,
     };
     if given.body.is_some() {
@@ -340,6 +367,10 @@ pub fn parse_with(
         "target".into(),
         json!({"error": error, "quantity": quantity.name()}),
     );
+    // Only when asked: a uniform study's document (and hash) is what it was before `meshes`.
+    if meshes == Meshes::Auto {
+        expanded["target"]["meshes"] = json!("auto");
+    }
     if let Some(b) = budget_s {
         expanded.insert("budget_s".into(), json!(b));
     }
@@ -416,6 +447,14 @@ mod tests {
         );
         assert_eq!(spec.quantity, Quantity::W);
         assert_eq!(doc["target"], json!({"error": 0.05, "quantity": "w"}));
+        assert_eq!(spec.meshes, Meshes::Uniform);
+        let (auto, doc) = parse(
+            &json!({"scene": "paper-convergence", "target": {"error": 0.05, "meshes": "auto"}}),
+            "",
+        )
+        .unwrap();
+        assert_eq!(auto.meshes, Meshes::Auto);
+        assert_eq!(doc["target"]["meshes"], json!("auto"));
         assert!(doc["scene"].is_object(), "the preset is expanded");
         let at = spec.scene_at(16, 32);
         assert_eq!(
@@ -448,6 +487,13 @@ mod tests {
             ["/study/target/x"]
         );
         assert_eq!(pointers(t(json!(0.1))), ["/study/target"]);
+        for meshes in [json!("adaptive"), json!(true)] {
+            let e = pointers(t(json!({"error": 0.1, "meshes": meshes})));
+            assert_eq!(e, ["/study/target/meshes"]);
+        }
+        // Adaptive meshes are compared by the velocity's estimate.
+        let e = pointers(t(json!({"error": 0.1, "quantity": "u", "meshes": "auto"})));
+        assert_eq!(e, ["/study/target/meshes"]);
         let mut d = t(json!({"error": 0.1}));
         d["budget_s"] = json!(-1);
         assert_eq!(pointers(d.clone()), ["/study/budget_s"]);

@@ -2,6 +2,8 @@
 //! as a text table.
 
 use super::*;
+use crate::mesh::{export, AnyMesh};
+use crate::study::adapt;
 
 /// A pilot run as reported.
 #[derive(Debug, Clone, Serialize)]
@@ -48,6 +50,44 @@ pub struct Attempt {
     pub companion: Companion,
 }
 
+/// Which meshes the chosen run is on, and why.
+#[derive(Debug, Clone, Serialize)]
+pub struct MeshChoice {
+    /// The request's `target.meshes`.
+    pub policy: Meshes,
+    /// "uniform" (the chosen attempt's level) or "adaptive" (the last of `cycles`).
+    pub taken: &'static str,
+    /// Why, in a sentence.
+    pub reason: String,
+    /// The spatial part of the chosen uniform run's relative estimate of w (policy auto).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uniform_estimate: Option<f64>,
+    /// The chosen uniform run's nodes (policy auto).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uniform_nodes: Option<usize>,
+    /// The adaptive cycles at the chosen k (policy auto), from the coarsest pilot mesh.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub cycles: Vec<adapt::Row>,
+    /// Why the cycles ended (policy auto).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stopped: Option<adapt::Stop>,
+}
+
+impl MeshChoice {
+    /// Policy uniform: nothing else was tried.
+    pub fn uniform() -> MeshChoice {
+        MeshChoice {
+            policy: Meshes::Uniform,
+            taken: "uniform",
+            reason: "uniform meshes were asked for (target.meshes)".into(),
+            uniform_estimate: None,
+            uniform_nodes: None,
+            cycles: Vec::new(),
+            stopped: None,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Serialize)]
 pub struct TargetResult {
     pub kind: &'static str,
@@ -66,16 +106,29 @@ pub struct TargetResult {
     /// Predicted work–precision frontier of the grid within the limits: the candidates no
     /// other beats in both predicted time and error, cheapest first.
     pub frontier: Vec<Candidate>,
-    /// The chosen run's scene document.
+    /// Which meshes the chosen run is on (`run`, `scene` and the served fields are the
+    /// adaptive mesh's when `meshes.taken` is "adaptive"; `chosen` stays the uniform level
+    /// that passed the check).
+    pub meshes: MeshChoice,
+    /// The chosen run's scene document (on an adaptive mesh: the uniform level's, whose mesh
+    /// the service replaces by the uploaded [`TargetResult::final_msh`]).
     pub scene: Value,
     /// The chosen run's simulation summary.
     pub run: Summary,
     /// Wall time of the whole study (pilots, plan, chosen runs and companions).
     pub seconds: f64,
     pub threads: usize,
+    /// The adaptive mesh taken (`meshes.taken` "adaptive").
+    #[serde(skip)]
+    pub final_mesh: Option<AnyMesh>,
 }
 
 impl TargetResult {
+    /// The adaptive mesh taken, as a gmsh MSH 2.2 file.
+    pub fn final_msh(&self) -> Option<String> {
+        self.final_mesh.as_ref().map(export::any_msh)
+    }
+
     /// A short text report: the choice, the check, the fit and the pilots.
     pub fn text_table(&self) -> String {
         let frac = crate::study::format::fraction;
@@ -97,6 +150,8 @@ impl TargetResult {
             c.predicted_seconds,
             c.seconds,
         );
+        let mc = &self.meshes;
+        s += &format!("meshes: {} ({})\n", mc.taken, mc.reason);
         if self.attempts.len() > 1 {
             s += "walk:";
             for a in &self.attempts {

@@ -2,6 +2,7 @@
 //! candidate up, each level checked by its (2h, 2k) error bar; the chosen run with its
 //! stored steps.
 
+use super::chosen::run_chosen;
 use super::planner::{frontier, unreachable};
 use super::*;
 use crate::solve::SolverSettings;
@@ -77,84 +78,6 @@ pub fn difference<const D: usize>(
 /// |f(T)| of a run in the quantity's norm.
 fn norm_at_end<const D: usize>(run: &LevelRun<D>, quantity: Quantity) -> f64 {
     difference(run, run, quantity).1
-}
-
-/// The chosen run: its stored steps to `sink`, its summary, and its fields at T.
-fn run_chosen<const D: usize>(
-    problem: &Problem,
-    exec: Execution,
-    keep_u: bool,
-    sink: &mut dyn Sink,
-    tick: &(dyn Fn() -> ControlFlow<()> + Sync),
-) -> Result<(LevelRun<D>, Summary), StudyError> {
-    let start = Instant::now();
-    let settings = SolverSettings {
-        threads: exec.threads,
-        ..exec.settings
-    };
-    let mut run = Run::<D>::new(problem.clone(), settings).map_err(RunError::from)?;
-    let mut hooks = Chosen {
-        stats: StatsAccumulator::new(exec.settings),
-        sink,
-        tick,
-    };
-    match run.drive(&mut hooks).map_err(RunError::from)? {
-        ControlFlow::Break(Some(e)) => return Err(StudyError::Output(e)),
-        ControlFlow::Break(None) => return Err(StudyError::Cancelled),
-        ControlFlow::Continue(()) => {}
-    }
-    let stats = hooks.stats.finish();
-    let sim = run.sim();
-    let snapshot = Snapshot {
-        step: problem.steps,
-        w: sim.w.clone(),
-        zeta: sim.state.zeta.clone(),
-        u: if keep_u {
-            sim.state.u.clone()
-        } else {
-            Vec::new()
-        },
-    };
-    let unknowns = sim.dofs.n_free();
-    let seconds = start.elapsed().as_secs_f64();
-    let mesh = sim.mesh.clone();
-    let summary = run.summary();
-    let run = LevelRun {
-        unknowns,
-        steps: problem.steps,
-        seconds,
-        stats,
-        snapshots: vec![snapshot],
-        mesh,
-    };
-    Ok((run, summary))
-}
-
-/// The chosen run's hooks: its stored steps to the sink (`Break(Some)`: a write failed), its
-/// solver figures, the study's tick (`Break(None)`: cancelled).
-struct Chosen<'a> {
-    stats: StatsAccumulator,
-    sink: &'a mut dyn Sink,
-    tick: &'a (dyn Fn() -> ControlFlow<()> + Sync),
-}
-
-impl<const D: usize> Hooks<D> for Chosen<'_> {
-    type Stop = Option<std::io::Error>;
-
-    fn stored_step(&mut self, run: &Run<D>, _: &StepReport) -> ControlFlow<Self::Stop> {
-        match self.sink.step(&run.sim().fields()) {
-            Ok(()) => ControlFlow::Continue(()),
-            Err(e) => ControlFlow::Break(Some(e)),
-        }
-    }
-
-    fn after_step(&mut self, _: &Run<D>, r: &StepReport) -> ControlFlow<Self::Stop> {
-        self.stats.add(r);
-        match (self.tick)() {
-            ControlFlow::Break(()) => ControlFlow::Break(None),
-            ControlFlow::Continue(()) => ControlFlow::Continue(()),
-        }
-    }
 }
 
 /// [`run`] in dimension D.
@@ -380,8 +303,10 @@ pub(super) fn run_in<const D: usize>(
                 continue;
             }
         }
-        // The level is run with its stored steps (beside its companion, if that is new).
-        let problem = planner.problem(level);
+        // The level is run with its stored steps (beside its companion, if that is new), and
+        // estimated where an adaptive mesh may replace it.
+        let mut problem = planner.problem(level);
+        problem.output.estimate |= spec.meshes == Meshes::Auto;
         sink.restart().map_err(StudyError::Output)?;
         total_steps.fetch_add(level.1, Ordering::Relaxed);
         let (run, summary) = if made.contains_key(&companion_level)
@@ -447,6 +372,18 @@ pub(super) fn run_in<const D: usize>(
             _ => break summary,
         }
     };
+    let (meshes, summary, final_mesh) = match spec.meshes {
+        Meshes::Uniform => (MeshChoice::uniform(), summary, None),
+        Meshes::Auto => {
+            let grow = |n: usize| {
+                total_steps.fetch_add(n, Ordering::Relaxed);
+            };
+            match super::adaptive::consider::<D>(planner, level, &summary, sink, &grow, &tick)? {
+                (choice, Some((adaptive, mesh))) => (choice, adaptive, Some(mesh)),
+                (choice, None) => (choice, summary, None),
+            }
+        }
+    };
     let chosen = attempts.last().cloned().expect("one attempt");
     let pilots = runs
         .iter()
@@ -473,10 +410,12 @@ pub(super) fn run_in<const D: usize>(
         cost_model: cost,
         pilots,
         frontier,
+        meshes,
         scene: spec.scene_at(last_level.0, last_level.1),
         run: summary,
         seconds: planner.started.elapsed().as_secs_f64(),
         threads: exec.threads,
+        final_mesh,
     })
 }
 
