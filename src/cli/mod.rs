@@ -63,7 +63,8 @@ pub enum Command {
     /// Print a preset as a scene file.
     Preset(preset::PresetArgs),
     /// Convergence studies: study files (JSON, `{"study": {...}}` or the study object) and/or
-    /// presets (paper-table-1, paper-table-2). Studies of one scene share their reference run.
+    /// presets (paper-table-1, paper-table-2, l-bracket-adaptive, l-bracket-target). Studies of
+    /// one scene share their reference run.
     /// Prints the result JSON (an array for several studies) or the paper-style tables.
     Study(study::StudyArgs),
     /// A parameter sweep: a file `{"sweep": {"scene", "vary": {POINTER: [VALUES]}, "mode"}}`;

@@ -52,7 +52,7 @@ pub fn main(args: StudyArgs) -> ExitCode {
     if args.files.is_empty() && args.preset.is_empty() {
         return fail(
             2,
-            "give study files and/or --preset NAME (paper-table-1, paper-table-2)",
+            "give study files and/or --preset NAME (paper-table-1, paper-table-2, l-bracket-adaptive, l-bracket-target)",
         );
     }
     let docs = match documents(&args.files, &args.preset) {

@@ -300,6 +300,10 @@ def test_a_study_preset_is_submitted_by_name(client: Client) -> None:
     assert client.submit("paper-exp1", overrides={"h": "1/4", "k": "1/4"}).kind == "simulation"
     if job.refresh().status in ("queued", "running"):
         job.cancel()
+    # The adaptive study preset runs as an adaptive study.
+    adaptive = client.submit("l-bracket-adaptive").wait(timeout=180, progress=False)
+    s = adaptive.summary()
+    assert s["kind"] == "adapt" and s["reached"] and s["cycles"][-1]["estimate"] <= 0.15
 
 
 def test_a_target_study_gives_the_chosen_run(client: Client) -> None:

@@ -54,6 +54,15 @@ pub fn parse(
     at: &str,
     files: &dyn MeshFiles,
 ) -> Result<(Request, Value), ValidationErrors> {
+    // A preset of any kind is read as its document.
+    if let Some(name) = doc.get("preset").and_then(Value::as_str) {
+        if let (Some(expanded), 1) = (
+            super::presets::get(name),
+            doc.as_object().map_or(0, |o| o.len()),
+        ) {
+            return parse(&expanded, at, files);
+        }
+    }
     if adapt::is_adapt(doc) {
         let (spec, expanded) = adapt::parse_with(doc, at, files)?;
         return Ok((
