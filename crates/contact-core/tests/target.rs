@@ -4,6 +4,7 @@
 
 mod common;
 use common::*;
+use contact_core::study::adapt;
 use contact_core::study::target::{self, Discard, Limits};
 use contact_core::study::{self, Execution, StudyError, TargetResult};
 use serde_json::json;
@@ -275,9 +276,8 @@ fn an_unreachable_target_is_refused_with_the_reason() {
 /// the mesh is exported. The uniform attempt stays in the report as the level checked.
 #[test]
 fn a_target_study_takes_an_adaptive_mesh_where_it_is_cheaper() {
-    let doc = json!({"scene": "l-bracket",
-                     "target": {"error": 0.1, "quantity": "w", "meshes": "auto"}});
-    let r = go(doc, Limits::default()).unwrap();
+    let doc_auto = || json!({"scene": "l-bracket", "target": {"error": 0.1, "quantity": "w", "meshes": "auto"}});
+    let r = go(doc_auto(), Limits::default()).unwrap();
     eprintln!("{}", r.text_table());
     let m = &r.meshes;
     assert_eq!(m.taken, "adaptive", "{}", m.reason);
@@ -317,6 +317,49 @@ fn a_target_study_takes_an_adaptive_mesh_where_it_is_cheaper() {
             &json!(r.chosen.steps)
         )
     );
+
+    // The mesh taken against a reference: the same cycles again, as an adaptive study with
+    // the initial mesh bisected 3·d times as its reference (46k nodes; the cycle taken is
+    // bisected 5 times at most), and its uniform line beside them. The adaptive mesh's true
+    // error is within the estimator's band (a factor 1.3) of the uniform mesh with the chosen
+    // level's nodes, and it has fewer of them.
+    let (spec, _) = target::parse(&doc_auto(), "").unwrap();
+    let base = contact_core::scene::validate(&spec.scene_at(spec.n0, r.chosen.steps)).unwrap();
+    let again = adapt::AdaptSpec {
+        name: "again".into(),
+        scene: spec.scene.clone(),
+        base,
+        target: eta_u,
+        theta: adapt::DEFAULT_THETA,
+        // One more than the study's: the uniform line's point at the chosen level's nodes.
+        max_nodes: Some(uniform_nodes),
+        max_cycles: 24,
+        uniform: true,
+        reference: Some(3),
+        spatial: true,
+    };
+    let measured = adapt::run(
+        &again,
+        Execution::default(),
+        Limits::default(),
+        &|_, _| ControlFlow::Continue(()),
+        &mut Discard,
+    )
+    .unwrap();
+    let nodes = |rows: &[adapt::Row]| rows.iter().map(|c| c.nodes).collect::<Vec<_>>();
+    assert_eq!(nodes(&measured.cycles), nodes(&m.cycles), "the same cycles");
+    let adaptive_error = measured.cycles.last().unwrap().error.unwrap();
+    let same_size = measured
+        .uniform
+        .iter()
+        .find(|u| u.nodes == uniform_nodes)
+        .expect("the uniform line has the chosen level's nodes");
+    let uniform_error = same_size.error.unwrap();
+    eprintln!(
+        "true error: adaptive {adaptive_error:.4} ({} nodes), uniform {uniform_error:.4} ({uniform_nodes} nodes)",
+        last.nodes
+    );
+    assert!(adaptive_error <= 1.3 * uniform_error);
 
     // Uniform meshes unless asked: nothing else is run, and the report says so.
     let uniform = go(
