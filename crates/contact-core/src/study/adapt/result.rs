@@ -99,9 +99,7 @@ impl Row {
             seconds,
         }
     }
-}
 
-impl Row {
     /// The spatial part of the relative estimate, √(estimate² − time part²): what refining
     /// the mesh reduces.
     pub fn space_estimate(&self) -> f64 {
