@@ -214,6 +214,39 @@ fn a_dominant_time_part_ends_the_cycles() {
     assert!(!before.is_empty());
 }
 
+/// With the spatial goal (a target study's comparison) the target bounds the estimate's
+/// spatial part, √(estimate² − time part²), and a dominant time part does not end the cycles.
+#[test]
+fn the_spatial_goal_leaves_the_time_part_out() {
+    let mut scene = small_bracket(1e-6, 40, None).scene;
+    scene["time"] = json!({"t_end": 1, "k": "1/2"});
+    let mut spec = parse(json!({"scene": scene, "adapt": {"target": 1e-6, "max_cycles": 8, "max_nodes": 20000, "uniform": false}})).unwrap();
+    spec.spatial = true;
+    let go = |spec: &AdaptSpec| {
+        run(
+            spec,
+            exec(),
+            Limits::default(),
+            &|_, _| ControlFlow::Continue(()),
+            &mut Discard,
+        )
+        .unwrap()
+    };
+    let all = go(&spec);
+    assert_eq!(all.stopped, Stop::MaxCycles, "{}", all.text_table());
+    assert!(all.cycles[7].time_share > std::f64::consts::FRAC_1_SQRT_2);
+    for c in &all.cycles {
+        let (space, time) = (c.space_estimate(), c.estimate * c.time_share);
+        assert!((space * space + time * time - c.estimate * c.estimate).abs() <= 1e-12);
+    }
+    // The third cycle's spatial part as the target: reached there, although the whole
+    // estimate is larger.
+    spec.target = all.cycles[2].space_estimate();
+    let three = go(&spec);
+    assert_eq!((three.stopped, three.cycles.len()), (Stop::Target, 3));
+    assert!(three.cycles[2].estimate > spec.target);
+}
+
 /// The final mesh, exported and read back as an uploaded mesh would be.
 struct Uploaded(Vec<u8>);
 
