@@ -41,6 +41,28 @@ const PAPER = {
   },
 };
 
+/**
+ * A study's table: it fits the panel on a wide screen, and on a narrow one scrolls sideways
+ * inside its frame (focusable, so the keyboard scrolls it too) and says so.
+ */
+function scrollingTable(id, label, heads, rows) {
+  return el('div', { class: 'table-wrap', tabindex: '0', role: 'region', 'aria-label': label },
+    el('table', { class: 'study', id },
+      el('caption', { class: 'scroll-note' }, 'Scroll sideways for every column →'),
+      el('thead', {}, el('tr', {}, heads.map((h) => el('th', { scope: 'col' }, h)))),
+      el('tbody', {}, rows)));
+}
+
+/**
+ * A study's report: on a phone it keeps its own size (its 11 px labels would shrink to 4 px
+ * at the screen's width) and scrolls sideways in its frame, as the table does.
+ */
+function scrollingReport(img) {
+  return el('div', { class: 'report-wrap', id: 'report-wrap', tabindex: '0', role: 'region', 'aria-label': 'report (scrolls sideways on a narrow screen)' },
+    el('p', { class: 'scroll-note' }, 'Scroll sideways for the whole report →'),
+    img);
+}
+
 /** A download link that works with a key and says its size once known. */
 function sized(a) {
   api.sizeInto(a, a.textContent, a.getAttribute('href'));
@@ -137,18 +159,8 @@ export class StudyView {
         `Least-squares orders: w ${order(s.lsq_order_w)}, ζ ${order(s.lsq_order_zeta)}.`),
       ...(paper ? [el('p', { class: 'run-info', id: 'paper-note' },
         'The paper\'s own values are beside ours: this scheme\'s errors differ from the paper\'s, its orders agree (see the user guide, "Reproduce the paper").')] : []),
-      // On a narrow screen the table scrolls sideways inside its frame (focusable, so the
-      // keyboard scrolls it too), and says so.
-      el('div', { class: 'table-wrap', tabindex: '0', role: 'region', 'aria-label': 'error table (scrolls sideways)' },
-        el('table', { class: 'study', id: 'study-table' },
-          el('caption', { class: 'scroll-note' }, 'Scroll sideways for every column →'),
-          el('thead', {}, el('tr', {}, heads.map((h) => el('th', { scope: 'col' }, h)))),
-          el('tbody', {}, rows))),
-      // On a phone the report keeps its own size (its 11 px labels would shrink to 4 px at
-      // the screen's width) and scrolls sideways in its frame, as the table does.
-      el('div', { class: 'report-wrap', id: 'report-wrap', tabindex: '0', role: 'region', 'aria-label': 'report (scrolls sideways on a narrow screen)' },
-        el('p', { class: 'scroll-note' }, 'Scroll sideways for the whole report →'),
-        img),
+      scrollingTable('study-table', 'error table (scrolls sideways)', heads, rows),
+      scrollingReport(img),
     );
     api.keyedImage(img, report);
     this.root.dataset.state = 'ready';
@@ -249,16 +261,8 @@ export class StudyView {
           api.keyedLink(el('a', { id: 'dl-last-fields', href: job.links?.fields || `/jobs/${id}/fields?step=last`, download: `adapt-${short}-fields.json` }, 'last cycle\'s fields (JSON)')),
           api.keyedLink(el('a', { href: `/jobs/${id}/archive.tar`, download: `contact-sim-${id}.tar` }, 'last cycle (VTU archive)')))),
       el('p', { class: 'run-info', id: 'adapt-outcome' }, adaptOutcome(s)),
-      // As the ladder's table: it fits the panel on a wide screen, and on a narrow one
-      // scrolls sideways inside its frame (focusable, so the keyboard scrolls it) and says so.
-      el('div', { class: 'table-wrap', tabindex: '0', role: 'region', 'aria-label': 'adaptive runs (scrolls sideways)' },
-        el('table', { class: 'study', id: 'adapt-table' },
-          el('caption', { class: 'scroll-note' }, 'Scroll sideways for every column →'),
-          el('thead', {}, el('tr', {}, heads.map((h) => el('th', { scope: 'col' }, h)))),
-          el('tbody', {}, rows))),
-      el('div', { class: 'report-wrap', id: 'report-wrap', tabindex: '0', role: 'region', 'aria-label': 'report (scrolls sideways on a narrow screen)' },
-        el('p', { class: 'scroll-note' }, 'Scroll sideways for the whole report →'),
-        img),
+      scrollingTable('adapt-table', 'adaptive runs (scrolls sideways)', heads, rows),
+      scrollingReport(img),
     );
     api.keyedImage(img, report);
     this.root.dataset.state = 'ready';

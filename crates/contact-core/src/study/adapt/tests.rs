@@ -76,6 +76,17 @@ fn small_bracket(target: f64, max_cycles: usize, reference: Option<usize>) -> Ad
     parse(doc).unwrap()
 }
 
+/// The study on one thread, under the default limits, without progress or stored steps.
+fn run_quietly(spec: &AdaptSpec) -> Result<AdaptResult, StudyError> {
+    run(
+        spec,
+        exec(),
+        Limits::default(),
+        &|_, _| ControlFlow::Continue(()),
+        &mut Discard,
+    )
+}
+
 fn exec() -> Execution {
     Execution {
         threads: 1,
@@ -86,14 +97,7 @@ fn exec() -> Execution {
 #[test]
 fn cycles_refine_where_marked_and_the_estimate_falls() {
     let spec = small_bracket(1e-6, 4, Some(2));
-    let r = run(
-        &spec,
-        exec(),
-        Limits::default(),
-        &|_, _| ControlFlow::Continue(()),
-        &mut Discard,
-    )
-    .unwrap();
+    let r = run_quietly(&spec).unwrap();
     eprintln!("{}", r.text_table());
     assert_eq!(r.stopped, Stop::MaxCycles);
     assert!(!r.reached);
@@ -119,34 +123,13 @@ fn cycles_refine_where_marked_and_the_estimate_falls() {
 
 #[test]
 fn a_reachable_target_stops_the_cycles() {
-    let first = run(
-        &small_bracket(0.95, 1, None),
-        exec(),
-        Limits::default(),
-        &|_, _| ControlFlow::Continue(()),
-        &mut Discard,
-    )
-    .unwrap();
+    let first = run_quietly(&small_bracket(0.95, 1, None)).unwrap();
     assert_eq!(first.stopped, Stop::Target, "{}", first.text_table());
     assert!(first.reached && first.cycles.len() == 1);
     // A target between the first two cycles' estimates takes exactly two.
-    let two = run(
-        &small_bracket(1e-6, 2, None),
-        exec(),
-        Limits::default(),
-        &|_, _| ControlFlow::Continue(()),
-        &mut Discard,
-    )
-    .unwrap();
+    let two = run_quietly(&small_bracket(1e-6, 2, None)).unwrap();
     let target = 0.5 * (two.cycles[0].estimate + two.cycles[1].estimate);
-    let r = run(
-        &small_bracket(target, 6, None),
-        exec(),
-        Limits::default(),
-        &|_, _| ControlFlow::Continue(()),
-        &mut Discard,
-    )
-    .unwrap();
+    let r = run_quietly(&small_bracket(target, 6, None)).unwrap();
     assert_eq!(
         (r.stopped, r.cycles.len()),
         (Stop::Target, 2),
@@ -160,14 +143,7 @@ fn the_node_budget_ends_the_cycles_before_it_is_passed() {
     let mut spec = small_bracket(1e-6, 40, None);
     spec.uniform = false;
     spec.max_nodes = Some(200);
-    let r = run(
-        &spec,
-        exec(),
-        Limits::default(),
-        &|_, _| ControlFlow::Continue(()),
-        &mut Discard,
-    )
-    .unwrap();
+    let r = run_quietly(&spec).unwrap();
     assert_eq!(r.stopped, Stop::MaxNodes);
     assert!(r.cycles.iter().all(|c| c.nodes <= 200));
     assert_eq!(r.uniform.len(), 1);
@@ -197,14 +173,7 @@ fn a_dominant_time_part_ends_the_cycles() {
     let mut scene = small_bracket(1e-6, 40, None).scene;
     scene["time"] = json!({"t_end": 1, "k": "1/2"});
     let spec = parse(json!({"scene": scene, "adapt": {"target": 1e-6, "max_cycles": 40, "max_nodes": 20000, "uniform": false}})).unwrap();
-    let r = run(
-        &spec,
-        exec(),
-        Limits::default(),
-        &|_, _| ControlFlow::Continue(()),
-        &mut Discard,
-    )
-    .unwrap();
+    let r = run_quietly(&spec).unwrap();
     assert_eq!(r.stopped, Stop::TimeStep, "{}", r.text_table());
     let (last, before) = r.cycles.split_last().unwrap();
     assert!(last.time_share > std::f64::consts::FRAC_1_SQRT_2);
@@ -222,17 +191,7 @@ fn the_spatial_goal_leaves_the_time_part_out() {
     scene["time"] = json!({"t_end": 1, "k": "1/2"});
     let mut spec = parse(json!({"scene": scene, "adapt": {"target": 1e-6, "max_cycles": 8, "max_nodes": 20000, "uniform": false}})).unwrap();
     spec.spatial = true;
-    let go = |spec: &AdaptSpec| {
-        run(
-            spec,
-            exec(),
-            Limits::default(),
-            &|_, _| ControlFlow::Continue(()),
-            &mut Discard,
-        )
-        .unwrap()
-    };
-    let all = go(&spec);
+    let all = run_quietly(&spec).unwrap();
     assert_eq!(all.stopped, Stop::MaxCycles, "{}", all.text_table());
     assert!(all.cycles[7].time_share > std::f64::consts::FRAC_1_SQRT_2);
     for c in &all.cycles {
@@ -242,7 +201,7 @@ fn the_spatial_goal_leaves_the_time_part_out() {
     // The third cycle's spatial part as the target: reached there, although the whole
     // estimate is larger.
     spec.target = all.cycles[2].space_estimate();
-    let three = go(&spec);
+    let three = run_quietly(&spec).unwrap();
     assert_eq!((three.stopped, three.cycles.len()), (Stop::Target, 3));
     assert!(three.cycles[2].estimate > spec.target);
 }
@@ -273,14 +232,7 @@ fn the_scene_on_the_final_mesh_validates_for_every_kind_of_body() {
             json!({"scene": scene, "adapt": {"target": 1e-6, "max_cycles": 2, "uniform": false}}),
         )
         .unwrap();
-        let r = run(
-            &spec,
-            exec(),
-            Limits::default(),
-            &|_, _| ControlFlow::Continue(()),
-            &mut Discard,
-        )
-        .unwrap();
+        let r = run_quietly(&spec).unwrap();
         let files = Uploaded(r.final_msh().into_bytes());
         let p = scene::validate_with(&spec.scene_on("final"), &files)
             .unwrap_or_else(|e| panic!("{preset}: {e}"));
