@@ -72,37 +72,41 @@ impl Accumulator {
     }
 }
 
-/// The `nrows` × `ncols` matrix whose row i `row(i, acc)` adds into `acc`. Blocks of rows
-/// are formed on the pool's threads, each with an accumulator of its own, and joined in
-/// order; a row's arithmetic does not depend on the split, so neither does the result.
-fn by_rows(nrows: usize, ncols: usize, row: impl Fn(usize, &mut Accumulator) + Sync + Send) -> Csr {
-    let threads = par::current_threads();
-    let chunk = match threads {
-        1 => nrows.max(1),
-        t => nrows.div_ceil(4 * t).max(1),
+/// Rows of a product as formed by one thread: each row's length, then all their columns
+/// and values in row order.
+type RowBlock = (Vec<usize>, Vec<u32>, Vec<f64>);
+
+/// The rows `rows` of a matrix with `ncols` columns whose row i `row(i, acc)` adds into
+/// `acc`, with one dense accumulator for the block.
+fn row_block(
+    rows: std::ops::Range<usize>,
+    ncols: usize,
+    row: impl Fn(usize, &mut Accumulator),
+) -> RowBlock {
+    let mut acc = Accumulator {
+        acc: vec![0.0; ncols],
+        seen: vec![usize::MAX; ncols],
+        cols: Vec::new(),
+        row: 0,
     };
-    let blocks = par::map_ranges(nrows, chunk, |rows| {
-        let mut acc = Accumulator {
-            acc: vec![0.0; ncols],
-            seen: vec![usize::MAX; ncols],
-            cols: Vec::new(),
-            row: 0,
-        };
-        let (mut lengths, mut indices, mut values) =
-            (Vec::with_capacity(rows.len()), Vec::new(), Vec::new());
-        for i in rows {
-            acc.row = i;
-            acc.cols.clear();
-            row(i, &mut acc);
-            acc.cols.sort_unstable();
-            for &j in &acc.cols {
-                indices.push(j as u32);
-                values.push(acc.acc[j]);
-            }
-            lengths.push(acc.cols.len());
+    let (mut lengths, mut indices, mut values) =
+        (Vec::with_capacity(rows.len()), Vec::new(), Vec::new());
+    for i in rows {
+        acc.row = i;
+        acc.cols.clear();
+        row(i, &mut acc);
+        acc.cols.sort_unstable();
+        for &j in &acc.cols {
+            indices.push(j as u32);
+            values.push(acc.acc[j]);
         }
-        (lengths, indices, values)
-    });
+        lengths.push(acc.cols.len());
+    }
+    (lengths, indices, values)
+}
+
+/// The `nrows` × `ncols` matrix made of consecutive row blocks, joined in order.
+fn join(nrows: usize, ncols: usize, blocks: Vec<RowBlock>) -> Csr {
     let nnz = blocks.iter().map(|b| b.1.len()).sum();
     let mut indptr = Vec::with_capacity(nrows + 1);
     let (mut indices, mut values) = (Vec::with_capacity(nnz), Vec::with_capacity(nnz));
@@ -114,6 +118,7 @@ fn by_rows(nrows: usize, ncols: usize, row: impl Fn(usize, &mut Accumulator) + S
         indices.extend_from_slice(&i);
         values.extend_from_slice(&v);
     }
+    assert_eq!(indptr.len(), nrows + 1, "row blocks cover the rows");
     Csr {
         nrows,
         ncols,
@@ -121,6 +126,19 @@ fn by_rows(nrows: usize, ncols: usize, row: impl Fn(usize, &mut Accumulator) + S
         indices,
         values,
     }
+}
+
+/// The `nrows` × `ncols` matrix whose row i `row(i, acc)` adds into `acc`. Blocks of rows
+/// are formed on the pool's threads, each with an accumulator of its own, and joined in
+/// order; a row's arithmetic does not depend on the split, so neither does the result.
+fn by_rows(nrows: usize, ncols: usize, row: impl Fn(usize, &mut Accumulator) + Sync + Send) -> Csr {
+    let threads = par::current_threads();
+    let chunk = match threads {
+        1 => nrows.max(1),
+        t => nrows.div_ceil(4 * t).max(1),
+    };
+    let blocks = par::map_ranges(nrows, chunk, |rows| row_block(rows, ncols, &row));
+    join(nrows, ncols, blocks)
 }
 
 /// α·A + β·B for two matrices of one shape (any patterns).
@@ -165,18 +183,88 @@ pub fn add(alpha: f64, a: &Csr, beta: f64, b: &Csr) -> Csr {
 /// The Galerkin coarse operator Pᵀ A P (coarse × coarse), symmetrised entrywise so that
 /// rounding cannot make a coarse operator unsymmetric.
 ///
-/// With a sparse P (geometric levels: at most two fine-to-coarse weights per row) it is
-/// formed row by row of the result without A·P, which on a fine 3D level has about 1.3 × A's
-/// entries and would be the set-up's largest transient. A smoothed-aggregation P has tens
-/// of entries per row, which would make that triple loop as many times the work, so it goes
-/// through A·P.
+/// A·P, on a fine 3D level, has more entries than A and would be the set-up's largest
+/// transient; it is never formed whole. With a sparse P (geometric levels: at most two
+/// fine-to-coarse weights per row) the product goes row by row of the result
+/// ([`triple_product`]). A smoothed-aggregation P has tens of entries per row, which would
+/// make that triple loop as many times the work: the sum over the fine rows is cut into
+/// [`GALERKIN_PIECES`] pieces instead ([`by_pieces`]).
 pub fn galerkin(a: &Csr, p: &Csr, pt: &Csr) -> Csr {
     let c = if p.nnz() <= 2 * p.nrows {
         triple_product(a, p, pt)
     } else {
-        product(pt, &product(a, p))
+        by_pieces(a, p)
     };
     add(0.5, &c, 0.5, &transpose(&c))
+}
+
+/// Pieces of the fine rows in [`by_pieces`]. Fixed, so the sums (and the bits) do not depend
+/// on the thread count.
+const GALERKIN_PIECES: usize = 16;
+
+/// Pᵀ A P = Σ_R P_Rᵀ (A P)_R over [`GALERKIN_PIECES`] consecutive pieces R of the fine rows:
+/// each piece forms (A P)_R and its term, and the terms are added in piece order as they
+/// come, a round of as many pieces as threads at a time. Every row of A·P is formed once;
+/// what is held beside the result is a round's rows of A·P and terms.
+fn by_pieces(a: &Csr, p: &Csr) -> Csr {
+    assert_eq!(
+        (a.nrows, a.ncols),
+        (p.nrows, p.nrows),
+        "A square with P's rows"
+    );
+    let (nf, nc) = (p.nrows, p.ncols);
+    let rows = nf.div_ceil(GALERKIN_PIECES).max(1);
+    let pieces = nf.div_ceil(rows);
+    let term = |k: usize| {
+        let fine = k * rows..((k + 1) * rows).min(nf);
+        let (lengths, ap_cols, ap_values) = row_block(fine.clone(), nc, |r, acc| {
+            for s in a.indptr[r]..a.indptr[r + 1] {
+                let (m, av) = (a.indices[s] as usize, a.values[s]);
+                for t in p.indptr[m]..p.indptr[m + 1] {
+                    acc.add(p.indices[t] as usize, av * p.values[t]);
+                }
+            }
+        });
+        let mut start = Vec::with_capacity(lengths.len() + 1);
+        start.push(0);
+        for l in lengths {
+            start.push(start.last().unwrap() + l);
+        }
+        let entries = p.indptr[fine.start]..p.indptr[fine.end];
+        let p_r = Csr {
+            nrows: fine.len(),
+            ncols: nc,
+            indptr: p.indptr[fine.clone()]
+                .iter()
+                .chain(std::iter::once(&p.indptr[fine.end]))
+                .map(|&e| e - entries.start)
+                .collect(),
+            indices: p.indices[entries.clone()].to_vec(),
+            values: p.values[entries].to_vec(),
+        };
+        let p_rt = transpose(&p_r);
+        join(
+            nc,
+            nc,
+            vec![row_block(0..nc, nc, |i, acc| {
+                for q in p_rt.indptr[i]..p_rt.indptr[i + 1] {
+                    let (r, w) = (p_rt.indices[q] as usize, p_rt.values[q]);
+                    for e in start[r]..start[r + 1] {
+                        acc.add(ap_cols[e] as usize, w * ap_values[e]);
+                    }
+                }
+            })],
+        )
+    };
+    let round = par::current_threads().max(1);
+    let mut c = Csr::from_triplets(nc, nc, Vec::new());
+    for first in (0..pieces).step_by(round) {
+        let terms = par::map_ranges(round.min(pieces - first), 1, |k| term(first + k.start));
+        for t in terms {
+            c = add(1.0, &c, 1.0, &t);
+        }
+    }
+    c
 }
 
 /// C_IJ = Σ_r Pᵀ_Ir Σ_m A_rm P_mJ, one row of C at a time: only C and one dense accumulator
@@ -274,6 +362,7 @@ mod tests {
             [
                 bits(product(&a, &p)),
                 bits(triple_product(&a, &p, &pt)),
+                bits(by_pieces(&a, &p)),
                 bits(galerkin(&a, &p, &pt)),
             ]
         };
@@ -293,6 +382,7 @@ mod tests {
         let forms = [
             galerkin(&a, &p, &pt),
             triple_product(&a, &p, &pt),
+            by_pieces(&a, &p),
             product(&pt, &product(&a, &p)),
         ];
         for c in forms.iter().map(dense) {

@@ -15,6 +15,7 @@ pub mod truncated;
 
 use super::block_csr32::BlockCsr32;
 use super::cholesky::{Cholesky, FactorError};
+use super::csr::TRANSPOSE_PIECES;
 use super::galerkin::{galerkin, transpose};
 use super::par;
 use super::pcg::Preconditioner;
@@ -183,9 +184,11 @@ struct Level {
     /// `a` in f32 node blocks, with [`Params::mixed`].
     a32: Option<BlockCsr32>,
     smoother: Chebyshev,
-    /// To the next coarser level, and its transpose.
+    /// To the next coarser level.
     p: Csr,
-    pt: Csr,
+    /// Pᵀ, stored for a sparse P (geometric levels); a smoothed-aggregation P, as large as
+    /// half of A, restricts by pieces instead ([`Csr::tmul_vec_by_pieces`]).
+    pt: Option<Csr>,
 }
 
 impl Level {
@@ -200,6 +203,7 @@ impl Level {
     ) -> (Level, Arc<Csr>) {
         let pt = transpose(&p);
         let coarse = Arc::new(galerkin(&a, &p, &pt));
+        let pt = (!restricts_by_pieces(&p)).then_some(pt);
         let a32 = params
             .mixed
             .then(|| BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
@@ -211,6 +215,30 @@ impl Level {
             pt,
         };
         (level, coarse)
+    }
+}
+
+/// Whether Pᵀ is applied by pieces rather than stored: a wide P (more than two entries a row:
+/// smoothed aggregation) whose pieces' scratch ([`TRANSPOSE_PIECES`] coarse vectors) is at
+/// most a fine vector.
+fn restricts_by_pieces(p: &Csr) -> bool {
+    p.nnz() > 2 * p.nrows && TRANSPOSE_PIECES * p.ncols <= p.nrows
+}
+
+impl Level {
+    /// y ← Pᵀ x, with `scratch` of [`Level::scratch_len`].
+    fn restrict(&self, x: &[f64], y: &mut [f64], scratch: &mut [f64]) {
+        match &self.pt {
+            Some(pt) => pt.mul_vec(x, y),
+            None => self.p.tmul_vec_by_pieces(x, y, scratch),
+        }
+    }
+
+    fn scratch_len(&self) -> usize {
+        match self.pt {
+            Some(_) => 0,
+            None => TRANSPOSE_PIECES * self.p.ncols,
+        }
     }
 }
 
@@ -247,15 +275,20 @@ impl Hierarchy {
                 let mut theta = params.theta;
                 while a.nrows > params.coarse_size && levels.len() + 1 < params.max_levels {
                     let smoother = Chebyshev::new(&a, &blocks, params.degree, params.ratio);
-                    let (mut ptr, mut list) = aggregation::strength(&a, &blocks, theta);
-                    // 3D elasticity aggregates the distance-two graph on the finest level
-                    // (see `aggregation::squared`): on the 80k-node gmsh part it cut the
-                    // first coarse operator from 9.4 M to 1.1 M entries, set-up by half and
-                    // the peak by 40 %, for 1.7× the Krylov iterations of cheaper cycles.
-                    if levels.is_empty() && k >= 6 && params.square_finest {
-                        (ptr, list) = aggregation::squared(&ptr, &list);
-                    }
-                    let (agg, count) = aggregation::aggregates(&ptr, &list);
+                    // The strength graph is dropped once aggregated: it is not to be held
+                    // beside the prolongator and the Galerkin product, the set-up's peak.
+                    let (agg, count) = {
+                        let (mut ptr, mut list) = aggregation::strength(&a, &blocks, theta);
+                        // 3D elasticity aggregates the distance-two graph on the finest level
+                        // (see `aggregation::squared`): on the 80k-node gmsh part it cut the
+                        // first coarse operator from 9.4 M to 1.1 M entries, set-up by half
+                        // and the peak by 40 %, for 1.7× the Krylov iterations of cheaper
+                        // cycles.
+                        if levels.is_empty() && k >= 6 && params.square_finest {
+                            (ptr, list) = aggregation::squared(&ptr, &list);
+                        }
+                        aggregation::aggregates(&ptr, &list)
+                    };
                     let (t, coarse_blocks, coarse_null) =
                         aggregation::tentative(&blocks, &agg, count, &nullspace, k);
                     if t.ncols == 0 || t.ncols * 10 > a.nrows * 9 {
@@ -318,9 +351,20 @@ impl Hierarchy {
         Ok(h)
     }
 
-    /// Level l's prolongator to level l + 1 and its transpose (l below the coarsest).
-    pub fn transfer(&self, l: usize) -> Option<(&Csr, &Csr)> {
-        self.levels.get(l).map(|level| (&level.p, &level.pt))
+    /// Level l's prolongator to level l + 1 (l below the coarsest).
+    pub fn prolongator(&self, l: usize) -> Option<&Csr> {
+        self.levels.get(l).map(|level| &level.p)
+    }
+
+    /// y ← P_lᵀ x, the restriction from level l to l + 1, with `scratch` of
+    /// [`Hierarchy::restriction_scratch`] entries.
+    pub fn restrict(&self, l: usize, x: &[f64], y: &mut [f64], scratch: &mut [f64]) {
+        self.levels[l].restrict(x, y, scratch);
+    }
+
+    /// The scratch entries that [`Hierarchy::restrict`] on level l needs.
+    pub fn restriction_scratch(&self, l: usize) -> usize {
+        self.levels.get(l).map_or(0, Level::scratch_len)
     }
 
     /// Level l's single-precision operator, with [`Params::mixed`].
@@ -393,12 +437,14 @@ impl Hierarchy {
         let work = self
             .sizes()
             .into_iter()
-            .map(|n| LevelWork {
+            .enumerate()
+            .map(|(l, n)| LevelWork {
                 b: vec![0.0; n],
                 x: vec![0.0; n],
                 r: vec![0.0; n],
                 d: vec![0.0; n],
                 t: vec![0.0; n],
+                pieces: vec![0.0; self.restriction_scratch(l)],
             })
             .collect();
         VCycle {
@@ -416,6 +462,8 @@ struct LevelWork {
     r: Vec<f64>,
     d: Vec<f64>,
     t: Vec<f64>,
+    /// The restriction's scratch ([`Hierarchy::restriction_scratch`]).
+    pieces: Vec<f64>,
 }
 
 /// One V-cycle x = B r on a shared [`Hierarchy`], with its own work vectors.
@@ -452,20 +500,21 @@ impl VCycle {
         {
             let w = &mut self.work[l];
             par::fill(&mut w.x, 0.0);
-            let LevelWork { b, x, r, d, t } = w;
+            let LevelWork { b, x, r, d, t, .. } = w;
             level.smoother.smooth(a, b, x, r, d, t, true);
             // t ← b − A x, restricted into the next level's right-hand side.
             a.apply(x, t);
             par::zip_apply(t, b, |t, b| b - t);
         }
         let (fine, coarse) = self.work.split_at_mut(l + 1);
-        level.pt.mul_vec(&fine[l].t, &mut coarse[0].b);
+        let w = &mut fine[l];
+        level.restrict(&w.t, &mut coarse[0].b, &mut w.pieces);
         self.cycle(l + 1);
         let (fine, coarse) = self.work.split_at_mut(l + 1);
         let w = &mut fine[l];
         level.p.mul_vec(&coarse[0].x, &mut w.t);
         par::zip_apply(&mut w.x, &w.t, |x, t| x + t);
-        let LevelWork { b, x, r, d, t } = w;
+        let LevelWork { b, x, r, d, t, .. } = w;
         level.smoother.smooth(a, b, x, r, d, t, false);
     }
 }

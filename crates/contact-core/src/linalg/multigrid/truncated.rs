@@ -183,7 +183,7 @@ struct Levels {
     /// P̃ x = mask(P x), P̃ᵀ t = Pᵀ mask(t), without a copy of P.
     fine: Arc<Hierarchy>,
     coarse: VCycle,
-    work: [Vec<f64>; 7],
+    work: [Vec<f64>; 8],
 }
 
 #[derive(Clone)]
@@ -302,6 +302,7 @@ impl Truncated {
                         vec![0.0; n],
                         vec![0.0; nc],
                         vec![0.0; nc],
+                        vec![0.0; h.restriction_scratch(0)],
                     ],
                 }))
             }
@@ -345,8 +346,10 @@ impl Preconditioner for Truncated {
                     Some(m) => m,
                     None => &op,
                 };
-                let (p, pt) = fine.transfer(0).expect("A's hierarchy has a first level");
-                let [b, x, rr, d, t, bc, xc] = work;
+                let p = fine
+                    .prolongator(0)
+                    .expect("A's hierarchy has a first level");
+                let [b, x, rr, d, t, bc, xc, pieces] = work;
                 b.copy_from_slice(r);
                 x.iter_mut().for_each(|v| *v = 0.0);
                 smoother.smooth(op, b, x, rr, d, t, true);
@@ -355,7 +358,7 @@ impl Preconditioner for Truncated {
                 for &s in &self.fixed {
                     t[s] = 0.0;
                 }
-                pt.mul_vec(t, bc);
+                fine.restrict(0, t, bc, pieces);
                 coarse.apply(bc, xc);
                 p.mul_vec(xc, t);
                 for &s in &self.fixed {
