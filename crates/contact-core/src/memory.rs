@@ -36,6 +36,7 @@
 //! which is not counted: it depends on the Γ3 part of the boundary, known only once the mesh
 //! is tagged.
 
+use crate::fem::multilevel::FACTORED_DOFS;
 use crate::linalg::projection::{SolutionSpace, CAPACITY};
 use crate::linalg::{CholeskyPlan, LinearPath};
 use crate::problem::Problem;
@@ -260,16 +261,24 @@ pub fn predict(p: &Problem) -> Prediction {
     } else {
         0.0
     };
-    // A refined body's geometric levels stop at its base mesh, whose operators are factored:
-    // K's (a second time with a Γ3, for the truncated cycle of slipping steps) and H's.
+    // A refined body's geometric levels stop at its base mesh, whose operators are factored
+    // (K's a second time with a Γ3, for the truncated cycle of slipping steps), or, above
+    // `multilevel::FACTORED_DOFS` unknowns, aggregated further: then the base level's
+    // operator with its aggregation hierarchy (the base K's bytes, scaled by its nodes).
     let coarsest = if c.geometric && c.coarse_nodes > 0.0 {
+        let base_k = csr(nnz_k * c.coarse_nodes / c.nodes, c.d * c.coarse_nodes);
         let copies_k = if c.contact { 2.0 } else { 1.0 };
-        let h = if c.damage {
-            factor_entries(c.d, c.coarse_nodes)
+        let k = if c.d * c.coarse_nodes > FACTORED_DOFS as f64 {
+            copies_k * AGGREGATION_HIERARCHY * base_k
         } else {
-            0.0
+            8.0 * 1.25 * copies_k * factor_entries(c.d, c.d * c.coarse_nodes)
         };
-        8.0 * 1.25 * (copies_k * factor_entries(c.d, c.d * c.coarse_nodes) + h)
+        let h = match (c.damage, c.coarse_nodes > FACTORED_DOFS as f64) {
+            (false, _) => 0.0,
+            (true, false) => 8.0 * 1.25 * factor_entries(c.d, c.coarse_nodes),
+            (true, true) => AGGREGATION_HIERARCHY * base_k / (c.d * c.d),
+        };
+        k + h
     } else {
         0.0
     };

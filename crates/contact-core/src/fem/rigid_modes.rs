@@ -22,6 +22,36 @@ pub const fn count(d: usize) -> usize {
 /// The modes on the free DOFs, n_free × count(D), row-major.
 pub fn rigid_modes<const D: usize>(mesh: &Mesh<D>, dofs: &DofMap<D>) -> Vec<f64> {
     let k = count(D);
+    let centre = centroid(mesh);
+    let mut out = vec![0.0; dofs.n_free() * k];
+    for i in 0..mesh.n_nodes() {
+        for r in 0..D {
+            if let Slot::Free(f) = dofs.slot[D * i + r] {
+                write_modes(mesh, dofs, centre, (i, r), &mut out[f * k..(f + 1) * k]);
+            }
+        }
+    }
+    out
+}
+
+/// The modes at the listed (node, component) DOFs, in list order (a coarse level of a
+/// nested hierarchy whose DOFs are such finest DOFs, [`crate::fem::multilevel`]):
+/// list.len() × count(D), row-major, the rows of [`rigid_modes`] at those DOFs.
+pub fn rigid_modes_at<const D: usize>(
+    mesh: &Mesh<D>,
+    dofs: &DofMap<D>,
+    list: &[(usize, usize)],
+) -> Vec<f64> {
+    let k = count(D);
+    let centre = centroid(mesh);
+    let mut out = vec![0.0; list.len() * k];
+    for (j, &dof) in list.iter().enumerate() {
+        write_modes(mesh, dofs, centre, dof, &mut out[j * k..(j + 1) * k]);
+    }
+    out
+}
+
+fn centroid<const D: usize>(mesh: &Mesh<D>) -> [f64; D] {
     let n = mesh.n_nodes().max(1);
     let mut centre = [0.0; D];
     for p in &mesh.nodes {
@@ -29,38 +59,40 @@ pub fn rigid_modes<const D: usize>(mesh: &Mesh<D>, dofs: &DofMap<D>) -> Vec<f64>
             centre[c] += p[c] / n as f64;
         }
     }
-    let mut out = vec![0.0; dofs.n_free() * k];
-    for (i, p) in mesh.nodes.iter().enumerate() {
-        let x: [f64; D] = std::array::from_fn(|c| p[c] - centre[c]);
-        // Cartesian modes at this node: modes[m][c].
-        let mut modes = vec![[0.0; D]; k];
-        for c in 0..D {
-            modes[c][c] = 1.0;
-        }
-        if D == 2 {
-            modes[2][0] = -x[1];
-            modes[2][1] = x[0];
-        } else {
-            // Rotations about x, y, z: ω × x.
-            for (m, (a, b)) in [(1usize, 2usize), (2, 0), (0, 1)].into_iter().enumerate() {
-                modes[D + m][a] = -x[b];
-                modes[D + m][b] = x[a];
-            }
-        }
-        let frame = dofs.frame(i);
-        for r in 0..D {
-            let Slot::Free(f) = dofs.slot[D * i + r] else {
-                continue;
-            };
-            for (m, v) in modes.iter().enumerate() {
-                out[f * k + m] = match frame {
-                    Some(rows) => (0..D).map(|c| rows[r][c] * v[c]).sum(),
-                    None => v[r],
-                };
-            }
+    centre
+}
+
+/// The count(D) modes' values at component r of node i (in its contact frame, if any).
+fn write_modes<const D: usize>(
+    mesh: &Mesh<D>,
+    dofs: &DofMap<D>,
+    centre: [f64; D],
+    (i, r): (usize, usize),
+    out: &mut [f64],
+) {
+    let p = mesh.nodes[i];
+    let x: [f64; D] = std::array::from_fn(|c| p[c] - centre[c]);
+    // Cartesian modes at this node: modes[m][c].
+    let mut modes = vec![[0.0; D]; count(D)];
+    for c in 0..D {
+        modes[c][c] = 1.0;
+    }
+    if D == 2 {
+        modes[2][0] = -x[1];
+        modes[2][1] = x[0];
+    } else {
+        // Rotations about x, y, z: ω × x.
+        for (m, (a, b)) in [(1usize, 2usize), (2, 0), (0, 1)].into_iter().enumerate() {
+            modes[D + m][a] = -x[b];
+            modes[D + m][b] = x[a];
         }
     }
-    out
+    for (m, v) in modes.iter().enumerate() {
+        out[m] = match dofs.frame(i) {
+            Some(rows) => (0..D).map(|c| rows[r][c] * v[c]).sum(),
+            None => v[r],
+        };
+    }
 }
 
 /// The node blocks of the free DOFs: each node's free components (none for clamped nodes).

@@ -133,11 +133,22 @@ pub enum Coarsening {
     /// Smoothed aggregation with the near-nullspace B (n × k, row-major).
     Aggregation { nullspace: Vec<f64>, k: usize },
     /// The prolongators of a nested mesh hierarchy, finest first: P_0 is n_0 × n_1, …;
-    /// each coarse level's blocks are its nodes (`blocks[l]` for level l + 1).
+    /// each coarse level's blocks are its nodes (`blocks[l]` for level l + 1). With `below`,
+    /// the coarsest of these levels is aggregated further rather than factored (a large
+    /// base mesh refined).
     Geometric {
         prolongators: Vec<Csr>,
         blocks: Vec<Blocks>,
+        below: Option<Below>,
     },
+}
+
+/// The near-nullspace on the coarsest level of a nested mesh hierarchy (n × k, row-major),
+/// for smoothed aggregation below it.
+#[derive(Debug, Clone)]
+pub struct Below {
+    pub nullspace: Vec<f64>,
+    pub k: usize,
 }
 
 /// Settings of the hierarchy.
@@ -266,51 +277,14 @@ impl Hierarchy {
         let mut levels = Vec::new();
         let mut a = a;
         let mut blocks = blocks;
-        let kind = match coarsening {
-            Coarsening::Aggregation { .. } => "smoothed aggregation",
-            Coarsening::Geometric { .. } => "geometric",
-        };
-        match coarsening {
-            Coarsening::Aggregation { mut nullspace, k } => {
-                let mut theta = params.theta;
-                while a.nrows > params.coarse_size && levels.len() + 1 < params.max_levels {
-                    let smoother = Chebyshev::new(&a, &blocks, params.degree, params.ratio);
-                    // The strength graph is dropped once aggregated: it is not to be held
-                    // beside the prolongator and the Galerkin product, the set-up's peak.
-                    let (agg, count) = {
-                        let (mut ptr, mut list) = aggregation::strength(&a, &blocks, theta);
-                        // 3D elasticity aggregates the distance-two graph on the finest level
-                        // (see `aggregation::squared`): on the 80k-node gmsh part it cut the
-                        // first coarse operator from 9.4 M to 1.1 M entries, set-up by half
-                        // and the peak by 40 %, for 1.7× the Krylov iterations of cheaper
-                        // cycles.
-                        if levels.is_empty() && k >= 6 && params.square_finest {
-                            (ptr, list) = aggregation::squared(&ptr, &list);
-                        }
-                        aggregation::aggregates(&ptr, &list)
-                    };
-                    let (t, coarse_blocks, coarse_null) =
-                        aggregation::tentative(&blocks, &agg, count, &nullspace, k);
-                    if t.ncols == 0 || t.ncols * 10 > a.nrows * 9 {
-                        break; // no longer coarsening: factor this level
-                    }
-                    let p = aggregation::smooth_prolongator(
-                        &a,
-                        &smoother.jacobi,
-                        smoother.lambda_hi() / 1.1,
-                        &t,
-                    );
-                    let (level, coarse) = Level::new(a, &blocks, smoother, p, params);
-                    levels.push(level);
-                    a = coarse;
-                    blocks = coarse_blocks;
-                    nullspace = coarse_null;
-                    theta *= 0.5;
-                }
+        let (kind, aggregate) = match coarsening {
+            Coarsening::Aggregation { nullspace, k } => {
+                ("smoothed aggregation", Some((nullspace, k)))
             }
             Coarsening::Geometric {
                 prolongators,
                 blocks: coarse_blocks,
+                below,
             } => {
                 let most = params.max_levels.saturating_sub(1);
                 for (p, cb) in prolongators.into_iter().zip(coarse_blocks).take(most) {
@@ -320,6 +294,50 @@ impl Hierarchy {
                     a = coarse;
                     blocks = cb;
                 }
+                match below {
+                    Some(b) if levels.len() + 1 < params.max_levels => (
+                        "geometric, then smoothed aggregation",
+                        Some((b.nullspace, b.k)),
+                    ),
+                    _ => ("geometric", None),
+                }
+            }
+        };
+        if let Some((mut nullspace, k)) = aggregate {
+            let first = levels.len();
+            let mut theta = params.theta;
+            while a.nrows > params.coarse_size && levels.len() + 1 < params.max_levels {
+                let smoother = Chebyshev::new(&a, &blocks, params.degree, params.ratio);
+                // The strength graph is dropped once aggregated: it is not to be held beside
+                // the prolongator and the Galerkin product, the set-up's peak.
+                let (agg, count) = {
+                    let (mut ptr, mut list) = aggregation::strength(&a, &blocks, theta);
+                    // 3D elasticity aggregates the distance-two graph on its first aggregated
+                    // level (see `aggregation::squared`): on the 80k-node gmsh part it cut the
+                    // first coarse operator from 9.4 M to 1.1 M entries, set-up by half and
+                    // the peak by 40 %, for 1.7× the Krylov iterations of cheaper cycles.
+                    if levels.len() == first && k >= 6 && params.square_finest {
+                        (ptr, list) = aggregation::squared(&ptr, &list);
+                    }
+                    aggregation::aggregates(&ptr, &list)
+                };
+                let (t, coarse_blocks, coarse_null) =
+                    aggregation::tentative(&blocks, &agg, count, &nullspace, k);
+                if t.ncols == 0 || t.ncols * 10 > a.nrows * 9 {
+                    break; // no longer coarsening: factor this level
+                }
+                let p = aggregation::smooth_prolongator(
+                    &a,
+                    &smoother.jacobi,
+                    smoother.lambda_hi() / 1.1,
+                    &t,
+                );
+                let (level, coarse) = Level::new(a, &blocks, smoother, p, params);
+                levels.push(level);
+                a = coarse;
+                blocks = coarse_blocks;
+                nullspace = coarse_null;
+                theta *= 0.5;
             }
         }
         let coarse_a = Arc::try_unwrap(a).unwrap_or_else(|a| (*a).clone());
@@ -345,6 +363,7 @@ impl Hierarchy {
         let coarsening = Coarsening::Geometric {
             prolongators: self.levels[level..].iter().map(|l| l.p.clone()).collect(),
             blocks: (level + 1..=self.levels.len()).map(blocks).collect(),
+            below: None,
         };
         let mut h = Hierarchy::new(a, blocks(level), coarsening, self.params)?;
         h.kind = self.kind;
@@ -382,7 +401,7 @@ impl Hierarchy {
         self.levels.len() + 1
     }
 
-    /// "smoothed aggregation" or "geometric".
+    /// "smoothed aggregation", "geometric", or "geometric, then smoothed aggregation".
     pub fn kind(&self) -> &'static str {
         self.kind
     }
@@ -606,6 +625,7 @@ mod tests {
             Coarsening::Geometric {
                 prolongators: vec![],
                 blocks: vec![],
+                below: None,
             },
             Params::default(),
         )
