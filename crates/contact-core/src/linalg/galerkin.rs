@@ -188,10 +188,14 @@ pub fn add(alpha: f64, a: &Csr, beta: f64, b: &Csr) -> Csr {
 /// fine-to-coarse weights per row) the product goes row by row of the result
 /// ([`triple_product`]). A smoothed-aggregation P has tens of entries per row, which would
 /// make that triple loop as many times the work: the sum over the fine rows is cut into
-/// [`GALERKIN_PIECES`] pieces instead ([`by_pieces`]).
-pub fn galerkin(a: &Csr, p: &Csr, pt: &Csr) -> Csr {
+/// [`GALERKIN_PIECES`] pieces instead ([`by_pieces`]). `pt` is Pᵀ where the caller holds it;
+/// the row-by-row product forms it otherwise.
+pub fn galerkin(a: &Csr, p: &Csr, pt: Option<&Csr>) -> Csr {
     let c = if p.nnz() <= 2 * p.nrows {
-        triple_product(a, p, pt)
+        match pt {
+            Some(pt) => triple_product(a, p, pt),
+            None => triple_product(a, p, &transpose(p)),
+        }
     } else {
         by_pieces(a, p)
     };
@@ -363,7 +367,8 @@ mod tests {
                 bits(product(&a, &p)),
                 bits(triple_product(&a, &p, &pt)),
                 bits(by_pieces(&a, &p)),
-                bits(galerkin(&a, &p, &pt)),
+                bits(galerkin(&a, &p, Some(&pt))),
+                bits(galerkin(&a, &p, None)),
             ]
         };
         let one = all();
@@ -380,7 +385,7 @@ mod tests {
         let pt = transpose(&p);
         let (da, dp) = (dense(&a), dense(&p));
         let forms = [
-            galerkin(&a, &p, &pt),
+            galerkin(&a, &p, Some(&pt)),
             triple_product(&a, &p, &pt),
             by_pieces(&a, &p),
             product(&pt, &product(&a, &p)),

@@ -212,9 +212,10 @@ impl Level {
         p: Csr,
         params: Params,
     ) -> (Level, Arc<Csr>) {
-        let pt = transpose(&p);
-        let coarse = Arc::new(galerkin(&a, &p, &pt));
-        let pt = (!restricts_by_pieces(&p)).then_some(pt);
+        // Pᵀ is formed only where it is kept: a P that restricts by pieces has its Galerkin
+        // product summed from its rows too.
+        let pt = (!restricts_by_pieces(&p)).then(|| transpose(&p));
+        let coarse = Arc::new(galerkin(&a, &p, pt.as_ref()));
         let a32 = params
             .mixed
             .then(|| BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));

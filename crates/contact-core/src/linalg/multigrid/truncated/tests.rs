@@ -135,7 +135,7 @@ fn first_coarse_operator_is_galerkin_for_the_truncated_prolongator() {
     for &s in &fixed {
         m_plus.values[m_plus.indptr[s]..m_plus.indptr[s + 1]].fill(0.0);
     }
-    let expected = galerkin(&m_plus, p, pt);
+    let expected = galerkin(&m_plus, p, Some(pt));
     let got = coarse.hierarchy().operator();
     let nc = expected.nrows;
     for i in 0..nc {
