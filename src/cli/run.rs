@@ -326,7 +326,7 @@ impl<const D: usize> Hooks<D> for Writer<'_> {
             }
         };
         if !self.wrote_mesh {
-            let mesh = AnyMesh::from_mesh(sim.mesh.clone());
+            let mesh = AnyMesh::from_mesh(sim.output_mesh());
             write(
                 dir.parent().unwrap().join("mesh.json"),
                 to_json(&MeshJson::new(&mesh, &sim.problem.boundary)),

@@ -8,6 +8,7 @@
 use std::sync::Arc;
 
 use crate::expr::Expr;
+use crate::mesh::locality::Numbering;
 pub use crate::mesh::support::Support;
 use crate::mesh::support::TagError;
 use crate::mesh::{AnyMesh, Mesh};
@@ -267,10 +268,31 @@ pub struct Body {
 }
 
 impl Body {
-    /// The mesh the scheme runs on: `base` after `refine` red refinements (its dimension is
-    /// D; panics on the other one, a programming error since [`Problem::dim`] tells which).
+    /// The mesh the scheme runs on: `base` renumbered for locality
+    /// ([`Mesh::ordered_for_locality`]) after `refine` red refinements (its dimension is D;
+    /// panics on the other one, a programming error since [`Problem::dim`] tells which).
     pub fn mesh<const D: usize>(&self) -> Mesh<D> {
-        refined(self.base.get::<D>(), self.refine)
+        self.mesh_and_numbering().0
+    }
+
+    /// [`Body::mesh`] and, where its numbering differs from [`Body::output_mesh`]'s (an
+    /// unrefined base that was renumbered), how the two relate.
+    pub fn mesh_and_numbering<const D: usize>(&self) -> (Mesh<D>, Option<Numbering>) {
+        let base = self.base.get::<D>();
+        match (base.ordered_for_locality(), self.refine) {
+            (Some((ordered, numbering)), 0) => (ordered, Some(numbering)),
+            (Some((ordered, _)), r) => (refined(&ordered, r), None),
+            (None, r) => (refined(base, r), None),
+        }
+    }
+
+    /// The mesh outputs are given on: the base as given when it is not refined (fields in
+    /// the numbering of the uploaded file), else [`Body::mesh`].
+    pub fn output_mesh<const D: usize>(&self) -> Mesh<D> {
+        match self.refine {
+            0 => self.base.get::<D>().clone(),
+            _ => self.mesh(),
+        }
     }
 
     /// Its node count, without refining: each refinement adds one node per edge. Admission
@@ -357,11 +379,29 @@ impl Problem {
         }
     }
 
-    /// [`Problem::mesh`] in whichever dimension the problem has.
+    /// [`Problem::mesh`] and, where outputs are given on another numbering of it
+    /// ([`Body::mesh_and_numbering`]), how the two relate.
+    pub fn mesh_and_numbering<const D: usize>(
+        &self,
+    ) -> Result<(Mesh<D>, Option<Numbering>), TagError> {
+        match &self.body {
+            Some(b) => {
+                assert_eq!(D, self.dim(), "mesh of the problem's dimension");
+                Ok(b.mesh_and_numbering())
+            }
+            None => Ok((self.mesh()?, None)),
+        }
+    }
+
+    /// The mesh outputs are given on, in whichever dimension the problem has: the mesh the
+    /// scheme runs on, except that an unrefined body keeps the numbering it was given
+    /// ([`Body::output_mesh`]).
     pub fn any_mesh(&self) -> Result<AnyMesh, TagError> {
-        Ok(match self.dim() {
-            2 => AnyMesh::Plane(self.mesh::<2>()?),
-            _ => AnyMesh::Solid(self.mesh::<3>()?),
+        Ok(match (&self.body, self.dim()) {
+            (Some(b), 2) => AnyMesh::Plane(b.output_mesh::<2>()),
+            (Some(b), _) => AnyMesh::Solid(b.output_mesh::<3>()),
+            (None, 2) => AnyMesh::Plane(self.mesh::<2>()?),
+            (None, _) => AnyMesh::Solid(self.mesh::<3>()?),
         })
     }
 

@@ -410,3 +410,127 @@ fn a_box_carries_an_error_estimate_from_the_nested_coarse_boxes() {
     let w = last.w.unwrap();
     assert!(w > 0.0 && w < 0.5 && !last.flagged, "{last:?}");
 }
+
+/// A mesh file by name, from bytes made in the test.
+struct Made(Vec<u8>);
+
+impl MeshFiles for Made {
+    fn load(&self, _: &str) -> Result<AnyMesh, String> {
+        contact_core::mesh::import::import_any(&self.0).map_err(|e| e.to_string())
+    }
+}
+
+/// The runs of an imported mesh compute on it renumbered for locality, and report on it as
+/// given: box-exp3 at h = 1/4 (part of Γ3 slipping) on the generated box and on the same box
+/// written to a file with its nodes and cells scrambled give the same fields node by node
+/// and cell by cell through the scramble, the same Γ3 states and the same checkpoints, and
+/// a checkpoint of the scrambled run continues it.
+#[test]
+fn a_scrambled_mesh_file_reports_in_its_own_numbering() {
+    let mut doc = box_slipping();
+    doc["output"] = json!({"every": 1, "fields": ["u", "w", "zeta", "sigma", "contact"]});
+    doc["time"] = json!({"t_end": 0.25, "k": "1/16"});
+    let generated = scene::validate(&doc).unwrap();
+    let b = generated.mesh::<3>().unwrap();
+    let (n, nc) = (b.n_nodes(), b.n_cells());
+    // Permutations: 104729 and 7919 are primes that divide neither count.
+    let label = |v: usize| (v * 104_729) % n;
+    let cell_at = |e: usize| (e * 7_919) % nc; // the file's cell e is the box's cell_at(e)
+    let mut nodes = vec![[0.0; 3]; n];
+    for (v, p) in b.nodes.iter().enumerate() {
+        nodes[label(v)] = *p;
+    }
+    let cells = (0..nc)
+        .flat_map(|e| b.cell(cell_at(e)).iter().map(|&v| label(v)))
+        .collect();
+    let scrambled_mesh = Mesh::from_cells(nodes, cells).unwrap();
+    let file = Made(contact_core::mesh::export::msh(&scrambled_mesh).into_bytes());
+    doc["domain"] = json!({"mesh": "scrambled.msh"});
+    doc["mesh"] = json!({"refine": 0});
+    let scrambled = scene::validate_with(&doc, &file).unwrap();
+
+    let mut a = Simulation::<3>::new(generated, Default::default()).unwrap();
+    let mut s = Simulation::<3>::new(scrambled.clone(), Default::default()).unwrap();
+    assert_eq!(s.output_mesh().nodes, scrambled_mesh.nodes);
+    assert_ne!(
+        s.mesh.nodes, scrambled_mesh.nodes,
+        "the run renumbered the file's mesh"
+    );
+    let close = |x: f64, y: f64, scale: f64| (x - y).abs() <= 1e-9 * scale;
+    let mut file_of_cell = vec![0; nc];
+    for e in 0..nc {
+        file_of_cell[cell_at(e)] = e;
+    }
+    let mut slipped = false;
+    let mut checkpoint = None;
+    while !a.finished() {
+        a.step().unwrap();
+        let r = s.step().unwrap();
+        invariants::check_step(&s, &r).unwrap_or_else(|e| panic!("{e}"));
+        let (fa, fs) = (a.fields(), s.fields());
+        for (what, va, vs, width) in [
+            ("u", fa.u.unwrap(), fs.u.unwrap(), 3),
+            ("w", fa.w.unwrap(), fs.w.unwrap(), 3),
+            ("ζ", fa.zeta.unwrap(), fs.zeta.unwrap(), 1),
+        ] {
+            let scale = va.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for v in 0..n {
+                for c in 0..width {
+                    let (x, y) = (va[width * v + c], vs[width * label(v) + c]);
+                    assert!(close(x, y, scale), "{what} at node {v}: {x} vs {y}");
+                }
+            }
+        }
+        let (Some(Stress::Solid(sa)), Some(Stress::Solid(ss))) = (fa.sigma, fs.sigma) else {
+            panic!("3D stresses")
+        };
+        let scale = sa.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+        for e in 0..nc {
+            for (x, y) in sa[e].iter().zip(&ss[file_of_cell[e]]) {
+                assert!(close(*x, *y, scale), "σ at cell {e}");
+            }
+        }
+        // Γ3 nodes listed by increasing node of the file, with the box's states.
+        let (ca, cs) = (fa.contact.unwrap(), fs.contact.unwrap());
+        assert!(cs.windows(2).all(|w| w[0].node < w[1].node));
+        let mut ca: Vec<_> = ca.into_iter().map(|c| (label(c.node), c)).collect();
+        ca.sort_by_key(|c| c.0);
+        assert_eq!(ca.len(), cs.len());
+        for ((node, x), y) in ca.iter().zip(&cs) {
+            assert_eq!((*node, x.slipping), (y.node, y.slipping));
+            assert!(close(x.slip_velocity, y.slip_velocity, 1.0));
+        }
+        slipped |= cs.iter().any(|c| c.slipping);
+        if r.n == 2 {
+            checkpoint = Some(s.checkpoint_state());
+            let (ka, ks) = (a.checkpoint_state(), s.checkpoint_state());
+            for v in 0..n {
+                assert_eq!(ka.damage_active[v], ks.damage_active[label(v)], "node {v}");
+            }
+            // The Γ3 warm start: two tangential values per node, nodes in the file's order.
+            let nodes_a: Vec<usize> = a.dofs.contact.iter().step_by(2).map(|c| c.node).collect();
+            let mut order: Vec<usize> = (0..nodes_a.len()).collect();
+            order.sort_by_key(|&i| label(nodes_a[i]));
+            for (j, &i) in order.iter().enumerate() {
+                for c in 0..2 {
+                    let (x, y) = (
+                        ka.contact_velocity[2 * i + c],
+                        ks.contact_velocity[2 * j + c],
+                    );
+                    assert!(close(x, y, 1.0), "warm start of Γ3 node {}", nodes_a[i]);
+                }
+            }
+        }
+    }
+    assert!(slipped, "part of Γ3 slips");
+    // Continued from the checkpoint of step 2, a fresh run ends where the first did.
+    let mut resumed = Simulation::<3>::new(scrambled, Default::default()).unwrap();
+    resumed.restore(checkpoint.unwrap());
+    while !resumed.finished() {
+        resumed.step().unwrap();
+    }
+    let (x, y) = (s.fields(), resumed.fields());
+    for (p, q) in x.w.unwrap().iter().zip(&y.w.unwrap()) {
+        assert!(close(*p, *q, 1.0), "{p} vs {q}");
+    }
+}

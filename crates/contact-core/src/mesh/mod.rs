@@ -25,6 +25,7 @@ pub mod bisect;
 pub mod cuboid;
 pub mod export;
 pub mod import;
+pub mod locality;
 pub mod polygon;
 pub mod quality;
 pub mod refine;

@@ -30,6 +30,7 @@ use crate::laws::constitutive::elastic_stress;
 use crate::laws::damage_source::phi;
 use crate::laws::Tensor;
 use crate::linalg::{par, Csr, LinearPath};
+use crate::mesh::locality::Numbering;
 use crate::mesh::Mesh;
 use crate::problem::Problem;
 use setup::formula_text;
@@ -231,7 +232,13 @@ impl DamagePart {
 /// One job's assembled operators, factorisations and current state, in dimension D.
 pub struct Simulation<const D: usize = 2> {
     pub problem: Problem,
+    /// The mesh the scheme runs on ([`Problem::mesh`]); every vector of the run is in its
+    /// numbering.
     pub mesh: Mesh<D>,
+    /// How `mesh` relates to the mesh outputs and checkpoints are given on
+    /// ([`Problem::any_mesh`]), where the two differ: [`Simulation::fields`],
+    /// [`Simulation::checkpoint_state`] and [`Simulation::restore`] map through it.
+    numbering: Option<Numbering>,
     pub geo: Geometry<D>,
     pub dofs: DofMap<D>,
     pub settings: SolverSettings,
@@ -269,9 +276,10 @@ impl<const D: usize> Simulation<D> {
         Simulation::from_prepared(problem, settings, prepared)
     }
 
-    /// The state with the solvers' warm starts, for a checkpoint.
+    /// The state with the solvers' warm starts, for a checkpoint, in the numbering of the
+    /// output mesh.
     pub fn checkpoint_state(&self) -> State {
-        State {
+        let state = State {
             contact_velocity: self.velocity.solver.contact_velocity().to_vec(),
             damage_active: self
                 .damage
@@ -286,12 +294,57 @@ impl<const D: usize> Simulation<D> {
                 _ => Vec::new(),
             },
             ..self.state.clone()
+        };
+        self.renumbered(state, false)
+    }
+
+    /// `state` between the run's numbering and the output mesh's: `back` from the run's
+    /// (per-node vectors permuted, the Γ3 warm start reordered by the output numbering of
+    /// its nodes, as a run on the mesh as given orders it), else into it.
+    fn renumbered(&self, state: State, into_run: bool) -> State {
+        let Some(numbering) = &self.numbering else {
+            return state;
+        };
+        let nodes = |v: Vec<f64>, width: usize| match (v.is_empty(), into_run) {
+            (true, _) => v,
+            (false, true) => numbering.nodes_forward(&v, width),
+            (false, false) => numbering.nodes_back(&v, width),
+        };
+        let active = match (state.damage_active.is_empty(), into_run) {
+            (true, _) => state.damage_active.clone(),
+            (false, true) => numbering.nodes_forward(&state.damage_active, 1),
+            (false, false) => numbering.nodes_back(&state.damage_active, 1),
+        };
+        // The run's Γ3 nodes (in its contact order) by their output index.
+        let nd = D - 1;
+        let mut by_output: Vec<usize> = (0..self.dofs.contact.len() / nd.max(1)).collect();
+        by_output.sort_by_key(|&i| numbering.node[self.dofs.contact[nd * i].node]);
+        let warm = &state.contact_velocity;
+        let mut contact_velocity = warm.clone();
+        if warm.len() == self.dofs.contact.len() {
+            for (j, &i) in by_output.iter().enumerate() {
+                let (run, out) = (nd * i..nd * (i + 1), nd * j..nd * (j + 1));
+                match into_run {
+                    true => contact_velocity[run].copy_from_slice(&warm[out]),
+                    false => contact_velocity[out].copy_from_slice(&warm[run]),
+                }
+            }
+        }
+        State {
+            step: state.step,
+            u: nodes(state.u, D),
+            zeta: nodes(state.zeta, 1),
+            contact_velocity,
+            damage_active: active,
+            damage_before: nodes(state.damage_before, 1),
+            w: nodes(state.w, D),
         }
     }
 
-    /// Continue from a checkpointed state (warm starts restored when present and of the
-    /// right size, else rebuilt from ζ).
-    pub fn restore(&mut self, mut state: State) {
+    /// Continue from a checkpointed state, given in the numbering of the output mesh (warm
+    /// starts restored when present and of the right size, else rebuilt from ζ).
+    pub fn restore(&mut self, state: State) {
+        let mut state = self.renumbered(state, true);
         assert_eq!(state.u.len(), self.state.u.len());
         assert_eq!(state.zeta.len(), self.state.zeta.len());
         let warm = std::mem::take(&mut state.contact_velocity);

@@ -7,6 +7,7 @@ use crate::fem::Geometry;
 use crate::laws::constitutive::{viscous_stress, von_mises};
 use crate::laws::Tensor;
 use crate::linalg::Csr;
+use crate::mesh::locality::Numbering;
 use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::Problem;
 use crate::solve::SolveError;
@@ -99,8 +100,36 @@ pub struct StepFields {
     pub estimate: Option<Vec<f64>>,
 }
 
+impl StepFields {
+    /// The fields of a run on a renumbered mesh ([`Numbering`]) on the mesh it was made
+    /// from: nodal fields (`dim` values per node for u and w) and cell fields permuted, Γ3
+    /// nodes renamed and listed by increasing node as on that mesh.
+    fn numbered_back(self, numbering: &Numbering, dim: usize) -> StepFields {
+        let nodes = |v: Vec<f64>, width: usize| numbering.nodes_back(&v, width);
+        let cells = |v: Vec<f64>| numbering.cells_back(&v);
+        StepFields {
+            u: self.u.map(|v| nodes(v, dim)),
+            w: self.w.map(|v| nodes(v, dim)),
+            zeta: self.zeta.map(|v| nodes(v, 1)),
+            sigma: self.sigma.map(|s| match s {
+                Stress::Plane(s) => Stress::Plane(numbering.cells_back(&s)),
+                Stress::Solid(s) => Stress::Solid(numbering.cells_back(&s)),
+            }),
+            von_mises: self.von_mises.map(cells),
+            contact: self.contact.map(|mut c| {
+                c.iter_mut().for_each(|n| n.node = numbering.node[n.node]);
+                c.sort_by_key(|n| n.node);
+                c
+            }),
+            estimate: self.estimate.map(cells),
+            ..self
+        }
+    }
+}
+
 impl<const D: usize> Simulation<D> {
-    /// The requested fields of the step just computed (σ_n = A ε(w_n) + B_{n−1}, (3.8)).
+    /// The requested fields of the step just computed, on the output mesh
+    /// ([`crate::problem::Problem::any_mesh`]) (σ_n = A ε(w_n) + B_{n−1}, (3.8)).
     pub fn fields(&self) -> StepFields {
         let sel = self.problem.output.fields;
         let n = self.state.step;
@@ -118,7 +147,7 @@ impl<const D: usize> Simulation<D> {
             Vec::new()
         };
         let (sigma, von_mises) = stress_fields(&self.problem, &sigma);
-        StepFields {
+        let fields = StepFields {
             n,
             t: n as f64 * self.problem.k(),
             u: sel.u.then(|| self.state.u.clone()),
@@ -128,10 +157,39 @@ impl<const D: usize> Simulation<D> {
             von_mises,
             contact: sel.contact.then(|| self.contact_state()),
             estimate: self.estimate.as_ref().map(|e| e.cells.clone()),
+        };
+        match &self.numbering {
+            Some(numbering) => fields.numbered_back(numbering, D),
+            None => fields,
         }
     }
 
-    /// Stick/slip state of every Γ3 node after the last step.
+    /// The mesh outputs are given on ([`crate::problem::Problem::any_mesh`]): the run's
+    /// mesh, or the body as given where the run renumbered it.
+    pub fn output_mesh(&self) -> Mesh<D> {
+        match (&self.numbering, &self.problem.body) {
+            (Some(_), Some(body)) => body.output_mesh(),
+            _ => self.mesh.clone(),
+        }
+    }
+
+    /// Per-node values of the run (`width` per node) in the numbering of the output mesh.
+    pub fn nodes_out(&self, v: &[f64], width: usize) -> Vec<f64> {
+        match &self.numbering {
+            Some(numbering) => numbering.nodes_back(v, width),
+            None => v.to_vec(),
+        }
+    }
+
+    /// Per-cell values of the run in the numbering of the output mesh.
+    pub fn cells_out(&self, v: &[f64]) -> Vec<f64> {
+        match &self.numbering {
+            Some(numbering) => numbering.cells_back(v),
+            None => v.to_vec(),
+        }
+    }
+
+    /// Stick/slip state of every Γ3 node after the last step (in the run's numbering).
     pub fn contact_state(&self) -> Vec<ContactNode> {
         let x = self.velocity.solver.contact_velocity();
         let force = self.velocity.solver.contact_force();

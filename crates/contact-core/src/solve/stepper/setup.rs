@@ -8,6 +8,7 @@ use crate::a_posteriori::Estimator;
 use crate::fem::{assembly, DofMap, Geometry, NodeCells};
 use crate::laws::Tensor;
 use crate::linalg::{Csr, LinearPath};
+use crate::mesh::locality::Numbering;
 use crate::mesh::Mesh;
 use crate::problem::{Problem, SmallnessPolicy};
 use crate::solve::backend::{self, Backend};
@@ -28,6 +29,8 @@ pub struct Prepared<const D: usize = 2> {
     pub predicted_bytes: u64,
     backend: Arc<dyn Backend<D>>,
     mesh: Mesh<D>,
+    /// How `mesh` relates to the mesh outputs are given on, where the two differ.
+    numbering: Option<Numbering>,
     geo: Geometry<D>,
     dofs: DofMap<D>,
     velocity: VelocityStep,
@@ -50,7 +53,7 @@ impl<const D: usize> Prepared<D> {
     pub fn within(problem: &Problem, memory_limit: Option<u64>) -> Result<Prepared<D>, SolveError> {
         let start = Instant::now();
         let pick = backend::pick(problem, memory_limit)?;
-        let mesh = problem.mesh().map_err(|e| SolveError::Data {
+        let (mesh, numbering) = problem.mesh_and_numbering().map_err(|e| SolveError::Data {
             pointer: format!("/boundary/{}", e.part()),
             message: e.to_string(),
         })?;
@@ -68,6 +71,7 @@ impl<const D: usize> Prepared<D> {
             predicted_bytes: backend.predicted_bytes(),
             backend,
             mesh,
+            numbering,
             geo,
             dofs,
             velocity,
@@ -93,6 +97,7 @@ impl<const D: usize> Simulation<D> {
             predicted_bytes,
             backend,
             mesh,
+            numbering,
             geo,
             dofs,
             velocity,
@@ -174,6 +179,7 @@ impl<const D: usize> Simulation<D> {
             predicted_bytes,
             problem,
             mesh,
+            numbering,
             geo,
             dofs,
             settings,

@@ -446,18 +446,19 @@ impl<const D: usize> Hooks<D> for Collect<'_> {
     }
 
     fn after_step(&mut self, run: &Run<D>, r: &StepReport) -> ControlFlow<Self::Stop> {
+        // The cycle's mesh is the bisection's: w and the indicators in its numbering.
         let sim = run.sim();
         if let Some(e) = sim.step_estimate() {
             let k = sim.problem.k();
             if self.squares.is_empty() {
                 self.squares = vec![0.0; e.velocity.len()];
             }
-            for (a, v) in self.squares.iter_mut().zip(&e.velocity) {
+            for (a, v) in self.squares.iter_mut().zip(sim.cells_out(&e.velocity)) {
                 *a += k * v * v;
             }
         }
         if (self.keep)(r.n) {
-            self.w.push(sim.w.clone());
+            self.w.push(sim.nodes_out(&sim.w, D));
         }
         match (self.tick)() {
             ControlFlow::Break(()) => ControlFlow::Break(None),
