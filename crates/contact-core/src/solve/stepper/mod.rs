@@ -298,23 +298,20 @@ impl<const D: usize> Simulation<D> {
         self.renumbered(state, false)
     }
 
-    /// `state` between the run's numbering and the output mesh's: `back` from the run's
-    /// (per-node vectors permuted, the Γ3 warm start reordered by the output numbering of
-    /// its nodes, as a run on the mesh as given orders it), else into it.
+    /// `state` from the output mesh's numbering into the run's (`into_run`), or back: the
+    /// per-node vectors permuted, and the Γ3 warm start reordered by the output numbering of
+    /// its nodes (the order of a run on the mesh as given).
     fn renumbered(&self, state: State, into_run: bool) -> State {
         let Some(numbering) = &self.numbering else {
             return state;
         };
-        let nodes = |v: Vec<f64>, width: usize| match (v.is_empty(), into_run) {
-            (true, _) => v,
-            (false, true) => numbering.nodes_forward(&v, width),
-            (false, false) => numbering.nodes_back(&v, width),
-        };
-        let active = match (state.damage_active.is_empty(), into_run) {
-            (true, _) => state.damage_active.clone(),
-            (false, true) => numbering.nodes_forward(&state.damage_active, 1),
-            (false, false) => numbering.nodes_back(&state.damage_active, 1),
-        };
+        fn nodes<T: Copy>(n: &Numbering, v: Vec<T>, width: usize, into_run: bool) -> Vec<T> {
+            match (v.is_empty(), into_run) {
+                (true, _) => v,
+                (false, true) => n.nodes_forward(&v, width),
+                (false, false) => n.nodes_back(&v, width),
+            }
+        }
         // The run's Γ3 nodes (in its contact order) by their output index.
         let nd = D - 1;
         let mut by_output: Vec<usize> = (0..self.dofs.contact.len() / nd.max(1)).collect();
@@ -332,12 +329,12 @@ impl<const D: usize> Simulation<D> {
         }
         State {
             step: state.step,
-            u: nodes(state.u, D),
-            zeta: nodes(state.zeta, 1),
+            u: nodes(numbering, state.u, D, into_run),
+            zeta: nodes(numbering, state.zeta, 1, into_run),
             contact_velocity,
-            damage_active: active,
-            damage_before: nodes(state.damage_before, 1),
-            w: nodes(state.w, D),
+            damage_active: nodes(numbering, state.damage_active, 1, into_run),
+            damage_before: nodes(numbering, state.damage_before, 1, into_run),
+            w: nodes(numbering, state.w, D, into_run),
         }
     }
 
