@@ -10,12 +10,12 @@
 //! A mesh generator numbers nodes in the order it inserts them: the vertices of a gmsh
 //! tetrahedron lie a third of the node list apart at the median, and each of those reads
 //! misses the cache. Renumbered, they are a few thousand entries apart, and the steps of an
-//! imported part run about a fifth faster (docs/src/speed/speed.md).
+//! imported part take a quarter to a third less time (docs/src/speed/speed.md).
 //!
 //! Only labels change: each cell keeps its vertices in their listed order (which fixes the
 //! children of its refinement, SCHEME "Refinement"), the boundary facets keep their order
-//! and groups, so every result is that of the mesh as given up to the order of
-//! floating-point sums. Outputs are mapped back ([`crate::solve::stepper`]), so the user sees
+//! and groups, so every result is that of the mesh as given to the solver tolerance (sums
+//! are added in another order, and multigrid aggregates differ). Outputs are mapped back ([`crate::solve::stepper`]), so the user sees
 //! the numbering of the file.
 
 use super::Mesh;
