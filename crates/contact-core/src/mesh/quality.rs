@@ -120,14 +120,66 @@ impl std::hash::Hasher for IndexHasher {
 /// A hash map keyed by node indices.
 pub(crate) type IndexMap<K, V> = HashMap<K, V, std::hash::BuildHasherDefault<IndexHasher>>;
 
-/// What the face map keeps per face: how many cells have it, the first cell and its local
-/// vertex opposite the face, and the second cell.
-#[derive(Clone, Copy)]
-struct Face {
-    count: u8,
-    cell: u32,
-    opposite: u8,
-    other: u32,
+/// Every face of every cell, grouped by its vertex set. Face `slot` = (D + 1)·e + (D − a) is
+/// cell e's face opposite its vertex a, so slots count the faces in the order they are met
+/// (cells in order, faces opposite vertex D, ..., 0). The faces are sorted by lowest vertex
+/// (a counting sort), then each lowest vertex's few faces by the others: linear in the
+/// faces, where a hash map of them spent most of the checks' time in random accesses.
+struct FaceGroups<const D: usize> {
+    /// (the other vertices, ascending; slot), lowest vertex by lowest vertex, in slot order
+    /// within a vertex set.
+    faces: Vec<([u32; D], u32)>,
+}
+
+impl<const D: usize> FaceGroups<D> {
+    fn new(cells: &[usize], n_nodes: usize) -> FaceGroups<D> {
+        let key = |slot: usize| {
+            let e = slot / (D + 1);
+            facet_key::<D>(&cells[(D + 1) * e..(D + 1) * (e + 1)], D - slot % (D + 1))
+        };
+        let mut start = vec![0usize; n_nodes + 1];
+        for slot in 0..cells.len() {
+            start[key(slot)[0] + 1] += 1;
+        }
+        for v in 0..n_nodes {
+            start[v + 1] += start[v];
+        }
+        let mut next = start.clone();
+        let mut faces = vec![([0u32; D], 0u32); cells.len()];
+        for slot in 0..cells.len() {
+            let k = key(slot);
+            let mut rest = [0u32; D];
+            for (r, &v) in rest.iter_mut().zip(&k[1..]) {
+                *r = v as u32;
+            }
+            // The lowest vertex, implied by the bucket, is kept in the last place.
+            rest[D - 1] = k[0] as u32;
+            faces[next[k[0]]] = (rest, slot as u32);
+            next[k[0]] += 1;
+        }
+        // Stable: equal vertex sets keep their slot order.
+        for v in 0..n_nodes {
+            faces[start[v]..start[v + 1]].sort_by_key(|f| f.0);
+        }
+        FaceGroups { faces }
+    }
+
+    fn len(&self) -> usize {
+        self.faces.len()
+    }
+
+    /// Each vertex set (sorted) with its faces, in slot order (a face's slot is `.1`).
+    fn groups(&self) -> impl Iterator<Item = ([usize; D], &[([u32; D], u32)])> + '_ {
+        self.faces.chunk_by(|a, b| a.0 == b.0).map(|group| {
+            let rest = group[0].0;
+            let mut key = [0usize; D];
+            key[0] = rest[D - 1] as usize;
+            for (k, &v) in key[1..].iter_mut().zip(&rest[..D - 1]) {
+                *k = v as usize;
+            }
+            (key, group)
+        })
+    }
 }
 
 /// Whether the points `x` and `y` lie on the same side of the facet `f` (its vertices in
@@ -152,10 +204,19 @@ pub fn build<const D: usize>(
     if nc == 0 {
         return Err(MeshError::Empty);
     }
-    if nc >= u32::MAX as usize {
+    // Faces and nodes are numbered in u32 (FaceGroups).
+    let max_cells = (u32::MAX as usize - 1) / (D + 1);
+    if nc > max_cells {
         return Err(MeshError::TooLarge {
             what: "cells",
             count: nc,
+            max: max_cells,
+        });
+    }
+    if nodes.len() >= u32::MAX as usize {
+        return Err(MeshError::TooLarge {
+            what: "nodes",
+            count: nodes.len(),
             max: u32::MAX as usize - 1,
         });
     }
@@ -221,44 +282,58 @@ pub fn build<const D: usize>(
         return Err(MeshError::DuplicateCell { cell, first });
     }
 
-    // Faces in order of first appearance, with the cells that share them.
-    let mut faces: IndexMap<[usize; D], Face> =
-        IndexMap::with_capacity_and_hasher(nc * (D + 1) / 2 + 16, Default::default());
-    let mut seen_order: Vec<[usize; D]> = Vec::with_capacity(nc + nc / 2);
-    for (e, cell) in cells.chunks_exact(D + 1).enumerate() {
-        for a in (0..=D).rev() {
-            let key = facet_key::<D>(cell, a);
-            let face = faces.entry(key).or_insert_with(|| {
-                seen_order.push(key);
-                Face {
-                    count: 0,
-                    cell: e as u32,
-                    opposite: a as u8,
-                    other: u32::MAX,
-                }
-            });
-            face.count += 1;
-            match face.count {
-                2 => {
-                    face.other = e as u32;
-                    let first = &cells[(D + 1) * face.cell as usize..][..D + 1];
-                    if same_side(&nodes, &key, first[face.opposite as usize], cell[a]) {
-                        return Err(MeshError::Folded {
-                            cell: e,
-                            other: face.cell as usize,
-                            nodes: key.to_vec(),
-                        });
-                    }
-                }
-                3.. => {
-                    return Err(MeshError::NonManifold {
+    let faces = FaceGroups::<D>::new(&cells, nodes.len());
+    let cell_of = |slot: usize| slot / (D + 1);
+    let opposite = |slot: usize| D - slot % (D + 1);
+    // The first fold or third cell on a facet in the order the faces are met (cells in
+    // order, faces opposite vertex D, ..., 0): the error a face-by-face scan reports.
+    let mut first_error: Option<(usize, MeshError)> = None;
+    let mut pairs = Vec::with_capacity(faces.len() / 2);
+    let mut boundary = vec![false; cells.len()];
+    for (key, slots) in faces.groups() {
+        let slot = |i: usize| slots.get(i).map(|f| f.1 as usize);
+        let s1 = slots[0].1 as usize;
+        let Some(s2) = slot(1) else {
+            boundary[s1] = true;
+            continue;
+        };
+        let (e1, e2) = (cell_of(s1), cell_of(s2));
+        let error = if same_side(
+            &nodes,
+            &key,
+            cells[(D + 1) * e1 + opposite(s1)],
+            cells[(D + 1) * e2 + opposite(s2)],
+        ) {
+            Some((
+                s2,
+                MeshError::Folded {
+                    cell: e2,
+                    other: e1,
+                    nodes: key.to_vec(),
+                },
+            ))
+        } else {
+            slot(2).map(|s3| {
+                (
+                    s3,
+                    MeshError::NonManifold {
                         nodes: key.to_vec(),
-                        cell: e,
-                    })
-                }
-                _ => {}
+                        cell: cell_of(s3),
+                    },
+                )
+            })
+        };
+        match error {
+            Some((at, error)) if first_error.as_ref().is_none_or(|(f, _)| at < *f) => {
+                first_error = Some((at, error))
             }
+            Some(_) => {}
+            None => pairs.push((e1 as u32, e2 as u32)),
         }
+    }
+    drop(faces);
+    if let Some((_, error)) = first_error {
+        return Err(error);
     }
 
     let mut used = vec![false; nodes.len()];
@@ -276,8 +351,8 @@ pub fn build<const D: usize>(
         }
         i
     }
-    for face in faces.values().filter(|f| f.count == 2) {
-        let (ra, rb) = (root(&mut parent, face.cell), root(&mut parent, face.other));
+    for (a, b) in pairs {
+        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
         parent[ra.max(rb) as usize] = ra.min(rb);
     }
     let r0 = root(&mut parent, 0);
@@ -288,21 +363,17 @@ pub fn build<const D: usize>(
     }
 
     let mut facets = Vec::new();
-    for key in seen_order {
-        let face = faces[&key];
-        if face.count != 1 {
-            continue;
-        }
-        let (e, a) = (face.cell as usize, face.opposite as usize);
+    for slot in (0..cells.len()).filter(|&s| boundary[s]) {
+        let (e, a) = (cell_of(slot), opposite(slot));
         let cell = &cells[(D + 1) * e..(D + 1) * (e + 1)];
         let mut f = [0; D];
-        for (slot, v) in f.iter_mut().zip(
+        for (vertex, &v) in f.iter_mut().zip(
             cell.iter()
                 .enumerate()
                 .filter(|&(b, _)| b != a)
-                .map(|(_, &v)| v),
+                .map(|(_, v)| v),
         ) {
-            *slot = v;
+            *vertex = v;
         }
         let (nodes_f, normal, measure) = facet_frame(&nodes, f, nodes[cell[a]]);
         facets.push(Facet {

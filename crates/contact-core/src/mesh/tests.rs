@@ -137,6 +137,37 @@ fn quality_checks_name_the_first_offender() {
     let bow = vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]];
     let err = Mesh::from_cells(bow, vec![0, 1, 2, 0, 3, 4]).unwrap_err();
     assert_eq!(err, MeshError::Disconnected { cell: 1 });
+    // A fold (on the edge of nodes 0 and 2) and a fan of three (on nodes 4 and 5): whichever
+    // the cells meet first is reported, not the lower-numbered facet.
+    let both = vec![
+        [0.0, 0.0],
+        [1.0, 0.0],
+        [1.0, 1.0],
+        [0.9, 0.3],
+        [10.0, 0.0],
+        [11.0, 0.0],
+        [10.5, 1.0],
+        [10.5, -1.0],
+        [10.5, 3.0],
+    ];
+    let (fold, fan) = ([0, 1, 2, 0, 3, 2], [4, 5, 6, 4, 5, 7, 4, 5, 8]);
+    let err = Mesh::from_cells(both.clone(), [fan.as_slice(), &fold].concat()).unwrap_err();
+    assert_eq!(
+        err,
+        MeshError::NonManifold {
+            nodes: vec![4, 5],
+            cell: 2
+        }
+    );
+    let err = Mesh::from_cells(both, [fold.as_slice(), &fan].concat()).unwrap_err();
+    assert_eq!(
+        err,
+        MeshError::Folded {
+            cell: 1,
+            other: 0,
+            nodes: vec![0, 2]
+        }
+    );
 }
 
 #[test]
