@@ -14,6 +14,7 @@ pub mod smoother;
 pub mod truncated;
 
 use super::block_csr32::BlockCsr32;
+use super::block_galerkin;
 use super::cholesky::{Cholesky, FactorError};
 use super::csr::TRANSPOSE_PIECES;
 use super::galerkin::{galerkin, transpose};
@@ -203,22 +204,29 @@ struct Level {
 }
 
 impl Level {
-    /// The level of `a` (node `blocks`) with prolongator `p`, and the next coarser operator
-    /// PᵀAP.
+    /// The level of `a` (node `blocks`) with prolongator `p` to the `coarse` blocks, and the
+    /// next coarser operator PᵀAP.
     fn new(
         a: Arc<Csr>,
         blocks: &Blocks,
+        coarse: &Blocks,
         smoother: Chebyshev,
         p: Csr,
         params: Params,
     ) -> (Level, Arc<Csr>) {
         // Pᵀ is formed only where it is kept: a P that restricts by pieces has its Galerkin
-        // product summed from its rows too.
+        // product summed from its rows too. A wide P (smoothed aggregation) takes the
+        // product in node blocks where their sizes allow.
+        let bounds = blocks.consecutive_bounds(a.nrows);
         let pt = (!restricts_by_pieces(&p)).then(|| transpose(&p));
-        let coarse = Arc::new(galerkin(&a, &p, pt.as_ref()));
-        let a32 = params
-            .mixed
-            .then(|| BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
+        let in_blocks = (p.nnz() > 2 * p.nrows)
+            .then(|| {
+                let coarse_bounds = coarse.consecutive_bounds(p.ncols);
+                block_galerkin::galerkin(&a, &p, &bounds, &coarse_bounds)
+            })
+            .flatten();
+        let coarse = Arc::new(in_blocks.unwrap_or_else(|| galerkin(&a, &p, pt.as_ref())));
+        let a32 = params.mixed.then(|| BlockCsr32::new(&a, &bounds));
         let level = Level {
             a,
             a32,
@@ -290,7 +298,7 @@ impl Hierarchy {
                 let most = params.max_levels.saturating_sub(1);
                 for (p, cb) in prolongators.into_iter().zip(coarse_blocks).take(most) {
                     let smoother = Chebyshev::new(&a, &blocks, params.degree, params.ratio);
-                    let (level, coarse) = Level::new(a, &blocks, smoother, p, params);
+                    let (level, coarse) = Level::new(a, &blocks, &cb, smoother, p, params);
                     levels.push(level);
                     a = coarse;
                     blocks = cb;
@@ -333,7 +341,7 @@ impl Hierarchy {
                     smoother.lambda_hi() / 1.1,
                     &t,
                 );
-                let (level, coarse) = Level::new(a, &blocks, smoother, p, params);
+                let (level, coarse) = Level::new(a, &blocks, &coarse_blocks, smoother, p, params);
                 levels.push(level);
                 a = coarse;
                 blocks = coarse_blocks;
