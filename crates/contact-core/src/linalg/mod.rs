@@ -8,7 +8,7 @@
 //! and the threads every kernel splits its work over ([`par`]).
 
 pub mod block_csr32;
-pub mod block_galerkin;
+pub mod block_products;
 pub mod cholesky;
 pub mod csr;
 pub mod dense;

@@ -19,6 +19,7 @@
 
 use super::smoother::BlockJacobi;
 use super::Blocks;
+use crate::linalg::block_products;
 use crate::linalg::galerkin::{add, product};
 use crate::linalg::{par, Csr};
 
@@ -202,11 +203,23 @@ pub fn tentative(
     (t, Blocks::contiguous(&coarse_ptr), coarse_null)
 }
 
-/// P = (I − ω D⁻¹A) T with ω = 4/(3 λ), λ ≥ λ_max(D⁻¹A).
-pub fn smooth_prolongator(a: &Csr, jacobi: &BlockJacobi, lambda: f64, t: &Csr) -> Csr {
+/// P = (I − ω D⁻¹A) T with ω = 4/(3 λ), λ ≥ λ_max(D⁻¹A); in node blocks where the fine
+/// blocks (consecutive bounds `fine`) and aggregates (`coarse`) allow
+/// ([`block_products::smoothed_prolongator`]).
+pub fn smooth_prolongator(
+    a: &Csr,
+    jacobi: &BlockJacobi,
+    lambda: f64,
+    t: &Csr,
+    fine: &[usize],
+    coarse: &[usize],
+) -> Csr {
     let omega = 4.0 / (3.0 * lambda);
-    let dinv_a = product(&jacobi.inverse_matrix(), a);
-    add(1.0, t, -omega, &product(&dinv_a, t))
+    let dinv = jacobi.inverse_matrix();
+    block_products::smoothed_prolongator(a, &dinv, omega, t, fine, coarse).unwrap_or_else(|| {
+        let dinv_a = product(&dinv, a);
+        add(1.0, t, -omega, &product(&dinv_a, t))
+    })
 }
 
 #[cfg(test)]

@@ -14,7 +14,7 @@ pub mod smoother;
 pub mod truncated;
 
 use super::block_csr32::BlockCsr32;
-use super::block_galerkin;
+use super::block_products;
 use super::cholesky::{Cholesky, FactorError};
 use super::csr::TRANSPOSE_PIECES;
 use super::galerkin::{galerkin, transpose};
@@ -222,7 +222,7 @@ impl Level {
         let in_blocks = (p.nnz() > 2 * p.nrows)
             .then(|| {
                 let coarse_bounds = coarse.consecutive_bounds(p.ncols);
-                block_galerkin::galerkin(&a, &p, &bounds, &coarse_bounds)
+                block_products::galerkin(&a, &p, &bounds, &coarse_bounds)
             })
             .flatten();
         let coarse = Arc::new(in_blocks.unwrap_or_else(|| galerkin(&a, &p, pt.as_ref())));
@@ -340,6 +340,8 @@ impl Hierarchy {
                     &smoother.jacobi,
                     smoother.lambda_hi() / 1.1,
                     &t,
+                    &blocks.consecutive_bounds(a.nrows),
+                    &coarse_blocks.consecutive_bounds(t.ncols),
                 );
                 let (level, coarse) = Level::new(a, &blocks, &coarse_blocks, smoother, p, params);
                 levels.push(level);

@@ -1,23 +1,26 @@
-//! The Galerkin coarse operator A_c = Pᵀ A P of a smoothed-aggregation level in node blocks:
-//! the fine DOFs cut into node blocks of at most SF DOFs (3 in 3D, 2 in 2D; an aggregate's
-//! SF = 6 coarse DOFs on the levels below), the coarse DOFs into aggregates of at most SC
-//! (the near-nullspace's 6 or 3 rigid modes).
+//! The products of a smoothed-aggregation level's set-up in node blocks: the fine DOFs cut
+//! into node blocks of at most SF DOFs (3 in 3D, 2 in 2D; an aggregate's SF = 6 coarse DOFs
+//! on the levels below), the coarse DOFs into aggregates of at most SC (the near-nullspace's
+//! 6 or 3 rigid modes).
 //!
-//! The scalar product ([`super::galerkin::galerkin`]) spends its time finding the place of
-//! each of some 450 M scalar terms on the 80k-node part. In blocks the places are found
+//! - the smoothed prolongator P = T − ω D⁻¹ A T ([`smoothed_prolongator`]);
+//! - the Galerkin coarse operator A_c = Pᵀ A P ([`galerkin`]).
+//!
+//! The scalar products ([`super::galerkin`]) spend their time finding the place of each
+//! scalar term (some 450 M for PᵀAP on the 80k-node part). In blocks the places are found
 //! once per block pair, and the arithmetic is dense SF × SC and SC × SC block products:
 //!
 //! 1. **Symbolic, once:** the block pattern of each fine block row of A P (the aggregates
 //!    within two block steps), and from it the block pattern of A_c, row by row over the
 //!    aggregates.
-//! 2. **Numeric, by pieces:** [`PIECES`] fixed pieces of the fine block rows each form their
-//!    rows of A P one at a time (from A's scalar rows: A is not copied) and add
+//! 2. **Numeric:** the rows of A P are formed one block row at a time from A's scalar rows
+//!    (A is not copied). For A_c, [`PIECES`] fixed pieces of the fine block rows each add
 //!    P_iᵀ (A P)_i into their own copy of A_c's values; the copies are summed in piece
 //!    order, so the bits do not depend on the thread count.
 //!
 //! Smaller blocks (Γ3 nodes, clamped components, aggregates of fewer modes) are padded
-//! with zeros, and the padding is dropped from the result. The result is A_c in scalar CSR
-//! with every entry of each nonzero block pair, symmetrised entrywise.
+//! with zeros, and the padding is dropped from the results: scalar CSR with every entry of
+//! each nonzero block pair.
 
 use super::galerkin::{add, transpose};
 use super::{par, Csr};
@@ -50,6 +53,148 @@ pub fn galerkin(a: &Csr, p: &Csr, fine: &[usize], coarse: &[usize]) -> Option<Cs
         (3, 3) => blocked::<3, 3>(a, p, fine, coarse),
         _ => return None,
     })
+}
+
+/// P = T − ω D⁻¹ A T for `a` square with T's rows and `dinv` = D⁻¹ block diagonal in the
+/// fine blocks, in the blocks of [`galerkin`] (the same sizes, or None).
+pub fn smoothed_prolongator(
+    a: &Csr,
+    dinv: &Csr,
+    omega: f64,
+    t: &Csr,
+    fine: &[usize],
+    coarse: &[usize],
+) -> Option<Csr> {
+    assert_eq!(
+        (a.nrows, a.ncols),
+        (t.nrows, t.nrows),
+        "A square with T's rows"
+    );
+    assert_eq!(fine.last(), Some(&t.nrows), "fine blocks cover T's rows");
+    assert_eq!(
+        coarse.last(),
+        Some(&t.ncols),
+        "coarse blocks cover T's columns"
+    );
+    // D⁻¹ must lie in the fine blocks.
+    let fine_of = block_of(fine);
+    let within = (0..dinv.nrows).all(|r| {
+        dinv.indices[dinv.indptr[r]..dinv.indptr[r + 1]]
+            .iter()
+            .all(|&c| fine_of[c as usize] == fine_of[r])
+    });
+    if !within {
+        return None;
+    }
+    let largest = |ptr: &[usize]| ptr.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+    Some(match (largest(fine), largest(coarse)) {
+        (3, 6) => prolongator::<3, 6>(a, dinv, omega, t, fine, coarse),
+        (6, 6) => prolongator::<6, 6>(a, dinv, omega, t, fine, coarse),
+        (2, 3) => prolongator::<2, 3>(a, dinv, omega, t, fine, coarse),
+        (3, 3) => prolongator::<3, 3>(a, dinv, omega, t, fine, coarse),
+        _ => return None,
+    })
+}
+
+fn prolongator<const SF: usize, const SC: usize>(
+    a: &Csr,
+    dinv: &Csr,
+    omega: f64,
+    t: &Csr,
+    fine: &[usize],
+    coarse: &[usize],
+) -> Csr {
+    let n_coarse = coarse.len() - 1;
+    let (fine_of, coarse_of) = (block_of(fine), block_of(coarse));
+    let tb = blocks_of_p::<SF, SC>(t, fine, coarse, &coarse_of);
+    let (ap_row, ap_cols) = product_pattern(a, fine, &fine_of, &tb, n_coarse);
+    let parts = par::map_ranges(fine.len() - 1, CHUNK, |range| {
+        let mut place = vec![u32::MAX; n_coarse];
+        let mut w: Vec<[[f64; SC]; SF]> = Vec::new();
+        let (mut lengths, mut indices, mut values) = (Vec::new(), Vec::new(), Vec::new());
+        for i in range {
+            let pattern = &ap_cols[ap_row[i]..ap_row[i + 1]];
+            for (q, &big_j) in pattern.iter().enumerate() {
+                place[big_j as usize] = q as u32;
+            }
+            w.clear();
+            w.resize(pattern.len(), [[0.0; SC]; SF]);
+            row_of_product(a, fine, &fine_of, &tb, &place, i, &mut w);
+            let (js, ti) = tb.blocks(i);
+            assert!(
+                js.iter().all(|j| pattern.binary_search(j).is_ok()),
+                "T's blocks lie in A T's pattern (A's diagonal blocks are stored)"
+            );
+            for (x, r) in (fine[i]..fine[i + 1]).enumerate() {
+                // Row x of T_i − ω D_i⁻¹ W, block by block.
+                let d = dinv.indptr[r]..dinv.indptr[r + 1];
+                for (q, &big_j) in pattern.iter().enumerate() {
+                    let mut row = [0.0f64; SC];
+                    for (&c, &dv) in dinv.indices[d.clone()].iter().zip(&dinv.values[d.clone()]) {
+                        let y = c as usize - fine[i];
+                        for (v, &wv) in row.iter_mut().zip(&w[q][y]) {
+                            *v -= omega * dv * wv;
+                        }
+                    }
+                    if let Ok(k) = js.binary_search(&big_j) {
+                        for (v, &tv) in row.iter_mut().zip(&ti[k][x]) {
+                            *v += tv;
+                        }
+                    }
+                    let cols = coarse[big_j as usize]..coarse[big_j as usize + 1];
+                    for (col, &v) in cols.zip(&row) {
+                        indices.push(col as u32);
+                        values.push(v);
+                    }
+                }
+                lengths.push(indices.len());
+            }
+        }
+        (lengths, indices, values)
+    });
+    // Rows joined in order (the lengths above are running ends within each part).
+    let mut indptr = vec![0usize];
+    let (mut indices, mut values) = (Vec::new(), Vec::new());
+    for (ends, i, v) in parts {
+        let base = indices.len();
+        indptr.extend(ends.into_iter().map(|e| base + e));
+        indices.extend(i);
+        values.extend(v);
+    }
+    Csr {
+        nrows: t.nrows,
+        ncols: t.ncols,
+        indptr,
+        indices,
+        values,
+    }
+}
+
+/// Block row i of A B into `w` (zeroed, one block per entry of i's pattern, whose places
+/// `place` gives by aggregate), from A's scalar rows and B in blocks.
+fn row_of_product<const SF: usize, const SC: usize>(
+    a: &Csr,
+    fine: &[usize],
+    fine_of: &[u32],
+    b: &BlockRows<SF, SC>,
+    place: &[u32],
+    i: usize,
+    w: &mut [[[f64; SC]; SF]],
+) {
+    for (x, r) in (fine[i]..fine[i + 1]).enumerate() {
+        for e in a.indptr[r]..a.indptr[r + 1] {
+            let (col, v) = (a.indices[e] as usize, a.values[e]);
+            let j = fine_of[col] as usize;
+            let y = col - fine[j];
+            let (js, bj) = b.blocks(j);
+            for (&big_j, bj) in js.iter().zip(bj) {
+                let wx = &mut w[place[big_j as usize] as usize][x];
+                for (w, &bv) in wx.iter_mut().zip(&bj[y]) {
+                    *w += v * bv;
+                }
+            }
+        }
+    }
 }
 
 /// The block of each DOF of the consecutive blocks `ptr`.
@@ -245,20 +390,7 @@ fn blocked<const SF: usize, const SC: usize>(
             }
             w.clear();
             w.resize(pattern.len(), [[0.0; SC]; SF]);
-            for (x, r) in (fine[i]..fine[i + 1]).enumerate() {
-                for e in a.indptr[r]..a.indptr[r + 1] {
-                    let (col, v) = (a.indices[e] as usize, a.values[e]);
-                    let j = fine_of[col] as usize;
-                    let y = col - fine[j];
-                    let (js, pj) = pb.blocks(j);
-                    for (&big_j, pj) in js.iter().zip(pj) {
-                        let wx = &mut w[place[big_j as usize] as usize][x];
-                        for (w, &pv) in wx.iter_mut().zip(&pj[y]) {
-                            *w += v * pv;
-                        }
-                    }
-                }
-            }
+            row_of_product(a, fine, &fine_of, &pb, &place, i, &mut w);
             // C_IJ += P_iIᵀ W_J.
             let (is, pi) = pb.blocks(i);
             for (&big_i, pi) in is.iter().zip(pi) {
@@ -398,6 +530,55 @@ mod tests {
             let cols = &blocked.indices[blocked.indptr[r]..blocked.indptr[r + 1]];
             assert!(cols.windows(2).all(|w| w[0] < w[1]), "row {r} sorted");
         }
+    }
+
+    #[test]
+    fn the_smoothed_prolongator_equals_the_scalar_products() {
+        let (a, t, fine, coarse) = case();
+        // A block-diagonal D⁻¹ in the fine blocks (any values: the product does not assume
+        // an inverse).
+        let mut d = Vec::new();
+        for b in 0..fine.len() - 1 {
+            for i in fine[b]..fine[b + 1] {
+                for j in fine[b]..fine[b + 1] {
+                    d.push((i, j, 0.1 + 0.01 * (3 * i + j) as f64));
+                }
+            }
+        }
+        let dinv = Csr::from_triplets(a.nrows, a.nrows, d.clone());
+        let omega = 0.7;
+        let scalar = dense(&add(
+            1.0,
+            &t,
+            -omega,
+            &super::super::galerkin::product(&super::super::galerkin::product(&dinv, &a), &t),
+        ));
+        let run = |threads: usize| {
+            par::Threads::new(threads).install(|| {
+                smoothed_prolongator(&a, &dinv, omega, &t, &fine, &coarse).expect("3 × 6 blocks")
+            })
+        };
+        let blocked = run(1);
+        for (r, (b, s)) in dense(&blocked).iter().zip(&scalar).enumerate() {
+            for (c, (b, s)) in b.iter().zip(s).enumerate() {
+                assert!(
+                    (b - s).abs() <= 1e-13 * (1.0 + s.abs()),
+                    "({r}, {c}): {b} against {s}"
+                );
+            }
+            let cols = &blocked.indices[blocked.indptr[r]..blocked.indptr[r + 1]];
+            assert!(cols.windows(2).all(|w| w[0] < w[1]), "row {r} sorted");
+        }
+        let two = run(2);
+        assert_eq!(
+            (&blocked.indptr, &blocked.indices),
+            (&two.indptr, &two.indices)
+        );
+        assert_eq!(blocked.values, two.values);
+        // A D⁻¹ across blocks is declined.
+        d.push((0, 3, 0.5));
+        let across = Csr::from_triplets(a.nrows, a.nrows, d);
+        assert!(smoothed_prolongator(&a, &across, omega, &t, &fine, &coarse).is_none());
     }
 
     #[test]
