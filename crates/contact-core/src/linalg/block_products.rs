@@ -378,11 +378,19 @@ fn blocked<const SF: usize, const SC: usize>(
 
     let rows = n_fine.div_ceil(PIECES).max(1);
     let pieces = n_fine.div_ceil(rows);
+    // A piece's term lives on the rows of A_c of the aggregates its fine rows meet: a band
+    // of A_c for a numbering with locality (its first value's place, and the values).
     let term = |k: usize| {
-        let mut c = vec![[[0.0f64; SC]; SC]; c_cols.len()];
+        let piece = k * rows..((k + 1) * rows).min(n_fine);
+        let met = &pb.cols[pb.row[piece.start]..pb.row[piece.end]];
+        let (Some(&low), Some(&high)) = (met.iter().min(), met.iter().max()) else {
+            return (0, Vec::new());
+        };
+        let band = c_row[low as usize]..c_row[high as usize + 1];
+        let mut c = vec![[[0.0f64; SC]; SC]; band.len()];
         let mut place = vec![u32::MAX; n_coarse];
         let mut w: Vec<[[f64; SC]; SF]> = Vec::new();
-        for i in k * rows..((k + 1) * rows).min(n_fine) {
+        for i in piece {
             // Row block i of A P: W[J] = Σ_j A_ij P_jJ, from A's scalar rows.
             let pattern = &ap_cols[ap_row[i]..ap_row[i + 1]];
             for (q, &big_j) in pattern.iter().enumerate() {
@@ -398,7 +406,7 @@ fn blocked<const SF: usize, const SC: usize>(
                 let c_of_row = &c_cols[c_range.clone()];
                 for (&big_j, wj) in pattern.iter().zip(&w) {
                     let q = c_range.start + c_of_row.binary_search(&big_j).expect("in pattern");
-                    let cq = &mut c[q];
+                    let cq = &mut c[q - band.start];
                     for x in 0..SF {
                         for (cy, &pxy) in cq.iter_mut().zip(&pi[x]) {
                             if pxy != 0.0 {
@@ -411,14 +419,14 @@ fn blocked<const SF: usize, const SC: usize>(
                 }
             }
         }
-        c
+        (band.start, c)
     };
     let round = par::current_threads().max(1);
     let mut values = vec![[[0.0f64; SC]; SC]; c_cols.len()];
     for first in (0..pieces).step_by(round) {
         let terms = par::map_ranges(round.min(pieces - first), 1, |k| term(first + k.start));
-        for t in terms {
-            for (v, t) in values.iter_mut().zip(&t) {
+        for (start, t) in terms {
+            for (v, t) in values[start..].iter_mut().zip(&t) {
                 for (v, t) in v.iter_mut().zip(t) {
                     for (v, t) in v.iter_mut().zip(t) {
                         *v += t;
