@@ -39,14 +39,9 @@ pub fn viscous_stiffness_in_pattern<const D: usize>(
     eta: f64,
     xi: f64,
 ) -> Csr {
-    let mut k = free_pattern(mesh, dofs);
     let (start, cells_of) = cells_of_nodes(mesh);
-    let mut owner = vec![(0usize, 0usize); dofs.n_free()];
-    for (s, slot) in dofs.slot.iter().enumerate() {
-        if let Slot::Free(f) = slot {
-            owner[*f] = (s / D, s % D);
-        }
-    }
+    let owner = dofs.owners();
+    let mut k = free_pattern_with(mesh, dofs, &owner, &start, &cells_of);
     let nd = (D + 1) * D;
     add_by_rows(&mut k, |r, add| {
         let (node, c) = owner[r];
@@ -164,14 +159,21 @@ fn stiffness_entry<const D: usize>(
 /// are its neighbour nodes' interior DOFs then their contact DOFs, already sorted (a sort per
 /// DOF row of its cells' vertices cost 4.6 % of a 1/32 box run).
 pub fn free_pattern<const D: usize>(mesh: &Mesh<D>, dofs: &DofMap<D>) -> Csr {
-    let nodes = node_pattern(mesh);
+    let (start, cells_of) = cells_of_nodes(mesh);
+    free_pattern_with(mesh, dofs, &dofs.owners(), &start, &cells_of)
+}
+
+/// [`free_pattern`] from the free DOFs' owners ([`DofMap::owners`]) and the cells of the
+/// nodes ([`cells_of_nodes`]), where the caller needs them too.
+fn free_pattern_with<const D: usize>(
+    mesh: &Mesh<D>,
+    dofs: &DofMap<D>,
+    owner: &[(usize, usize)],
+    start: &[usize],
+    cells_of: &[usize],
+) -> Csr {
+    let nodes = node_pattern_with(mesh, start, cells_of);
     let n = dofs.n_free();
-    let mut node_of = vec![0usize; n];
-    for (dof, slot) in dofs.slot.iter().enumerate() {
-        if let Slot::Free(f) = slot {
-            node_of[*f] = dof / D;
-        }
-    }
     let n_interior = dofs.n_interior;
     let free_of = |node: usize| {
         dofs.slot[D * node..D * (node + 1)]
@@ -182,7 +184,7 @@ pub fn free_pattern<const D: usize>(mesh: &Mesh<D>, dofs: &DofMap<D>) -> Csr {
             })
     };
     pattern_by_rows(n, |r, cols| {
-        let (i, first) = (node_of[r], cols.len());
+        let (i, first) = (owner[r].0, cols.len());
         let around = &nodes.indices[nodes.indptr[i]..nodes.indptr[i + 1]];
         for interior in [true, false] {
             for &j in around {
@@ -252,8 +254,13 @@ fn cells_of_nodes<const D: usize>(mesh: &Mesh<D>) -> (Vec<usize>, Vec<usize>) {
 /// The pattern of a P1 scalar operator on all nodes: node i couples to every node that shares
 /// a cell with it. Values zero.
 pub fn node_pattern<const D: usize>(mesh: &Mesh<D>) -> Csr {
-    let nn = mesh.n_nodes();
     let (start, cells_of) = cells_of_nodes(mesh);
+    node_pattern_with(mesh, &start, &cells_of)
+}
+
+/// [`node_pattern`] from [`cells_of_nodes`]'s (start, cells_of).
+fn node_pattern_with<const D: usize>(mesh: &Mesh<D>, start: &[usize], cells_of: &[usize]) -> Csr {
+    let nn = mesh.n_nodes();
     pattern_by_rows(nn, |i, cols| {
         for &e in &cells_of[start[i]..start[i + 1]] {
             cols.extend(mesh.cell(e).iter().map(|&v| v as u32));

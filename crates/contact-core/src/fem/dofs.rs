@@ -159,6 +159,17 @@ impl<const D: usize> DofMap<D> {
         self.contact.len()
     }
 
+    /// The node and component (in its frame) of each free DOF, by free index.
+    pub fn owners(&self) -> Vec<(usize, usize)> {
+        let mut owner = vec![(0, 0); self.n_free()];
+        for (dof, slot) in self.slot.iter().enumerate() {
+            if let Slot::Free(f) = *slot {
+                owner[f] = (dof / D, dof % D);
+            }
+        }
+        owner
+    }
+
     /// The rotated frame of a node, if it has one.
     #[inline]
     pub fn frame(&self, node: usize) -> Option<&[[f64; D]; D]> {

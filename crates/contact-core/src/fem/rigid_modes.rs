@@ -97,12 +97,7 @@ fn write_modes<const D: usize>(
 
 /// The node blocks of the free DOFs: each node's free components (none for clamped nodes).
 pub fn node_blocks<const D: usize>(mesh: &Mesh<D>, dofs: &DofMap<D>) -> Blocks {
-    let mut block_of = vec![0u32; dofs.n_free()];
-    for (dof, s) in dofs.slot.iter().enumerate() {
-        if let Slot::Free(f) = *s {
-            block_of[f] = (dof / D) as u32;
-        }
-    }
+    let block_of: Vec<u32> = dofs.owners().iter().map(|&(node, _)| node as u32).collect();
     Blocks::from_block_of(&block_of, mesh.n_nodes())
 }
 
