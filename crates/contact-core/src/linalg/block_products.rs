@@ -152,9 +152,12 @@ fn prolongator<const SF: usize, const SC: usize>(
         }
         (lengths, indices, values)
     });
-    // Rows joined in order (the lengths above are running ends within each part).
-    let mut indptr = vec![0usize];
-    let (mut indices, mut values) = (Vec::new(), Vec::new());
+    // Rows joined in order (the lengths above are running ends within each part), into
+    // vectors of their final size.
+    let mut indptr = Vec::with_capacity(t.nrows + 1);
+    indptr.push(0usize);
+    let mut indices = Vec::with_capacity(parts.iter().map(|p| p.1.len()).sum());
+    let mut values = Vec::with_capacity(parts.iter().map(|p| p.2.len()).sum());
     for (ends, i, v) in parts {
         let base = indices.len();
         indptr.extend(ends.into_iter().map(|e| base + e));
@@ -221,10 +224,13 @@ impl<const R: usize, const C: usize> BlockRows<R, C> {
     }
 }
 
-/// Joins per-range results (row lengths, columns, values) in order.
+/// Joins per-range results (row lengths, columns, values) in order, into vectors of their
+/// final size (grown by doubling, the join would hold up to three times the result).
 fn join_rows<T>(parts: Vec<(Vec<usize>, Vec<u32>, Vec<T>)>) -> (Vec<usize>, Vec<u32>, Vec<T>) {
-    let mut row = vec![0];
-    let (mut cols, mut vals) = (Vec::new(), Vec::new());
+    let mut row = Vec::with_capacity(parts.iter().map(|p| p.0.len()).sum::<usize>() + 1);
+    row.push(0);
+    let mut cols = Vec::with_capacity(parts.iter().map(|p| p.1.len()).sum());
+    let mut vals = Vec::with_capacity(parts.iter().map(|p| p.2.len()).sum());
     for (lengths, c, v) in parts {
         for l in lengths {
             row.push(row.last().unwrap() + l);
