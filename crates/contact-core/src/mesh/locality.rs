@@ -79,8 +79,21 @@ impl<const D: usize> Mesh<D> {
         let nodes = node.iter().map(|&old| self.nodes[old]).collect();
         let relabelled: Vec<usize> = self.cells.iter().map(|&v| new_of[v]).collect();
         let vertices = |e: usize| &relabelled[(D + 1) * e..(D + 1) * (e + 1)];
-        let mut cell: Vec<usize> = (0..self.n_cells()).collect();
-        cell.sort_by_key(|&e| (vertices(e).iter().min().copied(), e));
+        // Cells by lowest node, ties in cell order: a counting sort.
+        let lowest = |e: usize| *vertices(e).iter().min().expect("a cell has vertices");
+        let mut start = vec![0usize; node.len() + 1];
+        for e in 0..self.n_cells() {
+            start[lowest(e) + 1] += 1;
+        }
+        for v in 0..node.len() {
+            start[v + 1] += start[v];
+        }
+        let mut cell = vec![0usize; self.n_cells()];
+        for e in 0..self.n_cells() {
+            let v = lowest(e);
+            cell[start[v]] = e;
+            start[v] += 1;
+        }
         let cells = cell
             .iter()
             .flat_map(|&e| vertices(e).iter().copied())
