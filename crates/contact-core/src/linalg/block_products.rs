@@ -15,8 +15,9 @@
 //!    aggregates.
 //! 2. **Numeric:** the rows of A P are formed one block row at a time from A's scalar rows
 //!    (A is not copied). For A_c, [`PIECES`] fixed pieces of the fine block rows each add
-//!    P_iᵀ (A P)_i into their own copy of A_c's values; the copies are summed in piece
-//!    order, so the bits do not depend on the thread count.
+//!    P_iᵀ (A P)_i into their own copy of the band of A_c's rows their aggregates meet; the
+//!    copies are summed in piece order, so the bits do not depend on the thread count, and
+//!    the result is symmetrised entrywise as the scalar product's is.
 //!
 //! Smaller blocks (Γ3 nodes, clamped components, aggregates of fewer modes) are padded
 //! with zeros, and the padding is dropped from the results: scalar CSR with every entry of
