@@ -225,23 +225,6 @@ impl<const R: usize, const C: usize> BlockRows<R, C> {
     }
 }
 
-/// Joins per-range results (row lengths, columns, values) in order, into vectors of their
-/// final size (grown by doubling, the join would hold up to three times the result).
-fn join_rows<T>(parts: Vec<(Vec<usize>, Vec<u32>, Vec<T>)>) -> (Vec<usize>, Vec<u32>, Vec<T>) {
-    let mut row = Vec::with_capacity(parts.iter().map(|p| p.0.len()).sum::<usize>() + 1);
-    row.push(0);
-    let mut cols = Vec::with_capacity(parts.iter().map(|p| p.1.len()).sum());
-    let mut vals = Vec::with_capacity(parts.iter().map(|p| p.2.len()).sum());
-    for (lengths, c, v) in parts {
-        for l in lengths {
-            row.push(row.last().unwrap() + l);
-        }
-        cols.extend(c);
-        vals.extend(v);
-    }
-    (row, cols, vals)
-}
-
 /// Block rows per task of the set-up loops.
 const CHUNK: usize = 2048;
 
@@ -252,38 +235,57 @@ fn blocks_of_p<const R: usize, const C: usize>(
     coarse: &[usize],
     coarse_of: &[u32],
 ) -> BlockRows<R, C> {
+    let (row, cols) = par::sorted_rows(fine.len() - 1, |i, cols| {
+        for r in fine[i]..fine[i + 1] {
+            let entries = p.indptr[r]..p.indptr[r + 1];
+            cols.extend(p.indices[entries].iter().map(|&c| coarse_of[c as usize]));
+        }
+    });
     let parts = par::map_ranges(fine.len() - 1, CHUNK, |range| {
-        let (mut lengths, mut cols, mut vals) = (Vec::new(), Vec::new(), Vec::new());
-        for i in range {
-            let first = cols.len();
-            for r in fine[i]..fine[i + 1] {
-                let entries = p.indptr[r]..p.indptr[r + 1];
-                cols.extend(p.indices[entries].iter().map(|&c| coarse_of[c as usize]));
-            }
-            cols[first..].sort_unstable();
-            let mut unique = first;
-            for k in first..cols.len() {
-                if k == first || cols[k] != cols[unique - 1] {
-                    cols[unique] = cols[k];
-                    unique += 1;
-                }
-            }
-            cols.truncate(unique);
-            vals.resize(cols.len(), [[0.0; C]; R]);
+        let mut vals = vec![[[0.0; C]; R]; row[range.end] - row[range.start]];
+        for i in range.clone() {
+            let blocks = &cols[row[i]..row[i + 1]];
             for (x, r) in (fine[i]..fine[i + 1]).enumerate() {
                 for e in p.indptr[r]..p.indptr[r + 1] {
                     let c = p.indices[e] as usize;
                     let j = coarse_of[c];
-                    let k = first + cols[first..].binary_search(&j).expect("listed");
+                    let k = row[i] - row[range.start] + blocks.binary_search(&j).expect("listed");
                     vals[k][x][c - coarse[j as usize]] = p.values[e];
                 }
             }
+        }
+        vals
+    });
+    let mut vals = Vec::with_capacity(cols.len());
+    parts.into_iter().for_each(|part| vals.extend(part));
+    BlockRows { row, cols, vals }
+}
+
+/// The `n` rows of a pattern over `n_cols` columns whose row i is the union of the columns
+/// `row(i, add)` adds (repeats allowed), each row increasing: a marker per task drops the
+/// repeats, so only a row's distinct columns are sorted.
+fn union_rows(
+    n: usize,
+    n_cols: usize,
+    row: impl Fn(usize, &mut dyn FnMut(u32)) + Sync + Send,
+) -> (Vec<usize>, Vec<u32>) {
+    let parts = par::map_ranges(n, CHUNK, |range| {
+        let mut seen = vec![u32::MAX; n_cols];
+        let (mut lengths, mut cols) = (Vec::new(), Vec::new());
+        for i in range {
+            let first = cols.len();
+            row(i, &mut |j| {
+                if seen[j as usize] != i as u32 {
+                    seen[j as usize] = i as u32;
+                    cols.push(j);
+                }
+            });
+            cols[first..].sort_unstable();
             lengths.push(cols.len() - first);
         }
-        (lengths, cols, vals)
+        (lengths, cols)
     });
-    let (row, cols, vals) = join_rows(parts);
-    BlockRows { row, cols, vals }
+    par::join_rows(n, parts)
 }
 
 /// For each fine block row i, the aggregates J of its blocks of A P (the P columns of the
@@ -295,34 +297,16 @@ fn product_pattern<const R: usize, const C: usize>(
     pb: &BlockRows<R, C>,
     n_coarse: usize,
 ) -> (Vec<usize>, Vec<u32>) {
-    let parts = par::map_ranges(fine.len() - 1, CHUNK, |range| {
-        let mut seen = vec![u32::MAX; n_coarse];
-        let mut seen_block = vec![u32::MAX; fine.len() - 1];
-        let (mut lengths, mut cols) = (Vec::new(), Vec::new());
-        for i in range {
-            let first = cols.len();
-            for r in fine[i]..fine[i + 1] {
-                for &c in &a.indices[a.indptr[r]..a.indptr[r + 1]] {
-                    let j = fine_of[c as usize];
-                    if seen_block[j as usize] == i as u32 {
-                        continue;
-                    }
-                    seen_block[j as usize] = i as u32;
-                    for &big_j in pb.blocks(j as usize).0 {
-                        if seen[big_j as usize] != i as u32 {
-                            seen[big_j as usize] = i as u32;
-                            cols.push(big_j);
-                        }
-                    }
-                }
+    union_rows(fine.len() - 1, n_coarse, |i, add| {
+        for r in fine[i]..fine[i + 1] {
+            for &c in &a.indices[a.indptr[r]..a.indptr[r + 1]] {
+                pb.blocks(fine_of[c as usize] as usize)
+                    .0
+                    .iter()
+                    .for_each(|&big_j| add(big_j));
             }
-            cols[first..].sort_unstable();
-            lengths.push(cols.len() - first);
         }
-        (lengths, cols, Vec::<()>::new())
-    });
-    let (row, cols, _) = join_rows(parts);
-    (row, cols)
+    })
 }
 
 /// The block pattern of Pᵀ A P: row I is the union of the A P patterns of the fine block
@@ -349,26 +333,14 @@ fn coarse_pattern<const R: usize, const C: usize>(
             next[j as usize] += 1;
         }
     }
-    let parts = par::map_ranges(n_coarse, CHUNK, |range| {
-        let mut seen = vec![u32::MAX; n_coarse];
-        let (mut lengths, mut cols) = (Vec::new(), Vec::new());
-        for big_i in range {
-            let first = cols.len();
-            for &i in &rows_of[start[big_i]..start[big_i + 1]] {
-                for &big_j in &ap_cols[ap_row[i as usize]..ap_row[i as usize + 1]] {
-                    if seen[big_j as usize] != big_i as u32 {
-                        seen[big_j as usize] = big_i as u32;
-                        cols.push(big_j);
-                    }
-                }
-            }
-            cols[first..].sort_unstable();
-            lengths.push(cols.len() - first);
+    union_rows(n_coarse, n_coarse, |big_i, add| {
+        for &i in &rows_of[start[big_i]..start[big_i + 1]] {
+            let i = i as usize;
+            ap_cols[ap_row[i]..ap_row[i + 1]]
+                .iter()
+                .for_each(|&big_j| add(big_j));
         }
-        (lengths, cols, Vec::<()>::new())
-    });
-    let (row, cols, _) = join_rows(parts);
-    (row, cols)
+    })
 }
 
 fn blocked<const SF: usize, const SC: usize>(

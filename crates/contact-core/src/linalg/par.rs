@@ -175,6 +175,12 @@ pub fn sorted_rows<T: Ord + Copy + Send>(
         }
         (lengths, out)
     });
+    join_rows(n, blocks)
+}
+
+/// The `n` rows of consecutive blocks of rows (each its rows' lengths and their entries in
+/// row order) as one CSR-style (offsets, entries), in vectors of their final size.
+pub fn join_rows<T>(n: usize, blocks: Vec<(Vec<usize>, Vec<T>)>) -> (Vec<usize>, Vec<T>) {
     let mut ptr = Vec::with_capacity(n + 1);
     ptr.push(0);
     let mut entries = Vec::with_capacity(blocks.iter().map(|b| b.1.len()).sum());
@@ -182,8 +188,9 @@ pub fn sorted_rows<T: Ord + Copy + Send>(
         for l in lengths {
             ptr.push(ptr.last().unwrap() + l);
         }
-        entries.extend_from_slice(&out);
+        entries.extend(out);
     }
+    assert_eq!(ptr.len(), n + 1, "the blocks cover the rows");
     (ptr, entries)
 }
 
