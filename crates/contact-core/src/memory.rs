@@ -289,8 +289,10 @@ pub fn predict(p: &Problem) -> Prediction {
     };
     // With a Γ3 the multigrid path solves K_II through K's own hierarchy: no K_II copy.
     let shared_k_ii = if c.contact { csr(nnz_k, n) } else { 0.0 };
-    // The earlier steps' solutions whose projection starts each K_II solve.
-    let solution_space = 8.0 * SolutionSpace::vectors(CAPACITY) as f64 * n;
+    // The earlier steps' solutions whose projection starts each K_II solve, and with damage
+    // each masked H solve.
+    let damage_nodes = if c.damage { c.nodes } else { 0.0 };
+    let solution_space = 8.0 * SolutionSpace::vectors(CAPACITY) as f64 * (n + damage_nodes);
     let mixed = if p.precision.mixed(c.d as usize) {
         let per_entry = if c.d == 3.0 { 40.0 / 9.0 } else { 6.0 };
         let h = if c.damage { 8.0 * nnz_h } else { 0.0 };

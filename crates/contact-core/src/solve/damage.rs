@@ -432,6 +432,55 @@ mod tests {
         }
     }
 
+    /// The multigrid path starts each masked solve from the H-projection onto the earlier
+    /// solutions of the same masked system: a load in the span of solved loads (interior
+    /// solutions, so the active set stays empty) is solved without a Krylov iteration, and
+    /// after the active set changes the earlier solutions are no start for the new system.
+    #[test]
+    fn multigrid_solves_start_from_the_earlier_solutions_of_the_same_system() {
+        let n = 24;
+        let (h, _, nn) = h_matrix(n, 1.0 / 32.0, 0.5);
+        let mut solver = multigrid::Multigrid::new(0, false)
+            .damage(&square(n), h.clone())
+            .unwrap();
+        let settings = SolverSettings::default();
+        let interior = |phase: f64| -> Vec<f64> {
+            let z: Vec<f64> = (0..nn)
+                .map(|i| 0.5 + 0.3 * (0.37 * i as f64 + phase).sin())
+                .collect();
+            let mut g = vec![0.0; nn];
+            h.mul_vec(&z, &mut g);
+            g
+        };
+        let (g1, g2) = (interior(0.0), interior(1.0));
+        let mut zeta = vec![0.5; nn];
+        solver.set_active_from(&zeta);
+        let mut solve = |g: &[f64], zeta: &mut [f64]| {
+            let rep = solver.solve(g, zeta, &settings, 0).unwrap();
+            assert_kkt(&h, g, zeta);
+            rep.krylov_iterations
+        };
+        assert!(solve(&g1, &mut zeta) > 0);
+        assert!(solve(&g2, &mut zeta) > 0);
+        let mix: Vec<f64> = g1
+            .iter()
+            .zip(&g2)
+            .map(|(a, b)| 0.25 * a + 0.75 * b)
+            .collect();
+        zeta.iter_mut().for_each(|z| *z = 0.5);
+        assert_eq!(
+            solve(&mix, &mut zeta),
+            0,
+            "a load in the span of solved ones"
+        );
+        // A load that drives a corner to the lower bound: another masked system, solved to
+        // its own KKT conditions from the caller's start.
+        let mut pushed = mix.clone();
+        pushed[0] = -1.0;
+        assert!(solve(&pushed, &mut zeta) > 0);
+        assert_eq!(zeta[0], 0.0);
+    }
+
     #[test]
     fn unconstrained_solution_is_the_linear_solve() {
         let (h, _, nn) = h_matrix(5, 0.1, 0.5);

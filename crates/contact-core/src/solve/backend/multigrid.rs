@@ -6,7 +6,9 @@
 //!   complement: the slip solver [`FullSpaceNewton`]. Without a Γ3, K_II's own hierarchy.
 //! - H: CG on the masked H, applied from H's storage, preconditioned by the V-cycle B of the
 //!   whole H restricted to the free nodes (diag(B_FF, I): a principal block of an SPD matrix
-//!   is SPD), warm-started from the previous ζ; one hierarchy whatever the active set.
+//!   is SPD), started from the H-projection onto the earlier solutions of the same masked
+//!   system (as K_II's solves, [`crate::linalg::projection`]), or where there are none from
+//!   the extrapolated ζ; one hierarchy whatever the active set.
 //! - The smallness estimate: λ_min by Lanczos on T = W^{½} S⁻¹ W^{½} ([`min_eig_by_lanczos`]),
 //!   S never formed.
 //!
@@ -18,6 +20,7 @@ use crate::linalg::cholesky::FactorError;
 use crate::linalg::dense::tridiagonal_max_eig;
 use crate::linalg::multigrid::{Hierarchy, Params, VCycle};
 use crate::linalg::pcg::{self, PcgWork, Preconditioner};
+use crate::linalg::projection::{self, SolutionSpace};
 use crate::linalg::solver::{NotConverged, MAX_KRYLOV_ITERATIONS};
 use crate::linalg::{par, Csr, LinearOperator, LinearPath, LinearSolver};
 use crate::mesh::Mesh;
@@ -134,11 +137,7 @@ impl<const D: usize> Backend<D> for Multigrid {
                 source,
             })?;
         let n = h.nrows;
-        let masked = MaskedCg {
-            vcycle: hierarchy.vcycle(),
-            work: PcgWork::new(n),
-            buffer: vec![0.0; n],
-        };
+        let masked = MaskedCg::new(hierarchy.vcycle(), n);
         Ok(DamageStep::new(h, Box::new(masked)))
     }
 
@@ -314,11 +313,30 @@ impl Preconditioner for MaskedVCycle<'_> {
     }
 }
 
-/// CG on the masked H with the masked V-cycle of H's hierarchy.
+/// CG on the masked H with the masked V-cycle of H's hierarchy, started from the
+/// H-orthogonal projection of the solution onto the span of the earlier solutions of the same
+/// masked system ([`SolutionSpace`]).
 struct MaskedCg {
     vcycle: VCycle,
     work: PcgWork,
     buffer: Vec<f64>,
+    /// The earlier solutions of the masked system of `space_active`: H is fixed for the run,
+    /// so while the active set stays (in most steps, every PDAS iteration of them) the
+    /// systems differ only in their right-hand sides.
+    space: SolutionSpace,
+    space_active: Vec<Bound>,
+}
+
+impl MaskedCg {
+    fn new(vcycle: VCycle, n: usize) -> MaskedCg {
+        MaskedCg {
+            vcycle,
+            work: PcgWork::new(n),
+            buffer: vec![0.0; n],
+            space: SolutionSpace::new(n, projection::CAPACITY),
+            space_active: vec![Bound::Free; n],
+        }
+    }
 }
 
 impl MaskedSolver for MaskedCg {
@@ -334,12 +352,21 @@ impl MaskedSolver for MaskedCg {
         zeta: &mut [f64],
         atol: f64,
     ) -> Result<usize, NotConverged> {
+        let masked = Masked { h, active };
+        if self.space_active != active {
+            self.space.clear();
+            self.space_active.copy_from_slice(active);
+        }
+        // The projection is the best start in the span in H's energy norm; an empty span
+        // keeps the caller's start (the extrapolation in time).
+        if !self.space.is_empty() {
+            self.space.project(rhs, zeta);
+        }
         for ((z, a), r) in zeta.iter_mut().zip(active).zip(rhs) {
             if *a != Bound::Free {
                 *z = *r;
             }
         }
-        let masked = Masked { h, active };
         let mut pre = MaskedVCycle {
             vcycle: &mut self.vcycle,
             active,
@@ -355,6 +382,7 @@ impl MaskedSolver for MaskedCg {
             &mut self.work,
         );
         if rep.converged {
+            self.space.extend(&masked, zeta);
             Ok(rep.iterations)
         } else {
             Err(NotConverged {

@@ -173,7 +173,8 @@ impl DamagePart {
     /// The starting point of an iterative damage solve: ζ_{n−1} + (ζ_{n−1} − ζ_{n−2}) in
     /// [0, 1], the linear extrapolation in time, a residual O(k²) from ζ_n where ζ_{n−1} is
     /// O(k) from it. On the multigrid path CG starts closer (`benches/part` at 23k nodes: 11.0
-    /// iterations a step on average, 9.6 with it); a direct solve overwrites it, so the
+    /// iterations a step on average, 9.6 with it) where the solver has no earlier solutions
+    /// of the step's masked system to project onto; a direct solve overwrites it, so the
     /// direct path's numbers are unchanged.
     fn predict(&mut self) {
         if self.before.len() != self.next.len() {
