@@ -271,16 +271,25 @@ impl Truncated {
                     jacobi.set_block(b as usize, &m);
                 }
                 let smoother = smoother.with_jacobi(jacobi);
-                // P̃ and A₁' = A₁ − X − Xᵀ + P_Fᵀ A P_F + P̃ᵀ E⁺ P̃.
-                let not_fixed: Vec<bool> = is_fixed.iter().map(|f| !f).collect();
-                let p_trunc = rows_of(p, &not_fixed);
-                let pt = transpose(&p_trunc);
+                // A₁' = A₁ − X − Xᵀ + P_Fᵀ A P_F + P̃ᵀ E⁺ P̃. E⁺ P̃ has rows only on E's DOFs
+                // of R, so P̃ᵀ E⁺ P̃ = P_Eᵀ E⁺ P_E with P_E those rows of P: the same terms in
+                // the same order as with all of P̃, without a copy and a transpose of P.
+                let mut in_e = vec![false; n];
+                for b in &positive {
+                    for i in b.start..b.start + b.size {
+                        in_e[i] = !is_fixed[i];
+                    }
+                }
+                let p_e = rows_of(p, &in_e);
                 let p_f = rows_of(p, &is_fixed);
                 let a_f = rows_of(&a, &is_fixed);
                 let p_ft = transpose(&p_f);
                 let x = product(&p_ft, &product(&a_f, p));
                 let y = product(&p_ft, &product(&a_f, &p_f));
-                let z = product(&pt, &product(&block_matrix(n, &positive), &p_trunc));
+                let z = product(
+                    &transpose(&p_e),
+                    &product(&block_matrix(n, &positive), &p_e),
+                );
                 let delta = add(1.0, &add(1.0, &y, 1.0, &z), -1.0, &x);
                 let delta = add(1.0, &delta, -1.0, &transpose(&x));
                 let delta = add(0.5, &delta, 0.5, &transpose(&delta));
