@@ -8,6 +8,7 @@
 use super::{DofMap, Geometry, Slot};
 use crate::linalg::{par, Csr};
 use crate::mesh::Mesh;
+use std::ops::Range;
 
 /// (A ε(w), ε(v)) with A(τ) = 2η τ + ξ tr(τ) I on the free DOFs (3.13):
 /// K[(a,c),(b,d)] = |T| [η (δ_cd ∇ψ_a·∇ψ_b + ∂_d ψ_a ∂_c ψ_b) + ξ ∂_c ψ_a ∂_d ψ_b],
@@ -43,23 +44,36 @@ pub fn viscous_stiffness_in_pattern<const D: usize>(
     let owner = dofs.owners();
     let mut k = free_pattern_with(mesh, dofs, &owner, &start, &cells_of);
     let nd = (D + 1) * D;
-    add_by_rows(&mut k, |r, add| {
-        let (node, c) = owner[r];
+    // A node's free DOFs are consecutive rows with one pattern: they are formed together, so
+    // that the cells around the node, their gradients and the columns' slots are read once
+    // for all of them. Each entry still sums its cells in increasing order.
+    let groups: Vec<usize> = (0..owner.len())
+        .filter(|&r| r == 0 || owner[r].0 != owner[r - 1].0)
+        .chain([owner.len()])
+        .collect();
+    add_by_row_groups(&mut k, &groups, |rows, add| {
+        let node = owner[rows.start].0;
+        let comps = &owner[rows.clone()];
         let mut ke = Vec::new();
         for (e, cell, a) in around(mesh, &start, &cells_of, node) {
             let (g, m) = (geo.grads(e), geo.measure[e]);
             if cell.iter().all(|&v| dofs.frame(v).is_none()) {
                 for b in 0..=D {
+                    let gab = gradient_dot(g, a, b);
                     for d in 0..D {
                         if let Slot::Free(j) = dofs.slot[D * cell[b] + d] {
-                            add(j, stiffness_entry(g, m, eta, xi, (a, c), (b, d)));
+                            let mut v = [0.0; D];
+                            for (v, &(_, c)) in v.iter_mut().zip(comps) {
+                                *v = entry_from_dot(g, m, eta, xi, gab, (a, c), (b, d));
+                            }
+                            add(j, &v[..comps.len()]);
                         }
                     }
                 }
                 continue;
             }
             // A cell touching a rotated frame: its whole element matrix, rotated, of which
-            // this row is taken (the rotation mixes the node's components).
+            // the node's rows are taken (the rotation mixes the node's components).
             ke.resize(nd * nd, 0.0);
             for a in 0..=D {
                 for c in 0..D {
@@ -75,7 +89,11 @@ pub fn viscous_stiffness_in_pattern<const D: usize>(
             for b in 0..=D {
                 for d in 0..D {
                     if let Slot::Free(j) = dofs.slot[D * cell[b] + d] {
-                        add(j, ke[(a * D + c) * nd + b * D + d]);
+                        let mut v = [0.0; D];
+                        for (v, &(_, c)) in v.iter_mut().zip(comps) {
+                            *v = ke[(a * D + c) * nd + b * D + d];
+                        }
+                        add(j, &v[..comps.len()]);
                     }
                 }
             }
@@ -88,6 +106,25 @@ pub fn viscous_stiffness_in_pattern<const D: usize>(
 /// `add(j, v)` adds v at (r, j). Blocks of rows are filled on the pool's threads; a row's sum
 /// is formed in the order `row` adds, whatever the split.
 fn add_by_rows(k: &mut Csr, row: impl Fn(usize, &mut dyn FnMut(usize, f64)) + Sync + Send) {
+    let groups: Vec<usize> = (0..=k.nrows).collect();
+    add_by_row_groups(k, &groups, |rows, add| {
+        row(rows.start, &mut |j, v| add(j, &[v]))
+    });
+}
+
+/// Most rows of a group of [`add_by_row_groups`] (a node's DOFs).
+const GROUP_ROWS: usize = 8;
+
+/// [`add_by_rows`] for groups of consecutive rows with one pattern, formed together: group g
+/// is the rows `groups[g]..groups[g + 1]` (at most [`GROUP_ROWS`]), and `group(rows, add)`
+/// adds with `add(j, v)` v[i] at (rows.start + i, j) for each row. Each entry's sum is formed
+/// in the order `group` adds to it, whatever the split; chunks of about [`par::ROW_CHUNK`]
+/// rows end at group ends.
+fn add_by_row_groups(
+    k: &mut Csr,
+    groups: &[usize],
+    group: impl Fn(Range<usize>, &mut dyn FnMut(usize, &[f64])) + Sync + Send,
+) {
     let Csr {
         nrows,
         indptr,
@@ -95,38 +132,60 @@ fn add_by_rows(k: &mut Csr, row: impl Fn(usize, &mut dyn FnMut(usize, f64)) + Sy
         values,
         ..
     } = k;
-    let rows: Vec<usize> = (0..*nrows)
-        .step_by(par::ROW_CHUNK)
-        .chain([*nrows])
-        .collect();
+    assert!(groups.first() == Some(&0) && groups.last() == Some(nrows));
+    // Chunk boundaries: the first group end at or after each multiple of ROW_CHUNK.
+    let mut rows = vec![0];
+    for &g in &groups[1..] {
+        if g == *nrows || g >= rows.last().expect("0 first") + par::ROW_CHUNK {
+            rows.push(g);
+        }
+    }
+    rows.dedup();
     let bounds: Vec<usize> = rows.iter().map(|&r| indptr[r]).collect();
     par::for_each_segment_mut(values, &bounds, |seg, vals| {
         let base = bounds[seg];
         let (first, end) = (rows[seg], rows[seg + 1]);
-        // Each column's place in the current row, over the columns this block of rows
-        // reaches: one store per stored entry, then one load per added value (a binary
+        // Each column's place in the current group's rows, over the columns this chunk
+        // reaches: one store per stored entry, then one load per added column (a binary
         // search per value cost 3.5 % of a 1/32 box run).
         let reach = &indices[indptr[first]..indptr[end]];
         let lo = reach.iter().min().map_or(0, |&c| c as usize);
         let hi = reach.iter().max().map_or(0, |&c| c as usize + 1);
         let mut place = vec![u32::MAX; hi.saturating_sub(lo)];
-        for r in first..end {
-            let cols = &indices[indptr[r]..indptr[r + 1]];
+        let g0 = groups.partition_point(|&g| g < first);
+        for w in groups[g0..].windows(2).take_while(|w| w[0] < end) {
+            let (r0, r1) = (w[0], w[1]);
+            assert!(
+                r1 - r0 <= GROUP_ROWS,
+                "a group of at most {GROUP_ROWS} rows"
+            );
+            let cols = &indices[indptr[r0]..indptr[r0 + 1]];
+            for r in r0 + 1..r1 {
+                assert!(
+                    &indices[indptr[r]..indptr[r + 1]] == cols,
+                    "rows {r0} and {r} of a group have one pattern"
+                );
+            }
             for (p, &c) in cols.iter().enumerate() {
                 place[c as usize - lo] = p as u32;
             }
-            let at = indptr[r] - base;
-            row(r, &mut |j, v| {
-                // A stale place (another row's) or none fails the check.
+            let mut at = [0usize; GROUP_ROWS];
+            for (at, r) in at.iter_mut().zip(r0..r1) {
+                *at = indptr[r] - base;
+            }
+            group(r0..r1, &mut |j, v| {
+                // A stale place (another group's) or none fails the check.
                 let p = j
                     .checked_sub(lo)
                     .and_then(|i| place.get(i))
                     .map_or(usize::MAX, |&p| p as usize);
                 assert!(
                     cols.get(p).is_some_and(|&c| c as usize == j),
-                    "entry ({r}, {j}) in the pattern"
+                    "entry ({r0}, {j}) in the pattern"
                 );
-                vals[at + p] += v;
+                for (&at, v) in at.iter().zip(v) {
+                    vals[at + p] += v;
+                }
             });
         }
     });
@@ -143,10 +202,30 @@ fn stiffness_entry<const D: usize>(
     (a, c): (usize, usize),
     (b, d): (usize, usize),
 ) -> f64 {
+    entry_from_dot(g, m, eta, xi, gradient_dot(g, a, b), (a, c), (b, d))
+}
+
+/// ∇ψ_a · ∇ψ_b.
+#[inline]
+fn gradient_dot<const D: usize>(g: &[[f64; D]], a: usize, b: usize) -> f64 {
     let mut gab = g[a][0] * g[b][0];
     for k in 1..D {
         gab += g[a][k] * g[b][k];
     }
+    gab
+}
+
+/// [`stiffness_entry`] with ∇ψ_a · ∇ψ_b given.
+#[inline]
+fn entry_from_dot<const D: usize>(
+    g: &[[f64; D]],
+    m: f64,
+    eta: f64,
+    xi: f64,
+    gab: f64,
+    (a, c): (usize, usize),
+    (b, d): (usize, usize),
+) -> f64 {
     let delta = if c == d { gab } else { 0.0 };
     m * (eta * (delta + g[a][d] * g[b][c]) + xi * g[a][c] * g[b][d])
 }
