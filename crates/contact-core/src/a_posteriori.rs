@@ -30,7 +30,7 @@
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
 use crate::fem::loads::cell_rule;
-use crate::fem::Geometry;
+use crate::fem::{CellTensors, Geometry};
 use crate::laws::constitutive::viscous_stress;
 use crate::laws::damage_source::phi;
 use crate::laws::Tensor;
@@ -96,8 +96,8 @@ pub struct StepData<'a, const D: usize> {
     /// w_{n−1}; None at n = 1.
     pub w_prev: Option<&'a [f64]>,
     /// B_{n−1} and ε(u_{n−1}) per cell.
-    pub b: &'a [Tensor<D>],
-    pub eps: &'a [Tensor<D>],
+    pub b: &'a CellTensors<D>,
+    pub eps: &'a CellTensors<D>,
     pub zeta_prev: &'a [f64],
     pub zeta: &'a [f64],
 }
@@ -285,7 +285,7 @@ impl<const D: usize> Estimator<D> {
                 let cell = mesh.cell(e);
                 let (vol, h) = (geo.measure[e], self.h[e]);
                 let eps_w = geo.strain(mesh, e, s.w);
-                c.sigma = viscous_stress(&problem.material.viscosity, &eps_w) + s.b[e];
+                c.sigma = viscous_stress(&problem.material.viscosity, &eps_w) + s.b.get(e);
                 c.w2 = vol * eps_w.norm_squared();
                 let p = &mut c.parts;
                 if !f0.is_zero() {
@@ -310,7 +310,7 @@ impl<const D: usize> Estimator<D> {
                                 cell.iter().enumerate().map(|(a, &n)| l[a] * z[n]).sum()
                             };
                             let (zp, zn) = (at(s.zeta_prev), at(s.zeta));
-                            let r = phi(&dm.source, &s.eps[e], zp) - (zn - zp) / s.k;
+                            let r = phi(&dm.source, &s.eps.get(e), zp) - (zn - zp) / s.k;
                             wq * vol * obstacle_residual(r, zn).powi(2)
                         })
                         .sum();

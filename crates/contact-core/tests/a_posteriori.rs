@@ -10,8 +10,7 @@ mod common;
 use common::dirichlet;
 use contact_core::a_posteriori::{Estimator, Parts, StepData};
 use contact_core::fem::prolongation::prolongate;
-use contact_core::fem::{norms, Geometry};
-use contact_core::laws::Tensor;
+use contact_core::fem::{norms, CellTensors, Geometry};
 use contact_core::mesh::Mesh;
 use contact_core::problem::Problem;
 use contact_core::run::run;
@@ -269,7 +268,7 @@ fn on_a_manufactured_solution_the_estimate_converges_with_the_error() {
                 e2 += geo.measure[t] / 3.0 * (d[0] * d[0] + d[1] * d[1] + 2.0 * d[2] * d[2]);
             }
         }
-        let zero = vec![Tensor::<2>::zeros(); mesh.n_cells()];
+        let zero = CellTensors::<2>::zeros(mesh.n_cells());
         let data = StepData {
             t: 0.0,
             k: 1.0,

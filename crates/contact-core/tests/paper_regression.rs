@@ -94,7 +94,14 @@ fn experiment_1_matches_a_direct_linear_solve() {
         let mut f = vec![0.0; 2 * mesh.n_nodes()];
         loads::add_body_force(&mesh, &geo, &sim.problem.body_force, t, &mut f);
         loads::add_tractions(&mesh, &sim.problem.boundary, t, &mut f);
-        loads::add_stress_divergence(&contact_core::fem::NodeCells::new(&mesh), &geo, &b, &mut f);
+        let mut stored = contact_core::fem::CellTensors::zeros(b.len());
+        stored.fill(|e| b[e]);
+        loads::add_stress_divergence(
+            &contact_core::fem::NodeCells::new(&mesh),
+            &geo,
+            &stored,
+            &mut f,
+        );
         let mut ff = vec![0.0; n];
         dofs.to_free(&f, &mut ff);
         let w = chol.solve(&DVector::from_vec(ff));

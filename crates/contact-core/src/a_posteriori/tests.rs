@@ -72,7 +72,9 @@ impl Patch {
         zeta: &[f64],
     ) -> StepEstimate {
         let nc = self.mesh.n_cells();
-        let b = vec![Tensor::<2>::zeros(); nc];
+        let b = CellTensors::zeros(nc);
+        let mut stored = CellTensors::zeros(nc);
+        stored.fill(|e| eps[e]);
         let data = StepData {
             t: 0.25,
             k: 0.25,
@@ -80,7 +82,7 @@ impl Patch {
             w,
             w_prev: None,
             b: &b,
-            eps,
+            eps: &stored,
             zeta_prev,
             zeta,
         };

@@ -9,8 +9,7 @@
 
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
-use super::{Geometry, NodeCells};
-use crate::laws::Tensor;
+use super::{CellTensors, Geometry, NodeCells};
 use crate::linalg::par;
 use crate::mesh::Mesh;
 use crate::problem::{BoundaryKind, BoundaryPart, VectorField};
@@ -258,11 +257,11 @@ pub fn find_non_finite<const D: usize>(
 pub fn add_stress_divergence<const D: usize>(
     cells: &NodeCells,
     geo: &Geometry<D>,
-    b: &[Tensor<D>],
+    b: &CellTensors<D>,
     out: &mut [f64],
 ) {
     cells.gather(out, D, |e, a, out| {
-        let (s, vol, g) = (&b[e], geo.measure[e], geo.grads(e)[a]);
+        let (s, vol, g) = (b.get(e), geo.measure[e], geo.grads(e)[a]);
         for c in 0..D {
             let mut v = 0.0;
             for k in 0..D {
@@ -334,6 +333,7 @@ pub fn damage_source<const D: usize>(
 mod tests {
     use super::*;
     use crate::expr::Expr;
+    use crate::laws::Tensor;
     use crate::problem::{MeshPattern, ScalarField, Segment, Support};
 
     /// The element loops of [`add_stress_divergence`] and [`damage_source`] cell by cell:
@@ -408,6 +408,8 @@ mod tests {
             .collect();
         let phi = |e: usize, z: f64| (1.0 - z) / (z + 0.1) - wave(e, 2);
         let (div, src) = serial_scatters(mesh, &geo, &b, &zeta, phi);
+        let mut stored = CellTensors::zeros(mesh.n_cells());
+        stored.fill(|e| b[e]);
         let cells = NodeCells::new(mesh);
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         for t in [1, 2, 4] {
@@ -416,7 +418,7 @@ mod tests {
                 vec![f64::NAN; mesh.n_nodes()],
             );
             Threads::new(t).install(|| {
-                add_stress_divergence(&cells, &geo, &b, &mut d);
+                add_stress_divergence(&cells, &geo, &stored, &mut d);
                 damage_source(mesh, &cells, &geo, &zeta, phi, &mut f);
             });
             assert_eq!(bits(&d), bits(&div), "(B, ε(ψ)) on {t} threads");

@@ -25,10 +25,9 @@ use super::smallness::SmallnessReport;
 use super::velocity::VelocityStep;
 use super::{SolveError, SolverReport, SolverSettings};
 use crate::a_posteriori::{Estimator, Parts, StepData, StepEstimate};
-use crate::fem::{loads, norms, DofMap, Geometry, NodeCells};
+use crate::fem::{loads, norms, CellTensors, DofMap, Geometry, NodeCells};
 use crate::laws::constitutive::elastic_stress;
 use crate::laws::damage_source::phi;
-use crate::laws::Tensor;
 use crate::linalg::{par, Csr, LinearPath};
 use crate::mesh::locality::Numbering;
 use crate::mesh::Mesh;
@@ -130,8 +129,8 @@ struct StepInput<'a, const D: usize> {
     settings: &'a SolverSettings,
     mass: &'a Csr,
     zeta_prev: &'a [f64],
-    eps: &'a [Tensor<D>],
-    b: &'a [Tensor<D>],
+    eps: &'a CellTensors<D>,
+    b: &'a CellTensors<D>,
 }
 
 impl VelocityPart {
@@ -204,7 +203,7 @@ impl DamagePart {
             s.cells,
             s.geo,
             s.zeta_prev,
-            |e, z| phi(&source, &s.eps[e], z),
+            |e, z| phi(&source, &s.eps.get(e), z),
             &mut self.f,
         );
         s.mass.mul_vec(s.zeta_prev, &mut self.g);
@@ -251,8 +250,8 @@ pub struct Simulation<const D: usize = 2> {
     velocity: VelocityPart,
     damage: Option<DamagePart>,
     /// Per-element ε(u_{n−1}) and B_{n−1} of the current step.
-    eps: Vec<Tensor<D>>,
-    b: Vec<Tensor<D>>,
+    eps: CellTensors<D>,
+    b: CellTensors<D>,
     /// The a posteriori estimator when the scene's output asks for it, with the cell
     /// indicators of the last step.
     estimator: Option<Box<Estimator<D>>>,
@@ -494,7 +493,7 @@ impl<const D: usize> Simulation<D> {
             for e in cells {
                 let ew = self.geo.strain(&self.mesh, e, &self.w);
                 w2 += self.geo.measure[e] * ew.norm_squared();
-                u2 += self.geo.measure[e] * (self.eps[e] + ew * k).norm_squared();
+                u2 += self.geo.measure[e] * (self.eps.get(e) + ew * k).norm_squared();
             }
             (w2, u2)
         })
@@ -534,22 +533,15 @@ fn history_stress<const D: usize>(
     geo: &Geometry<D>,
     u: &[f64],
     zeta: &[f64],
-    eps: &mut [Tensor<D>],
-    b: &mut [Tensor<D>],
+    eps: &mut CellTensors<D>,
+    b: &mut CellTensors<D>,
 ) {
     let elasticity = problem.material.elasticity;
-    par::for_each_chunk_mut(eps, par::ROW_CHUNK, |first, eps| {
-        for (i, eps) in eps.iter_mut().enumerate() {
-            *eps = geo.strain(mesh, first + i, u);
-        }
-    });
+    eps.fill(|e| geo.strain(mesh, e, u));
     let eps = &*eps;
-    par::for_each_chunk_mut(b, par::ROW_CHUNK, |first, b| {
-        for (i, b) in b.iter_mut().enumerate() {
-            let e = first + i;
-            let zbar = mesh.cell(e).iter().map(|&n| zeta[n]).sum::<f64>() / (D + 1) as f64;
-            *b = elastic_stress(&elasticity, &eps[e], zbar);
-        }
+    b.fill(|e| {
+        let zbar = mesh.cell(e).iter().map(|&n| zeta[n]).sum::<f64>() / (D + 1) as f64;
+        elastic_stress(&elasticity, &eps.get(e), zbar)
     });
 }
 

@@ -3,7 +3,7 @@
 //! diagnostics for the summary and the benchmarks.
 
 use super::{history_stress, Simulation};
-use crate::fem::Geometry;
+use crate::fem::{CellTensors, Geometry};
 use crate::laws::constitutive::{viscous_stress, von_mises};
 use crate::laws::Tensor;
 use crate::linalg::Csr;
@@ -140,7 +140,7 @@ impl<const D: usize> Simulation<D> {
                     viscous_stress(
                         &self.problem.material.viscosity,
                         &self.geo.strain(&self.mesh, e, &self.w),
-                    ) + self.b[e]
+                    ) + self.b.get(e)
                 })
                 .collect()
         } else {
@@ -335,8 +335,8 @@ pub fn initial_fields<const D: usize>(
     let sel = problem.output.fields;
     let (sigma, von_mises) = if sel.sigma || sel.von_mises {
         let nt = mesh.n_cells();
-        let mut eps = vec![Tensor::zeros(); nt];
-        let mut b = vec![Tensor::zeros(); nt];
+        let mut eps = CellTensors::zeros(nt);
+        let mut b = CellTensors::zeros(nt);
         history_stress(
             problem,
             mesh,
@@ -346,6 +346,7 @@ pub fn initial_fields<const D: usize>(
             &mut eps,
             &mut b,
         );
+        let b: Vec<Tensor<D>> = (0..nt).map(|e| b.get(e)).collect();
         stress_fields(problem, &b)
     } else {
         (None, None)

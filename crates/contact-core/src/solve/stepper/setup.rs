@@ -5,8 +5,7 @@
 
 use super::{DamagePart, Simulation, State, VelocityPart};
 use crate::a_posteriori::Estimator;
-use crate::fem::{assembly, DofMap, Geometry, NodeCells};
-use crate::laws::Tensor;
+use crate::fem::{assembly, CellTensors, DofMap, Geometry, NodeCells};
 use crate::linalg::{Csr, LinearPath};
 use crate::mesh::locality::Numbering;
 use crate::mesh::Mesh;
@@ -161,8 +160,8 @@ impl<const D: usize> Simulation<D> {
                 w_free: vec![0.0; n_free],
             },
             damage,
-            eps: vec![Tensor::zeros(); nt],
-            b: vec![Tensor::zeros(); nt],
+            eps: CellTensors::zeros(nt),
+            b: CellTensors::zeros(nt),
             estimator: problem
                 .output
                 .estimate
