@@ -133,7 +133,8 @@ fn add_by_row_groups(
         ..
     } = k;
     assert!(groups.first() == Some(&0) && groups.last() == Some(nrows));
-    // Chunk boundaries: the first group end at or after each multiple of ROW_CHUNK.
+    // Chunk boundaries: the first group end at least ROW_CHUNK rows past the previous
+    // boundary (for one-row groups, the multiples of ROW_CHUNK), and the last row.
     let mut rows = vec![0];
     for &g in &groups[1..] {
         if g == *nrows || g >= rows.last().expect("0 first") + par::ROW_CHUNK {
