@@ -123,17 +123,13 @@ pub(super) fn with_type(bytes: Vec<u8>, content_type: &'static str) -> Response 
     r
 }
 
-/// The stored scene, validated again, and its mesh. The mesh is not stored: it is
-/// regenerated (deterministically) from the stored scene, an imported one from the uploaded
-/// mesh the scene names. Once that mesh is deleted (allowed when no unfinished job uses
-/// it), the results drawn on it are 409 until the same file is uploaded again (it gets the
-/// same id). Blocking.
-fn scene_of(
-    meshes: &Meshes,
-    rec: &JobRecord,
-) -> Result<(contact_core::problem::Problem, AnyMesh), Problem> {
+/// The stored scene, validated again. An imported mesh is read from the uploaded file the
+/// scene names; once that file is deleted (allowed when no unfinished job uses it), the
+/// results drawn on it are 409 until the same file is uploaded again (it gets the same id).
+/// Blocking.
+fn problem_of(meshes: &Meshes, rec: &JobRecord) -> Result<contact_core::problem::Problem, Problem> {
     let scene = crate::continuation::scene_of(&rec.scene);
-    let p = contact_core::scene::validate_with(&scene, meshes).map_err(|e| {
+    contact_core::scene::validate_with(&scene, meshes).map_err(|e| {
         match e.0.iter().find(|f| f.pointer == "/domain/mesh") {
             Some(f) if crate::meshes::mesh_ref(&rec.scene).is_some() => Problem::conflict(format!(
                 "job {}: its mesh is no longer stored ({}); upload the same .msh again (POST /meshes gives it the same id) to read these results",
@@ -141,17 +137,21 @@ fn scene_of(
             )),
             _ => Problem::internal(format!("stored scene: {e}")),
         }
-    })?;
+    })
+}
+
+/// [`problem_of`] and the mesh the results are drawn on. The mesh is not stored: it is
+/// regenerated (deterministically) from the scene, refined and renumbered as the run's was.
+/// Blocking.
+fn scene_of(
+    meshes: &Meshes,
+    rec: &JobRecord,
+) -> Result<(contact_core::problem::Problem, AnyMesh), Problem> {
+    let p = problem_of(meshes, rec)?;
     let mesh = p
         .any_mesh()
         .map_err(|e| Problem::internal(format!("stored scene: {e}")))?;
     Ok((p, mesh))
-}
-
-/// The mesh and the time step k. Blocking.
-fn mesh_of(meshes: &Meshes, rec: &JobRecord) -> Result<(AnyMesh, f64), Problem> {
-    let (p, mesh) = scene_of(meshes, rec)?;
-    Ok((mesh, p.k()))
 }
 
 /// The steps that can be served, in order: 0 (the initial state, derived from the scene)
@@ -637,7 +637,9 @@ pub async fn pvd(
     let id = rec.id;
     let (steps, k) = blocking(move || {
         let steps = available_steps(&st, id)?;
-        Ok((steps, mesh_of(&st.rt.meshes, &rec)?.1))
+        // Only k: the scene, not its mesh (a refined body's mesh is refined and renumbered
+        // again each time it is built).
+        Ok((steps, problem_of(&st.rt.meshes, &rec)?.k()))
     })
     .await?;
     let entries: Vec<(f64, String)> = steps
