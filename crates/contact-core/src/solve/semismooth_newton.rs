@@ -31,7 +31,8 @@
 //!    the solution.
 //!
 //! The preconditioner is rebuilt only when the stick set changes or a block of E⁺ moves by
-//! more than its node's stiffness; CG is run on the exact M either way.
+//! more than a tenth of its node's stiffness plus the smaller of its old and new sizes
+//! ([`REBUILD_FLOOR`]); CG is run on the exact M either way.
 //! Convergence is declared on the KKT residual of the full problem (as the direct path's),
 //! from a freshly computed K w − f.
 
