@@ -135,26 +135,28 @@ fn factor_entries(d: f64, n: f64) -> f64 {
 const GEOMETRIC_HIERARCHY: f64 = 0.8;
 
 /// With a Γ3 the multigrid path's hierarchy is K's on all free DOFs (K shared, K_II never
-/// copied), plus the slipping steps' truncated preconditioner and Newton vectors, as a
-/// multiple of K's bytes beside the terms above. Counted whether or not the run slips, and
-/// fitted so that both kinds of run fall inside ±25 % with slip on the safe side: box-exp3
-/// with g = 2 (every step slips) peaked at 71, 481 and 3,866 MiB at 1/16, 1/32 and 1/64
-/// (0.25 predicted 68, 460 and 3,517 MiB); with g = 20 (all stick) at 60 and 411 MiB at 1/16
-/// and 1/32.
-const FULL_SPACE_GEOMETRIC: f64 = 0.55;
+/// copied), plus the truncated cycles (K_II's, and the slipping steps') and the Newton
+/// vectors, as a multiple of K's bytes beside the terms above. Counted whether or not the
+/// run slips. The cycles share the finest block diagonal and keep the levels they rebuild
+/// in f32 only ([`crate::linalg::multigrid::Hierarchy::shed_operators`]); fitted to
+/// box-exp3 on one thread, release: 1/32 sticking (g = 20) 442 MiB, predicted 1.19×;
+/// slipping (g = 2) 480 MiB, 1.07×; 1/64 sticking, two steps, 3,205 MiB, 1.23×.
+const FULL_SPACE_GEOMETRIC: f64 = 0.35;
 
-/// The same with smoothed aggregation: the truncated cycle's update of the first coarse
-/// operator and the levels rebuilt below it (no copy of P: its rows are masked).
-const FULL_SPACE_AGGREGATION: f64 = 0.5;
+/// The same with smoothed aggregation: the truncated cycles' updates of the first coarse
+/// operator and the levels rebuilt below it (no copy of P: its rows are masked). Fitted to
+/// `benches/part` (82k nodes, one thread): 604 MiB sticking, predicted 1.15×; 661 MiB
+/// slipping (g = 0.5, T = 8/32), 1.05×.
+const FULL_SPACE_AGGREGATION: f64 = 0.25;
 
 /// Smoothed aggregation's hierarchy of K as a multiple of K's bytes, beside 25 vectors: with
 /// the finest level aggregated on the distance-two graph the coarse operators are small; P
 /// is held, Pᵀ is not (restriction by pieces), and the Galerkin product's A·P is formed a
-/// piece at a time. With [`FULL_SPACE_AGGREGATION`] fitted (1.6 × K in all) to four measured
-/// peaks that the prediction meets within ±25 % (one thread, release): box-exp3 at 1/15 and
+/// piece at a time. Fitted with the full-space term (then 1.6 × K in all) to four measured
+/// peaks that the prediction met within ±25 % (one thread, release): box-exp3 at 1/15 and
 /// 1/31 (85 and 580 MiB, predicted 0.93× and 1.01×) and the gmsh part of `benches/part` at
 /// 21k and 82k nodes (168 MiB for the whole run and 600 MiB for its first step, predicted
-/// 1.15× and 1.23×).
+/// 1.15× and 1.23×); [`FULL_SPACE_AGGREGATION`] has since fallen with the cycles' copies.
 const AGGREGATION_HIERARCHY: f64 = 1.1;
 
 /// Mixed precision ([`crate::problem::Precision`]) adds a single-precision block copy of every

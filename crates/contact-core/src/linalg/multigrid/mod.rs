@@ -192,7 +192,12 @@ impl Default for Params {
 /// One level above the coarsest.
 #[derive(Debug)]
 struct Level {
-    a: Arc<Csr>,
+    /// The operator in f64: `None` once shed ([`Hierarchy::shed_operators`]), when the
+    /// V-cycle reads only `a32`.
+    a: Option<Arc<Csr>>,
+    /// The operator's rows and entries, for the sizes and the operator complexity.
+    n: usize,
+    nnz: usize,
     /// `a` in f32 node blocks, with [`Params::mixed`].
     a32: Option<BlockCsr32>,
     smoother: Chebyshev,
@@ -228,7 +233,9 @@ impl Level {
         let coarse = Arc::new(in_blocks.unwrap_or_else(|| galerkin(&a, &p, pt.as_ref())));
         let a32 = params.mixed.then(|| BlockCsr32::new(&a, &bounds));
         let level = Level {
-            a,
+            n: a.nrows,
+            nnz: a.nnz(),
+            a: Some(a),
             a32,
             smoother,
             p,
@@ -402,9 +409,32 @@ impl Hierarchy {
         self.levels.get(l).and_then(|v| v.a32.as_ref())
     }
 
-    /// Level l's operator, smoother and prolongator to level l + 1 (l below the coarsest).
-    pub fn level(&self, l: usize) -> Option<(&Arc<Csr>, &Chebyshev, &Csr)> {
-        self.levels.get(l).map(|v| (&v.a, &v.smoother, &v.p))
+    /// Level l's smoother and prolongator to level l + 1 (l below the coarsest).
+    pub fn level(&self, l: usize) -> Option<(&Chebyshev, &Csr)> {
+        self.levels.get(l).map(|v| (&v.smoother, &v.p))
+    }
+
+    /// Level l's operator in f64 (the coarsest's for l = the number of levels above it);
+    /// `None` where it was shed or l is past the coarsest.
+    pub fn operator_at(&self, l: usize) -> Option<&Csr> {
+        match self.levels.get(l) {
+            Some(level) => level.a.as_deref(),
+            None => (l == self.levels.len()).then_some(&self.coarse_a),
+        }
+    }
+
+    /// Drops the f64 operators of levels `from` and below that have a single-precision copy
+    /// ([`Params::mixed`]), which is all the V-cycle reads there. What still needs them must
+    /// keep them: the truncated cycle updates A₁ = P₀ᵀ A P₀ of K's hierarchy for every
+    /// slipping Jacobian and reads A at level 0; a hierarchy rebuilt for one Jacobian
+    /// ([`Hierarchy::rebuilt_from`]) or the damage step's is never read again. On the 82k-node
+    /// part this is the K_II cycle's first coarse operator and H's first coarse level.
+    pub fn shed_operators(&mut self, from: usize) {
+        for level in self.levels.iter_mut().skip(from) {
+            if level.a32.is_some() {
+                level.a = None;
+            }
+        }
     }
 
     /// Number of levels, the coarsest included.
@@ -435,7 +465,7 @@ impl Hierarchy {
     pub fn sizes(&self) -> Vec<usize> {
         self.levels
             .iter()
-            .map(|l| l.a.nrows)
+            .map(|l| l.n)
             .chain(std::iter::once(self.coarse_a.nrows))
             .collect()
     }
@@ -446,7 +476,7 @@ impl Hierarchy {
         let nnz: Vec<usize> = self
             .levels
             .iter()
-            .map(|l| l.a.nnz())
+            .map(|l| l.nnz)
             .chain(std::iter::once(self.coarse_a.nnz()))
             .collect();
         nnz.iter().sum::<usize>() as f64 / nnz[0].max(1) as f64
@@ -457,9 +487,9 @@ impl Hierarchy {
         &self.coarse_a
     }
 
-    /// The finest operator.
+    /// The finest operator (kept by [`Hierarchy::shed_operators`] from level 1 on).
     pub fn operator(&self) -> &Csr {
-        self.levels.first().map_or(&self.coarse_a, |l| &l.a)
+        self.operator_at(0).expect("the finest operator is kept")
     }
 
     /// A fresh work space for V-cycles on this hierarchy.
@@ -523,9 +553,10 @@ impl VCycle {
             return;
         }
         let level = &h.levels[l];
-        let a: &dyn LinearOperator = match &level.a32 {
-            Some(a32) => a32,
-            None => level.a.as_ref(),
+        let a: &dyn LinearOperator = match (&level.a32, &level.a) {
+            (Some(a32), _) => a32,
+            (None, Some(a)) => a.as_ref(),
+            (None, None) => unreachable!("only an operator with an f32 copy is shed"),
         };
         {
             let w = &mut self.work[l];
@@ -642,5 +673,50 @@ mod tests {
         )
         .unwrap();
         assert_eq!(single.operator_complexity(), 1.0);
+    }
+
+    /// Shedding the f64 operators of levels with an f32 copy leaves the V-cycle the same bits
+    /// and the sizes and operator complexity as they were; without f32 copies nothing goes.
+    #[test]
+    fn shed_operators_leave_the_v_cycle_and_the_counts_unchanged() {
+        let build = |mixed: bool| {
+            let mesh = Mesh::rectangle(1.0, 1.0, 32, 32, MeshPattern::Cross);
+            let geo = Geometry::new(&mesh);
+            let m = assembly::mass_in_pattern(&mesh, &geo);
+            let l = assembly::laplacian_in_pattern_of(&mesh, &geo, &m);
+            let h = assembly::combine(64.0, &m, 1.0, &l);
+            let (blocks, levels) = multilevel::scalar_levels(&mesh, h.nrows);
+            let params = Params {
+                mixed,
+                coarse_size: 100,
+                ..Params::default()
+            };
+            Hierarchy::new(Arc::new(h), blocks, levels, params).unwrap()
+        };
+        let whole = Arc::new(build(true));
+        assert!(whole.n_levels() >= 3, "{:?}", whole.sizes());
+        let mut shed = build(true);
+        shed.shed_operators(1);
+        assert!(shed.operator_at(0).is_some());
+        for l in 1..shed.n_levels() - 1 {
+            assert!(shed.operator_at(l).is_none(), "level {l}");
+        }
+        assert!(
+            shed.operator_at(shed.n_levels() - 1).is_some(),
+            "the coarsest"
+        );
+        assert_eq!(shed.sizes(), whole.sizes());
+        assert_eq!(shed.operator_complexity(), whole.operator_complexity());
+        let n = whole.operator().nrows;
+        let r: Vec<f64> = (0..n).map(|i| (0.9 * i as f64).sin()).collect();
+        let apply = |h: &Arc<Hierarchy>| {
+            let mut z = vec![0.0; n];
+            h.vcycle().apply(&r, &mut z);
+            z
+        };
+        assert_eq!(apply(&Arc::new(shed)), apply(&whole));
+        let mut plain = build(false);
+        plain.shed_operators(0);
+        assert!((0..plain.n_levels()).all(|l| plain.operator_at(l).is_some()));
     }
 }

@@ -17,6 +17,7 @@ use crate::linalg::dense::tridiagonal_max_eig;
 use crate::linalg::par;
 use crate::linalg::{Csr, LinearOperator};
 use nalgebra::DMatrix;
+use std::sync::Arc;
 
 /// Lanczos steps of the λ_max estimate.
 const LANCZOS_STEPS: usize = 12;
@@ -27,6 +28,14 @@ const UPPER: f64 = 1.1;
 /// The inverse of the block diagonal of A, and the block diagonal itself.
 #[derive(Debug, Clone)]
 pub struct BlockJacobi {
+    /// Shared with the copies [`BlockJacobi::patched`] makes.
+    shared: Arc<Diagonal>,
+    /// This copy's own blocks, where it has any.
+    patch: Option<Patch>,
+}
+
+#[derive(Debug, Clone)]
+struct Diagonal {
     blocks: Blocks,
     /// Per block, its s × s inverse and its s × s diagonal block, row-major; `offset[b]`.
     inv: Vec<f64>,
@@ -34,6 +43,20 @@ pub struct BlockJacobi {
     offset: Vec<usize>,
     split: Split,
 }
+
+/// Blocks that replace the shared ones in one copy: `slot[b]` indexes them ([`NO_SLOT`]:
+/// block b is the shared one), whose entries are laid out as [`Diagonal`]'s; `list` holds
+/// the replaced blocks in increasing order.
+#[derive(Debug, Clone)]
+struct Patch {
+    slot: Vec<u32>,
+    list: Vec<u32>,
+    inv: Vec<f64>,
+    diag: Vec<f64>,
+    offset: Vec<usize>,
+}
+
+const NO_SLOT: u32 = u32::MAX;
 
 /// Where the block products split over threads: pieces of whole blocks, `blocks[s]` the first
 /// block of piece s and `dofs[s]` its first DOF (both ending with the totals). Blocks whose
@@ -78,11 +101,14 @@ impl BlockJacobi {
         let total = *offset.last().unwrap();
         let (inv, diag) = (vec![0.0; total], vec![0.0; total]);
         let mut jacobi = BlockJacobi {
-            split: Split::of(blocks),
-            blocks: blocks.clone(),
-            inv,
-            diag,
-            offset,
+            shared: Arc::new(Diagonal {
+                split: Split::of(blocks),
+                blocks: blocks.clone(),
+                inv,
+                diag,
+                offset,
+            }),
+            patch: None,
         };
         for b in 0..blocks.len() {
             let dofs = blocks.dofs(b);
@@ -94,12 +120,45 @@ impl BlockJacobi {
 
     /// The node blocks.
     pub fn blocks(&self) -> &Blocks {
-        &self.blocks
+        &self.shared.blocks
+    }
+
+    /// A copy whose [`BlockJacobi::set_block`] changes only itself, sharing every block it
+    /// does not set (the truncated cycles remake the few blocks of Γ3 nodes; a whole copy of
+    /// the finest level's blocks was 14 MB of the 82k-node part's peak, twice in a
+    /// slipping run).
+    pub fn patched(&self) -> BlockJacobi {
+        BlockJacobi {
+            shared: self.shared.clone(),
+            patch: Some(Patch {
+                slot: vec![NO_SLOT; self.shared.blocks.len()],
+                list: Vec::new(),
+                inv: Vec::new(),
+                diag: Vec::new(),
+                offset: vec![0],
+            }),
+        }
+    }
+
+    /// Block b's inverse and matrix, s × s row-major.
+    fn block(&self, b: usize) -> (&[f64], &[f64]) {
+        match &self.patch {
+            Some(p) if p.slot[b] != NO_SLOT => {
+                let k = p.slot[b] as usize;
+                let r = p.offset[k]..p.offset[k + 1];
+                (&p.inv[r.clone()], &p.diag[r])
+            }
+            _ => {
+                let d = &*self.shared;
+                let r = d.offset[b]..d.offset[b + 1];
+                (&d.inv[r.clone()], &d.diag[r])
+            }
+        }
     }
 
     /// Makes block b's matrix `m` (s × s, s its DOF count).
     pub fn set_block(&mut self, b: usize, m: &DMatrix<f64>) {
-        let s = self.blocks.dofs(b).len();
+        let s = self.blocks().dofs(b).len();
         // SPD A has SPD diagonal blocks; a singular one (a DOF without stiffness) falls
         // back to the inverse of its positive diagonal entries.
         let mi = m
@@ -115,59 +174,80 @@ impl BlockJacobi {
                     }
                 })
             });
-        let o = self.offset[b];
+        let (inv, diag, o) = match &mut self.patch {
+            Some(p) => {
+                if p.slot[b] == NO_SLOT {
+                    p.slot[b] = (p.offset.len() - 1) as u32;
+                    let at = p.list.partition_point(|&c| (c as usize) < b);
+                    p.list.insert(at, b as u32);
+                    let end = p.offset.last().unwrap() + s * s;
+                    p.offset.push(end);
+                    p.inv.resize(end, 0.0);
+                    p.diag.resize(end, 0.0);
+                }
+                let o = p.offset[p.slot[b] as usize];
+                (&mut p.inv, &mut p.diag, o)
+            }
+            None => {
+                let d = Arc::make_mut(&mut self.shared);
+                let o = d.offset[b];
+                (&mut d.inv, &mut d.diag, o)
+            }
+        };
         for i in 0..s {
             for j in 0..s {
-                self.inv[o + i * s + j] = mi[(i, j)];
-                self.diag[o + i * s + j] = m[(i, j)];
+                inv[o + i * s + j] = mi[(i, j)];
+                diag[o + i * s + j] = m[(i, j)];
             }
         }
     }
 
-    /// y ← keep·y + sign·M x with M the blocks in `values`. Node blocks of 3 and 1 DOFs (3D
-    /// velocity, scalar damage) are spelled out: the generic loop over a block's index list
-    /// cost about a tenth of the products with A it sits beside.
-    fn apply_blocks(&self, values: &[f64], x: &[f64], y: &mut [f64], sign: f64, keep: f64) {
-        let Blocks { ptr, dofs } = &self.blocks;
-        par::for_each_segment_mut(y, &self.split.dofs, |seg, y| {
+    /// y ← keep·y + sign·M x with M the blocks' inverses (`inverse`) or the blocks.
+    fn apply_blocks(&self, inverse: bool, x: &[f64], y: &mut [f64], sign: f64, keep: f64) {
+        let d = &*self.shared;
+        let Blocks { ptr, dofs } = &d.blocks;
+        let values = if inverse { &d.inv } else { &d.diag };
+        let patched: &[u32] = self.patch.as_ref().map_or(&[], |p| &p.list);
+        par::for_each_segment_mut(y, &d.split.dofs, |seg, y| {
             // A piece of y holds the DOFs of its blocks, from `base` on (all of y, from 0,
             // when the blocks are not contiguous and there is one piece).
-            let base = self.split.dofs[seg];
-            for b in self.split.blocks[seg]..self.split.blocks[seg + 1] {
-                let m = &values[self.offset[b]..self.offset[b + 1]];
-                match (&dofs[ptr[b]..ptr[b + 1]], m) {
-                    (&[i], &[m]) => {
-                        let yi = &mut y[i - base];
-                        *yi = keep * *yi + sign * m * x[i];
-                    }
-                    (&[i, j, k], &[m00, m01, m02, m10, m11, m12, m20, m21, m22]) => {
-                        let (a, c, e) = (x[i], x[j], x[k]);
-                        y[i - base] = keep * y[i - base] + sign * (m00 * a + m01 * c + m02 * e);
-                        y[j - base] = keep * y[j - base] + sign * (m10 * a + m11 * c + m12 * e);
-                        y[k - base] = keep * y[k - base] + sign * (m20 * a + m21 * c + m22 * e);
-                    }
-                    (block, m) => {
-                        let s = block.len();
-                        for (row, &i) in m.chunks_exact(s).zip(block) {
-                            let v: f64 = row.iter().zip(block).map(|(m, &j)| m * x[j]).sum();
-                            y[i - base] = keep * y[i - base] + sign * v;
-                        }
-                    }
+            let base = d.split.dofs[seg];
+            let shared = |blocks: std::ops::Range<usize>, y: &mut [f64]| {
+                for b in blocks {
+                    let m = &values[d.offset[b]..d.offset[b + 1]];
+                    apply_block(&dofs[ptr[b]..ptr[b + 1]], m, x, y, base, sign, keep);
                 }
+            };
+            // The shared blocks run by run between this copy's own, so that a copy without
+            // any costs no test per block.
+            let (first, end) = (d.split.blocks[seg], d.split.blocks[seg + 1]);
+            let own = patched.partition_point(|&b| (b as usize) < first)
+                ..patched.partition_point(|&b| (b as usize) < end);
+            let mut next = first;
+            for &b in &patched[own] {
+                let b = b as usize;
+                shared(next..b, y);
+                let (inv, diag) = self.block(b);
+                let m = if inverse { inv } else { diag };
+                apply_block(&dofs[ptr[b]..ptr[b + 1]], m, x, y, base, sign, keep);
+                next = b + 1;
             }
+            shared(next..end, y);
         });
     }
 
     /// D⁻¹ as a sparse (block-diagonal) matrix.
     pub fn inverse_matrix(&self) -> Csr {
-        let n = self.blocks.n_dofs();
-        let mut t = Vec::with_capacity(self.inv.len());
-        for b in 0..self.blocks.len() {
-            let dofs = self.blocks.dofs(b);
+        let blocks = self.blocks();
+        let n = blocks.n_dofs();
+        let mut t = Vec::with_capacity(self.shared.inv.len());
+        for b in 0..blocks.len() {
+            let dofs = blocks.dofs(b);
             let s = dofs.len();
+            let inv = self.block(b).0;
             for i in 0..s {
                 for j in 0..s {
-                    t.push((dofs[i], dofs[j], self.inv[self.offset[b] + i * s + j]));
+                    t.push((dofs[i], dofs[j], inv[i * s + j]));
                 }
             }
         }
@@ -176,17 +256,52 @@ impl BlockJacobi {
 
     /// y ← D⁻¹ x.
     pub fn solve(&self, x: &[f64], y: &mut [f64]) {
-        self.apply_blocks(&self.inv, x, y, 1.0, 0.0);
+        self.apply_blocks(true, x, y, 1.0, 0.0);
     }
 
     /// y ← y − D⁻¹ x.
     pub fn solve_sub(&self, x: &[f64], y: &mut [f64]) {
-        self.apply_blocks(&self.inv, x, y, -1.0, 1.0);
+        self.apply_blocks(true, x, y, -1.0, 1.0);
     }
 
     /// y ← D x.
     pub fn mul(&self, x: &[f64], y: &mut [f64]) {
-        self.apply_blocks(&self.diag, x, y, 1.0, 0.0);
+        self.apply_blocks(false, x, y, 1.0, 0.0);
+    }
+}
+
+/// y_i ← keep·y_i + sign·(m x)_i over one block's DOFs `block` (m: s × s, row-major; y holds
+/// the DOFs from `base` on). Node blocks of 3 and 1 DOFs (3D velocity, scalar damage) are
+/// spelled out: the generic loop over a block's index list cost about a tenth of the
+/// products with A it sits beside.
+#[inline(always)]
+fn apply_block(
+    block: &[usize],
+    m: &[f64],
+    x: &[f64],
+    y: &mut [f64],
+    base: usize,
+    sign: f64,
+    keep: f64,
+) {
+    match (block, m) {
+        (&[i], &[m]) => {
+            let yi = &mut y[i - base];
+            *yi = keep * *yi + sign * m * x[i];
+        }
+        (&[i, j, k], &[m00, m01, m02, m10, m11, m12, m20, m21, m22]) => {
+            let (a, c, e) = (x[i], x[j], x[k]);
+            y[i - base] = keep * y[i - base] + sign * (m00 * a + m01 * c + m02 * e);
+            y[j - base] = keep * y[j - base] + sign * (m10 * a + m11 * c + m12 * e);
+            y[k - base] = keep * y[k - base] + sign * (m20 * a + m21 * c + m22 * e);
+        }
+        (block, m) => {
+            let s = block.len();
+            for (row, &i) in m.chunks_exact(s).zip(block) {
+                let v: f64 = row.iter().zip(block).map(|(m, &j)| m * x[j]).sum();
+                y[i - base] = keep * y[i - base] + sign * v;
+            }
+        }
     }
 }
 
@@ -359,5 +474,67 @@ mod tests {
             assert!((back[i] - x[i]).abs() < 1e-13, "D⁻¹ D x at {i}");
             assert!(sub[i].abs() < 1e-13, "x − D⁻¹ D x at {i}");
         }
+    }
+
+    /// A patched copy applies its own blocks where set and the shared ones elsewhere, the
+    /// same bits as a whole copy with the same blocks set, on any thread count, and leaves
+    /// the blocks it shares as they were. Contiguous node blocks over several pieces of the
+    /// thread split (ROW_CHUNK is 32 under test), set at the first, the last and inner
+    /// blocks.
+    #[test]
+    fn a_patched_copy_equals_a_whole_copy_with_the_same_blocks_set() {
+        let n = 3 * 100;
+        let mut t = Vec::new();
+        for i in 0..n {
+            t.push((i, i, 6.0 + (i % 7) as f64));
+            for j in [i + 1, i + 3] {
+                if j < n {
+                    t.push((i, j, -1.0 / (1.0 + (i % 5) as f64)));
+                    t.push((j, i, -1.0 / (1.0 + (i % 5) as f64)));
+                }
+            }
+        }
+        let a = Csr::from_triplets(n, n, t);
+        let bounds: Vec<usize> = (0..=n / 3).map(|b| 3 * b).collect();
+        let original = BlockJacobi::new(&a, &Blocks::contiguous(&bounds));
+        let (mut whole, mut patched) = (original.clone(), original.patched());
+        for b in [99usize, 0, 17, 50, 18] {
+            let m = DMatrix::from_fn(3, 3, |i, j| {
+                if i == j {
+                    20.0 + b as f64
+                } else {
+                    0.5 + 0.1 * (i + j) as f64
+                }
+            });
+            whole.set_block(b, &m);
+            patched.set_block(b, &m);
+        }
+        let x: Vec<f64> = (0..n).map(|i| (0.37 * i as f64).sin() + 0.2).collect();
+        let apply = |d: &BlockJacobi, threads: usize| {
+            par::Threads::new(threads).install(|| {
+                let (mut s, mut m, mut sub) = (vec![0.0; n], vec![0.0; n], x.clone());
+                d.solve(&x, &mut s);
+                d.mul(&x, &mut m);
+                d.solve_sub(&x, &mut sub);
+                (s, m, sub)
+            })
+        };
+        for threads in [1, 2, 3] {
+            assert_eq!(
+                apply(&patched, threads),
+                apply(&whole, threads),
+                "{threads}"
+            );
+        }
+        let (pi, wi) = (patched.inverse_matrix(), whole.inverse_matrix());
+        assert_eq!(
+            (pi.indptr, pi.indices, pi.values),
+            (wi.indptr, wi.indices, wi.values)
+        );
+        assert_ne!(apply(&patched, 1), apply(&original, 1));
+        assert_eq!(
+            apply(&original, 1),
+            apply(&BlockJacobi::new(&a, &Blocks::contiguous(&bounds)), 1)
+        );
     }
 }

@@ -252,9 +252,9 @@ impl Truncated {
                 let m = Csr::from_triplets(n, n, t);
                 Cycle::Direct(Cholesky::new(m.lower_csc().as_ref())?)
             }
-            Some((_, smoother, p)) => {
+            Some((smoother, p)) => {
                 // The block diagonal of M⁺: A's, with the blocks touching F or E remade.
-                let mut jacobi = smoother.jacobi.clone();
+                let mut jacobi = smoother.jacobi.patched();
                 let block_of = jacobi.blocks().block_of(n);
                 let mut touched: Vec<u32> = fixed
                     .iter()
@@ -293,11 +293,14 @@ impl Truncated {
                 let delta = add(1.0, &add(1.0, &y, 1.0, &z), -1.0, &x);
                 let delta = add(1.0, &delta, -1.0, &transpose(&x));
                 let delta = add(0.5, &delta, 0.5, &transpose(&delta));
-                let a1 = match h.level(1) {
-                    Some((a1, _, _)) => a1.as_ref(),
-                    None => h.coarsest(),
-                };
-                let coarse = Arc::new(h.rebuilt_from(1, Arc::new(add(1.0, a1, 1.0, &delta)))?);
+                let a1 = h
+                    .operator_at(1)
+                    .expect("A's hierarchy keeps its first coarse operator");
+                // Only this cycle reads the rebuilt levels, through their f32 copies where
+                // there are any.
+                let mut coarse = h.rebuilt_from(1, Arc::new(add(1.0, a1, 1.0, &delta)))?;
+                coarse.shed_operators(0);
+                let coarse = Arc::new(coarse);
                 let nc = p.ncols;
                 Cycle::Levels(Box::new(Levels {
                     smoother,

@@ -99,8 +99,9 @@ impl<const D: usize> Backend<D> for Multigrid {
         if dofs.n_contact() == 0 {
             let (blocks, levels) = multilevel::velocity_levels(mesh, dofs, n_i);
             let k_ii = Arc::new(k.block(0..n_i, 0..n_i));
-            let h = Hierarchy::new(k_ii.clone(), blocks, levels, self.params())
+            let mut h = Hierarchy::new(k_ii.clone(), blocks, levels, self.params())
                 .map_err(factor_error)?;
+            h.shed_operators(1);
             let k_ii = LinearSolver::with_hierarchy(Arc::new(h), k_ii);
             return Ok(
                 VelocityStep::with_solver(k, dofs, law, k_ii, Box::new(NoContact))
@@ -110,9 +111,11 @@ impl<const D: usize> Backend<D> for Multigrid {
         // One hierarchy, of K on all free DOFs: the slip solver's, through which K_II is
         // solved too.
         let (blocks, levels) = multilevel::velocity_levels(mesh, dofs, dofs.n_free());
-        let h = Hierarchy::new(k.clone(), blocks, levels, self.params())
-            .map(Arc::new)
-            .map_err(factor_error)?;
+        let mut h =
+            Hierarchy::new(k.clone(), blocks, levels, self.params()).map_err(factor_error)?;
+        // K (shared) and A₁, which the truncated cycles update, stay.
+        h.shed_operators(2);
+        let h = Arc::new(h);
         let k_ii = LinearSolver::leading_block(h.clone(), k.clone(), n_i).map_err(factor_error)?;
         let node_weights = dofs.contact.iter().step_by(D - 1).map(|c| c.weight);
         let newton = SemismoothNewton::new(
@@ -130,12 +133,15 @@ impl<const D: usize> Backend<D> for Multigrid {
     fn damage(&self, mesh: &Mesh<D>, h: Csr) -> Result<DamageStep, SolveError> {
         let (blocks, levels) = multilevel::scalar_levels(mesh, h.nrows);
         let h = Arc::new(h);
-        let hierarchy = Hierarchy::new(h.clone(), blocks, levels, self.params())
-            .map(Arc::new)
-            .map_err(|source| SolveError::Factor {
-                what: "damage",
-                source,
+        let mut hierarchy =
+            Hierarchy::new(h.clone(), blocks, levels, self.params()).map_err(|source| {
+                SolveError::Factor {
+                    what: "damage",
+                    source,
+                }
             })?;
+        hierarchy.shed_operators(1);
+        let hierarchy = Arc::new(hierarchy);
         let n = h.nrows;
         let masked = MaskedCg::new(hierarchy.vcycle(), n);
         Ok(DamageStep::new(h, Box::new(masked)))
