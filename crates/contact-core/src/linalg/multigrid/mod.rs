@@ -482,11 +482,6 @@ impl Hierarchy {
         nnz.iter().sum::<usize>() as f64 / nnz[0].max(1) as f64
     }
 
-    /// The coarsest operator.
-    pub fn coarsest(&self) -> &Csr {
-        &self.coarse_a
-    }
-
     /// The finest operator (kept by [`Hierarchy::shed_operators`] from level 1 on).
     pub fn operator(&self) -> &Csr {
         self.operator_at(0).expect("the finest operator is kept")
@@ -661,9 +656,10 @@ mod tests {
             "{} levels, {c}",
             h.n_levels()
         );
+        let coarsest = h.operator_at(h.n_levels() - 1).unwrap();
         let single = Hierarchy::new(
-            Arc::new(h.coarsest().clone()),
-            Blocks::scalar(h.coarsest().nrows),
+            Arc::new(coarsest.clone()),
+            Blocks::scalar(coarsest.nrows),
             Coarsening::Geometric {
                 prolongators: vec![],
                 blocks: vec![],
