@@ -289,20 +289,28 @@ pub fn predict(p: &Problem) -> Prediction {
         (true, true) => FULL_SPACE_GEOMETRIC * csr(nnz_k, n),
         (true, false) => FULL_SPACE_AGGREGATION * csr(nnz_k, n),
     };
-    // With a Γ3 the multigrid path solves K_II through K's own hierarchy: no K_II copy.
-    let shared_k_ii = if c.contact { csr(nnz_k, n) } else { 0.0 };
+    // The multigrid path holds K once (K_II is solved through K's own hierarchy, or is K
+    // without a Γ3), and with mixed precision in f64 node blocks
+    // ([`crate::linalg::Sparse::Blocks`]): d × d blocks with one 32-bit index each.
+    let mixed_precision = p.precision.mixed(c.d as usize);
+    let k_held = if mixed_precision {
+        (8.0 + 4.0 / (c.d * c.d)) * nnz_k
+    } else {
+        csr(nnz_k, n)
+    };
+    let k_not_held = 2.0 * csr(nnz_k, n) - k_held;
     // The earlier steps' solutions whose projection starts each K_II solve, and with damage
     // each masked H solve.
     let damage_nodes = if c.damage { c.nodes } else { 0.0 };
     let solution_space = 8.0 * SolutionSpace::vectors(CAPACITY) as f64 * (n + damage_nodes);
-    let mixed = if p.precision.mixed(c.d as usize) {
+    let mixed = if mixed_precision {
         let per_entry = if c.d == 3.0 { 40.0 / 9.0 } else { 6.0 };
         let h = if c.damage { 8.0 * nnz_h } else { 0.0 };
         MIXED_LEVELS * (per_entry * nnz_k + h)
     } else {
         0.0
     };
-    let multigrid = PROCESS + base - shared_k_ii
+    let multigrid = PROCESS + base - k_not_held
         + hierarchy_k
         + hierarchy_h
         + coarsest

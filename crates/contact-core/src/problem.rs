@@ -449,7 +449,7 @@ impl Problem {
 
 /// The precision of the multigrid V-cycle's level operators (the scene's
 /// `solver.precision`): the operators of the scheme, the residuals and conjugate gradients
-/// are f64 either way ([`crate::linalg::block_csr32`]).
+/// are f64 either way ([`crate::linalg::block_csr`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Precision {

@@ -118,7 +118,7 @@ impl Case {
     /// The full-space solver of this case with weights ω and `law`.
     fn newton(&self, weights: &[f64], law: FrictionLaw) -> SemismoothNewton {
         SemismoothNewton::new(
-            self.k.clone(),
+            self.k.clone().into(),
             self.hierarchy.clone(),
             self.n_i,
             self.block,
@@ -291,7 +291,7 @@ fn lanczos_smallness_matches_the_dense_eigenvalue() {
         let d: Vec<f64> = per_dof.iter().map(|w| 1.0 / w.sqrt()).collect();
         let dense = min_eig_scaled(&c.s, &d);
         let w_sqrt: Vec<f64> = per_dof.iter().map(|w| w.sqrt()).collect();
-        let mut solver = LinearSolver::with_hierarchy(c.hierarchy.clone(), c.k.clone());
+        let mut solver = LinearSolver::with_hierarchy(c.hierarchy.clone(), c.k.clone().into());
         let lanczos = min_eig_by_lanczos(&mut solver, c.n_i, &w_sqrt).unwrap();
         assert!(
             (lanczos - dense).abs() <= 1e-8 * dense,

@@ -431,12 +431,12 @@ fn velocity_operator(
         2 => {
             let sim = Simulation::<2>::new(problem, SolverSettings::default())?;
             let (k, n_i) = sim.velocity_operator();
-            (k.clone(), n_i)
+            (k.to_csr().into_owned(), n_i)
         }
         _ => {
             let sim = Simulation::<3>::new(problem, SolverSettings::default())?;
             let (k, n_i) = sim.velocity_operator();
-            (k.clone(), n_i)
+            (k.to_csr().into_owned(), n_i)
         }
     };
     Ok((k, n_i))

@@ -7,7 +7,7 @@
 //! complement onto Γ3 ([`schur`]), the nested-dissection ordering ([`nested_dissection`]),
 //! and the threads every kernel splits its work over ([`par`]).
 
-pub mod block_csr32;
+pub mod block_csr;
 pub mod block_products;
 pub mod cholesky;
 pub mod csr;
@@ -21,6 +21,7 @@ pub mod pcg;
 pub mod projection;
 pub mod schur;
 pub mod solver;
+pub mod sparse;
 
 pub use crate::problem::LinearPath;
 pub use cholesky::{Cholesky, CholeskyPlan};
@@ -28,3 +29,4 @@ pub use csr::Csr;
 pub use operator::LinearOperator;
 pub use schur::{schur_complement, SchurPath};
 pub use solver::LinearSolver;
+pub use sparse::Sparse;

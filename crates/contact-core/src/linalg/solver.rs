@@ -17,7 +17,7 @@ use super::cholesky::{Cholesky, FactorError};
 use super::multigrid::truncated::{Jacobian, Truncated};
 use super::multigrid::{Blocks, Coarsening, Hierarchy, Params, VCycle};
 use super::pcg::{self, PcgWork};
-use super::Csr;
+use super::{Csr, Sparse};
 use std::sync::Arc;
 
 /// Most conjugate-gradient iterations of one solve.
@@ -26,7 +26,7 @@ pub const MAX_KRYLOV_ITERATIONS: usize = 1000;
 /// Conjugate gradients with a multigrid V-cycle on a shared hierarchy.
 #[derive(Clone)]
 pub struct Krylov {
-    a: Arc<Csr>,
+    a: Sparse,
     vcycle: VCycle,
     work: PcgWork,
 }
@@ -35,7 +35,7 @@ pub struct Krylov {
 #[derive(Clone)]
 pub struct LeadingBlock {
     hierarchy: Arc<Hierarchy>,
-    a: Arc<Csr>,
+    a: Sparse,
     lead: usize,
     /// The trailing DOFs, as a list and a flag per DOF.
     fixed: Vec<usize>,
@@ -92,12 +92,13 @@ impl LinearSolver {
             coarsening,
             Params::default(),
         )?);
-        Ok(Self::with_hierarchy(hierarchy, a))
+        Ok(Self::with_hierarchy(hierarchy, a.into()))
     }
 
-    /// Multigrid-preconditioned CG for the operator `a` of `hierarchy` (shared).
-    pub fn with_hierarchy(hierarchy: Arc<Hierarchy>, a: Arc<Csr>) -> LinearSolver {
-        let n = a.nrows;
+    /// Multigrid-preconditioned CG for the operator `a` of `hierarchy` (shared; in any
+    /// storage, whether or not the hierarchy kept its own).
+    pub fn with_hierarchy(hierarchy: Arc<Hierarchy>, a: Sparse) -> LinearSolver {
+        let n = a.nrows();
         LinearSolver::Multigrid(Box::new(Krylov {
             vcycle: hierarchy.vcycle(),
             a,
@@ -109,10 +110,10 @@ impl LinearSolver {
     /// `hierarchy` (the other DOFs held at zero).
     pub fn leading_block(
         hierarchy: Arc<Hierarchy>,
-        a: Arc<Csr>,
+        a: Sparse,
         lead: usize,
     ) -> Result<LinearSolver, FactorError> {
-        let n = a.nrows;
+        let n = a.nrows();
         let fixed: Vec<usize> = (lead..n).collect();
         let is_fixed = (0..n).map(|i| i >= lead).collect();
         let truncated = Truncated::with_operator(&hierarchy, a.clone(), fixed.clone(), &[])?;
@@ -132,7 +133,7 @@ impl LinearSolver {
     pub fn n(&self) -> usize {
         match self {
             LinearSolver::Direct(c) => c.n(),
-            LinearSolver::Multigrid(k) => k.a.nrows,
+            LinearSolver::Multigrid(k) => k.a.nrows(),
             LinearSolver::LeadingBlock(l) => l.lead,
         }
     }
@@ -154,7 +155,7 @@ impl LinearSolver {
             }
             LinearSolver::Multigrid(k) => {
                 let Krylov { a, vcycle, work } = &mut **k;
-                let rep = pcg::solve(&**a, vcycle, b, x, atol, MAX_KRYLOV_ITERATIONS, work);
+                let rep = pcg::solve(&*a, vcycle, b, x, atol, MAX_KRYLOV_ITERATIONS, work);
                 outcome(rep)
             }
             LinearSolver::LeadingBlock(l) => {
@@ -277,7 +278,7 @@ mod tests {
         let (blocks, levels) = multilevel::scalar_levels(&mesh, n);
         let hierarchy =
             Arc::new(Hierarchy::new(a.clone(), blocks, levels, Params::default()).unwrap());
-        let mut cg = LinearSolver::with_hierarchy(hierarchy.clone(), a.clone());
+        let mut cg = LinearSolver::with_hierarchy(hierarchy.clone(), a.clone().into());
         let atol = 1e-8 * max_abs(&b);
         let mut x = vec![0.0; n];
         assert!(cg.solve(&b, &mut x, atol).unwrap() > 0);
@@ -293,7 +294,7 @@ mod tests {
         // for K_II.
         let lead = n - 33;
         let block = a.block(0..lead, 0..lead);
-        let mut leading = LinearSolver::leading_block(hierarchy, a.clone(), lead).unwrap();
+        let mut leading = LinearSolver::leading_block(hierarchy, a.clone().into(), lead).unwrap();
         let mut y = vec![0.0; lead];
         leading.solve(&b[..lead], &mut y, atol).unwrap();
         assert_eq!(leading.n(), lead);

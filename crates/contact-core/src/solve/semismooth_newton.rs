@@ -42,7 +42,7 @@ use crate::linalg::multigrid::truncated::{Jacobian, NodeBlock, Truncated};
 use crate::linalg::multigrid::Hierarchy;
 use crate::linalg::pcg::{self, PcgWork, Preconditioner};
 use crate::linalg::solver::MAX_KRYLOV_ITERATIONS;
-use crate::linalg::Csr;
+use crate::linalg::Sparse;
 use crate::problem::FrictionLaw;
 use std::sync::Arc;
 
@@ -94,7 +94,7 @@ struct Cached {
 
 /// The solver of (3.13) on all free DOFs for one operator K (fixed for a run).
 pub struct SemismoothNewton {
-    k: Arc<Csr>,
+    k: Sparse,
     hierarchy: Arc<Hierarchy>,
     n_i: usize,
     /// Tangential DOFs per Γ3 node: d − 1.
@@ -138,7 +138,7 @@ impl SemismoothNewton {
     /// `k` on all free DOFs (the first `n_i` interior, then `block` DOFs per Γ3 node),
     /// `hierarchy` the multigrid hierarchy of `k`.
     pub fn new(
-        k: Arc<Csr>,
+        k: Sparse,
         hierarchy: Arc<Hierarchy>,
         n_i: usize,
         block: usize,
@@ -217,10 +217,7 @@ impl SemismoothNewton {
             if d == 0.0 {
                 continue;
             }
-            let row = self.k.indptr[c + r]..self.k.indptr[c + r + 1];
-            for (&j, v) in self.k.indices[row.clone()].iter().zip(&self.k.values[row]) {
-                g[j as usize] += v * d;
-            }
+            self.k.for_each_in_row(c + r, |j, v| g[j] += v * d);
         }
     }
 
@@ -320,7 +317,7 @@ impl SemismoothNewton {
     /// up to a tenth of the slipping nodes changed): CG ran to its iteration limit on step 19
     /// and the step failed. Rebuilding is about 40 % of that run's time.
     fn prepare(&mut self, stick: Vec<bool>, blocks: &[NodeBlock]) -> Result<bool, SolveError> {
-        let n = self.k.nrows;
+        let n = self.k.nrows();
         self.is_fixed.clear();
         self.is_fixed.resize(n, false);
         self.fixed.clear();
@@ -444,12 +441,12 @@ impl SemismoothNewton {
         krylov_floor: f64,
         step: usize,
     ) -> Result<NewtonReport, SolveError> {
-        let n = self.k.nrows;
+        let n = self.k.nrows();
         let scale = f.iter().fold(f64::MIN_POSITIVE, |s, v| s.max(v.abs()));
         let mut g = std::mem::take(&mut self.gradient);
         g.resize(n, 0.0);
         let (mut r, mut d, mut kd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        let fresh_gradient = |k: &Csr, w: &[f64], g: &mut [f64]| {
+        let fresh_gradient = |k: &Sparse, w: &[f64], g: &mut [f64]| {
             k.mul_vec(w, g);
             g.iter_mut().zip(f).for_each(|(g, f)| *g -= f);
         };
@@ -576,6 +573,7 @@ mod tests {
     use super::*;
     use crate::fem::{assembly, multilevel, DofMap, Geometry};
     use crate::linalg::multigrid::Params;
+    use crate::linalg::Csr;
     use crate::scene::{self, presets};
     use serde_json::json;
 
@@ -604,7 +602,7 @@ mod tests {
     fn slip_blocks_that_fell_far_below_the_stiffness_rebuild_the_preconditioner() {
         let (k, h, n_i, weights) = box_at_quarter();
         let law = FrictionLaw::Tresca { g: 1.0 };
-        let mut newton = SemismoothNewton::new(k, h, n_i, 2, weights.clone(), law);
+        let mut newton = SemismoothNewton::new(k.into(), h, n_i, 2, weights.clone(), law);
         let at = |fraction: f64| -> Vec<NodeBlock> {
             (0..weights.len())
                 .map(|i| {
@@ -646,7 +644,7 @@ mod tests {
         for g in [0.05, 0.5, 50.0] {
             let law = FrictionLaw::Tresca { g };
             let mut newton =
-                SemismoothNewton::new(k.clone(), h.clone(), n_i, 2, weights.clone(), law);
+                SemismoothNewton::new(k.clone().into(), h.clone(), n_i, 2, weights.clone(), law);
             let mut w = vec![0.0; n];
             let settings = SolverSettings::default();
             let rep = newton

@@ -26,10 +26,9 @@
 use super::{friction_node, SolveError, SolverReport, SolverSettings};
 use crate::fem::DofMap;
 use crate::linalg::projection::{self, SolutionSpace};
-use crate::linalg::{Csr, LinearSolver, SchurPath};
+use crate::linalg::{Csr, LinearSolver, SchurPath, Sparse};
 use crate::problem::FrictionLaw;
 use std::any::Any;
-use std::sync::Arc;
 
 /// How a velocity step's friction problem is solved.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -154,7 +153,7 @@ impl Clone for VelocityStep {
 #[derive(Clone)]
 pub struct StepState {
     /// The operator on all free DOFs (for residuals), interior first, contact last.
-    pub(crate) k: Arc<Csr>,
+    pub(crate) k: Sparse,
     pub(crate) n_i: usize,
     pub(crate) k_ii: LinearSolver,
     /// Contact rows, interior columns.
@@ -196,7 +195,7 @@ impl VelocityStep {
     /// The step with a given solver of K_II (the leading n_interior block of `k`) and of
     /// slipping steps.
     pub fn with_solver<const D: usize>(
-        k: Arc<Csr>,
+        k: Sparse,
         dofs: &DofMap<D>,
         law: FrictionLaw,
         k_ii: LinearSolver,
@@ -239,7 +238,10 @@ impl VelocityStep {
     /// steps' velocities ([`crate::linalg::projection`]): for a solver that takes a
     /// starting guess.
     pub fn with_solution_space(mut self) -> Self {
-        self.state.space = Some(SolutionSpace::new(self.state.k.nrows, projection::CAPACITY));
+        self.state.space = Some(SolutionSpace::new(
+            self.state.k.nrows(),
+            projection::CAPACITY,
+        ));
         self
     }
 
@@ -294,12 +296,12 @@ impl VelocityStep {
     }
 
     /// The free-DOF operator K and the number of interior DOFs (for benchmarks).
-    pub fn operator(&self) -> (&Csr, usize) {
-        (self.state.k.as_ref(), self.state.n_i)
+    pub fn operator(&self) -> (&Sparse, usize) {
+        (&self.state.k, self.state.n_i)
     }
 
     /// K on all free DOFs, shared (no copy).
-    pub fn shared_operator(&self) -> Arc<Csr> {
+    pub fn shared_operator(&self) -> Sparse {
         self.state.k.clone()
     }
 
@@ -393,7 +395,7 @@ impl StepState {
         if let (Some(space), Ok(())) = (&mut self.space, &solved) {
             w[..n_i].copy_from_slice(&y);
             w[n_i..].iter_mut().for_each(|v| *v = 0.0);
-            space.extend(self.k.as_ref(), w);
+            space.extend(&self.k, w);
         }
         self.y = y;
         solved?;
@@ -484,16 +486,7 @@ impl StepState {
                 return residual;
             }
         }
-        let k = &self.k;
-        let floor = (0..k.nrows).fold(f64::MIN_POSITIVE, |m, i| {
-            let row = k.indptr[i]..k.indptr[i + 1];
-            let s: f64 = k.indices[row.clone()]
-                .iter()
-                .zip(&k.values[row])
-                .map(|(&j, v)| (v * w[j as usize]).abs())
-                .sum();
-            m.max(s)
-        });
+        let floor = self.k.max_abs_row_product(w).max(f64::MIN_POSITIVE);
         residual * scale / floor.max(scale)
     }
 
@@ -533,6 +526,7 @@ mod tests {
     use crate::scene::{self, presets};
     use crate::solve::backend;
     use serde_json::json;
+    use std::sync::Arc;
 
     /// The velocity step of paper-exp3 at h = 1/8 with Tresca bound `g` as the backend of
     /// `linear` builds it, with K assembled here by element triplets and the DOF map.

@@ -13,7 +13,7 @@ pub mod aggregation;
 pub mod smoother;
 pub mod truncated;
 
-use super::block_csr32::BlockCsr32;
+use super::block_csr::BlockCsr32;
 use super::block_products;
 use super::cholesky::{Cholesky, FactorError};
 use super::csr::TRANSPOSE_PIECES;
@@ -423,15 +423,17 @@ impl Hierarchy {
         }
     }
 
-    /// Drops the f64 operators of levels `from` and below that have a single-precision copy
-    /// ([`Params::mixed`]), which is all the V-cycle reads there. What still needs them must
-    /// keep them: the truncated cycle updates A₁ = P₀ᵀ A P₀ of K's hierarchy for every
-    /// slipping Jacobian and reads A at level 0; a hierarchy rebuilt for one Jacobian
-    /// ([`Hierarchy::rebuilt_from`]) or the damage step's is never read again. On the 82k-node
-    /// part this is the K_II cycle's first coarse operator and H's first coarse level.
-    pub fn shed_operators(&mut self, from: usize) {
-        for level in self.levels.iter_mut().skip(from) {
-            if level.a32.is_some() {
+    /// Drops the f64 operators of the levels not in `keep` that have a single-precision
+    /// copy ([`Params::mixed`]), which is all the V-cycle reads there. What still needs them
+    /// must keep them: the truncated cycle updates A₁ = P₀ᵀ A P₀ of K's hierarchy for every
+    /// slipping Jacobian; the finest operator is kept where its owner reads it from here (the
+    /// damage step's H), not where the owner holds it in another storage (the velocity
+    /// step's K in f64 node blocks); a hierarchy rebuilt for one Jacobian
+    /// ([`Hierarchy::rebuilt_from`]) keeps none. On the 82k-node part this is K, the K_II
+    /// cycle's first coarse operator and H's first coarse level.
+    pub fn shed_operators(&mut self, keep: &[usize]) {
+        for (l, level) in self.levels.iter_mut().enumerate() {
+            if level.a32.is_some() && !keep.contains(&l) {
                 level.a = None;
             }
         }
@@ -482,7 +484,7 @@ impl Hierarchy {
         nnz.iter().sum::<usize>() as f64 / nnz[0].max(1) as f64
     }
 
-    /// The finest operator (kept by [`Hierarchy::shed_operators`] from level 1 on).
+    /// The finest operator, where it was not shed ([`Hierarchy::shed_operators`]).
     pub fn operator(&self) -> &Csr {
         self.operator_at(0).expect("the finest operator is kept")
     }
@@ -692,9 +694,10 @@ mod tests {
         let whole = Arc::new(build(true));
         assert!(whole.n_levels() >= 3, "{:?}", whole.sizes());
         let mut shed = build(true);
-        shed.shed_operators(1);
-        assert!(shed.operator_at(0).is_some());
-        for l in 1..shed.n_levels() - 1 {
+        // What the velocity step keeps of K's hierarchy: A₁ only (K is held in node blocks).
+        shed.shed_operators(&[1]);
+        assert!(shed.operator_at(1).is_some());
+        for l in (0..shed.n_levels() - 1).filter(|&l| l != 1) {
             assert!(shed.operator_at(l).is_none(), "level {l}");
         }
         assert!(
@@ -703,7 +706,7 @@ mod tests {
         );
         assert_eq!(shed.sizes(), whole.sizes());
         assert_eq!(shed.operator_complexity(), whole.operator_complexity());
-        let n = whole.operator().nrows;
+        let n = whole.sizes()[0];
         let r: Vec<f64> = (0..n).map(|i| (0.9 * i as f64).sin()).collect();
         let apply = |h: &Arc<Hierarchy>| {
             let mut z = vec![0.0; n];
@@ -712,7 +715,7 @@ mod tests {
         };
         assert_eq!(apply(&Arc::new(shed)), apply(&whole));
         let mut plain = build(false);
-        plain.shed_operators(0);
+        plain.shed_operators(&[]);
         assert!((0..plain.n_levels()).all(|l| plain.operator_at(l).is_some()));
     }
 }

@@ -25,12 +25,12 @@
 
 use super::smoother::Chebyshev;
 use super::{Hierarchy, VCycle};
-use crate::linalg::block_csr32::BlockCsr32;
+use crate::linalg::block_csr::BlockCsr32;
 use crate::linalg::cholesky::{Cholesky, FactorError};
 use crate::linalg::galerkin::{add, product, transpose};
 use crate::linalg::par;
 use crate::linalg::pcg::Preconditioner;
-use crate::linalg::{Csr, LinearOperator};
+use crate::linalg::{Csr, LinearOperator, Sparse};
 use nalgebra::DMatrix;
 use std::sync::Arc;
 
@@ -73,7 +73,7 @@ impl NodeBlock {
 
 /// M = (A + E)_{RR} ⊕ I_{FF} applied from A's storage.
 pub struct Jacobian<'a> {
-    pub a: &'a Csr,
+    pub a: &'a Sparse,
     /// The fixed DOFs F, and a flag per DOF.
     pub fixed: &'a [usize],
     pub is_fixed: &'a [bool],
@@ -83,21 +83,13 @@ pub struct Jacobian<'a> {
 
 impl LinearOperator for Jacobian<'_> {
     fn dim(&self) -> usize {
-        self.a.nrows
+        self.a.nrows()
     }
 
     fn apply(&self, x: &[f64], y: &mut [f64]) {
         self.a.mul_vec(x, y);
-        // Remove A's columns of F (A is symmetric: its rows), then make the rows of F the
-        // identity's.
-        for &s in self.fixed {
-            if x[s] != 0.0 {
-                let row = self.a.indptr[s]..self.a.indptr[s + 1];
-                for (&j, v) in self.a.indices[row.clone()].iter().zip(&self.a.values[row]) {
-                    y[j as usize] -= v * x[s];
-                }
-            }
-        }
+        // Remove A's columns of F, then make the rows of F the identity's.
+        self.a.sub_columns(self.fixed, x, y);
         for &s in self.fixed {
             y[s] = x[s];
         }
@@ -142,7 +134,7 @@ fn add_blocks(blocks: &[NodeBlock], x: &[f64], y: &mut [f64]) {
     }
 }
 
-/// The rows of `a` listed in `rows` (the others empty), same shape.
+/// The rows of `a` (a prolongator) listed in `rows` (the others empty), same shape.
 fn rows_of(a: &Csr, rows: &[bool]) -> Csr {
     let mut indptr = Vec::with_capacity(a.nrows + 1);
     let (mut indices, mut values) = (Vec::new(), Vec::new());
@@ -197,7 +189,7 @@ enum Cycle {
 /// The truncated V-cycle for M⁺ (an SPD preconditioner for M).
 #[derive(Clone)]
 pub struct Truncated {
-    a: Arc<Csr>,
+    a: Sparse,
     fixed: Vec<usize>,
     is_fixed: Vec<bool>,
     /// E⁺'s blocks.
@@ -213,18 +205,19 @@ impl Truncated {
         fixed: Vec<usize>,
         blocks: &[NodeBlock],
     ) -> Result<Truncated, FactorError> {
-        let a = Arc::new(h.operator().clone());
+        let a = Sparse::from(h.operator().clone());
         Self::with_operator(h, a, fixed, blocks)
     }
 
-    /// As [`Truncated::new`], with A given (shared with the caller, which holds it anyway).
+    /// As [`Truncated::new`], with A given (shared with the caller, which holds it anyway;
+    /// the hierarchy may have shed its own).
     pub fn with_operator(
         h: &Arc<Hierarchy>,
-        a: Arc<Csr>,
+        a: Sparse,
         fixed: Vec<usize>,
         blocks: &[NodeBlock],
     ) -> Result<Truncated, FactorError> {
-        let n = a.nrows;
+        let n = a.nrows();
         let mut is_fixed = vec![false; n];
         for &s in &fixed {
             is_fixed[s] = true;
@@ -242,10 +235,11 @@ impl Truncated {
         };
         let cycle = match h.level(0) {
             None => {
+                let pattern = a.to_csr();
                 let t = (0..n)
                     .flat_map(|i| {
-                        let row = a.indptr[i]..a.indptr[i + 1];
-                        a.indices[row].iter().map(move |&j| (i, j as usize))
+                        let row = pattern.indptr[i]..pattern.indptr[i + 1];
+                        pattern.indices[row].iter().map(move |&j| (i, j as usize))
                     })
                     .map(|(i, j)| (i, j, entry(i, j)))
                     .collect();
@@ -282,7 +276,7 @@ impl Truncated {
                 }
                 let p_e = rows_of(p, &in_e);
                 let p_f = rows_of(p, &is_fixed);
-                let a_f = rows_of(&a, &is_fixed);
+                let a_f = a.rows_of(&is_fixed);
                 let p_ft = transpose(&p_f);
                 let x = product(&p_ft, &product(&a_f, p));
                 let y = product(&p_ft, &product(&a_f, &p_f));
@@ -299,7 +293,7 @@ impl Truncated {
                 // Only this cycle reads the rebuilt levels, through their f32 copies where
                 // there are any.
                 let mut coarse = h.rebuilt_from(1, Arc::new(add(1.0, a1, 1.0, &delta)))?;
-                coarse.shed_operators(0);
+                coarse.shed_operators(&[]);
                 let coarse = Arc::new(coarse);
                 let nc = p.ncols;
                 Cycle::Levels(Box::new(Levels {

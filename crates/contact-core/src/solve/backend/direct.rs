@@ -147,7 +147,7 @@ impl<const D: usize> Backend<D> for Direct {
             })?;
         drop(lower);
         Ok(VelocityStep::with_solver(
-            k,
+            k.into(),
             dofs,
             law,
             LinearSolver::Direct(factor),
@@ -214,7 +214,15 @@ impl DenseReduced {
                 .k_ii
                 .factor()
                 .expect("the direct family's factor of K_II");
-            let (s, path) = schur_complement(&state.k, state.n_i, factor, self.path);
+            let (s, path) = schur_complement(
+                state
+                    .k
+                    .scalar()
+                    .expect("the direct path keeps K in scalar CSR"),
+                state.n_i,
+                factor,
+                self.path,
+            );
             self.path = path;
             self.s = Some(s);
         }

@@ -22,7 +22,7 @@ use crate::linalg::multigrid::{Hierarchy, Params, VCycle};
 use crate::linalg::pcg::{self, PcgWork, Preconditioner};
 use crate::linalg::projection::{self, SolutionSpace};
 use crate::linalg::solver::{NotConverged, MAX_KRYLOV_ITERATIONS};
-use crate::linalg::{par, Csr, LinearOperator, LinearPath, LinearSolver};
+use crate::linalg::{par, Csr, LinearOperator, LinearPath, LinearSolver, Sparse};
 use crate::mesh::Mesh;
 use crate::problem::FrictionLaw;
 use crate::solve::damage::{Bound, DamageStep, MaskedSolver};
@@ -96,26 +96,31 @@ impl<const D: usize> Backend<D> for Multigrid {
             source,
         };
         let n_i = dofs.n_interior;
+        // One hierarchy, of K on all free DOFs: without a Γ3 K is K_II; with one, K_II is
+        // solved through it too (the truncated cycle), and so are the slipping steps.
+        let (blocks, levels) = multilevel::velocity_levels(mesh, dofs, dofs.n_free());
+        let bounds = blocks.consecutive_bounds(k.nrows);
+        let mut h =
+            Hierarchy::new(k.clone(), blocks, levels, self.params()).map_err(factor_error)?;
+        // After set-up K is only multiplied and read on Γ3 rows: with mixed precision, where
+        // the V-cycle reads its f32 copy, the step holds it in f64 node blocks and the
+        // hierarchy sheds its scalar copy, keeping A₁ where the truncated cycles update it.
+        let k = if self.mixed {
+            let blocked = Sparse::in_blocks(&k, &bounds);
+            let contact_free = dofs.n_contact() == 0;
+            h.shed_operators(if contact_free { &[] } else { &[1] });
+            blocked
+        } else {
+            Sparse::from(k)
+        };
+        let h = Arc::new(h);
         if dofs.n_contact() == 0 {
-            let (blocks, levels) = multilevel::velocity_levels(mesh, dofs, n_i);
-            let k_ii = Arc::new(k.block(0..n_i, 0..n_i));
-            let mut h = Hierarchy::new(k_ii.clone(), blocks, levels, self.params())
-                .map_err(factor_error)?;
-            h.shed_operators(1);
-            let k_ii = LinearSolver::with_hierarchy(Arc::new(h), k_ii);
+            let k_ii = LinearSolver::with_hierarchy(h, k.clone());
             return Ok(
                 VelocityStep::with_solver(k, dofs, law, k_ii, Box::new(NoContact))
                     .with_solution_space(),
             );
         }
-        // One hierarchy, of K on all free DOFs: the slip solver's, through which K_II is
-        // solved too.
-        let (blocks, levels) = multilevel::velocity_levels(mesh, dofs, dofs.n_free());
-        let mut h =
-            Hierarchy::new(k.clone(), blocks, levels, self.params()).map_err(factor_error)?;
-        // K (shared) and A₁, which the truncated cycles update, stay.
-        h.shed_operators(2);
-        let h = Arc::new(h);
         let k_ii = LinearSolver::leading_block(h.clone(), k.clone(), n_i).map_err(factor_error)?;
         let node_weights = dofs.contact.iter().step_by(D - 1).map(|c| c.weight);
         let newton = SemismoothNewton::new(
@@ -140,7 +145,7 @@ impl<const D: usize> Backend<D> for Multigrid {
                     source,
                 }
             })?;
-        hierarchy.shed_operators(1);
+        hierarchy.shed_operators(&[0]);
         let hierarchy = Arc::new(hierarchy);
         let n = h.nrows;
         let masked = MaskedCg::new(hierarchy.vcycle(), n);
@@ -171,7 +176,7 @@ impl<const D: usize> Backend<D> for Multigrid {
                     source,
                 }
             })?;
-        let mut g_solver = LinearSolver::with_hierarchy(Arc::new(g_hierarchy), gram);
+        let mut g_solver = LinearSolver::with_hierarchy(Arc::new(g_hierarchy), gram.into());
         let lambda_g = min_eig_by_lanczos(&mut g_solver, n_i, &w_sqrt)?;
         let lambda_a = min_eig_by_lanczos(&mut k_solver, n_i, &w_sqrt)?;
         Ok((lambda_g, lambda_a))
@@ -234,7 +239,7 @@ impl SlipSolver for FullSpaceNewton {
         state.r_fresh = true;
         state.x.copy_from_slice(&w[n_i..]);
         if let Some(space) = &mut state.space {
-            space.extend(state.k.as_ref(), w);
+            space.extend(&state.k, w);
             state.space_slips |= state.x.iter().any(|&v| v != 0.0);
         }
         Ok(rep.newton_iterations)

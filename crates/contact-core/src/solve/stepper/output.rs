@@ -6,7 +6,7 @@ use super::{history_stress, Simulation};
 use crate::fem::{CellTensors, Geometry};
 use crate::laws::constitutive::{viscous_stress, von_mises};
 use crate::laws::Tensor;
-use crate::linalg::Csr;
+use crate::linalg::Sparse;
 use crate::mesh::locality::Numbering;
 use crate::mesh::{AnyMesh, Mesh};
 use crate::problem::Problem;
@@ -280,7 +280,7 @@ impl<const D: usize> Simulation<D> {
 
     /// The free-DOF velocity operator K (interior DOFs first) and the number of interior
     /// DOFs (for benchmarks of its factorisation).
-    pub fn velocity_operator(&self) -> (&Csr, usize) {
+    pub fn velocity_operator(&self) -> (&Sparse, usize) {
         self.velocity.solver.operator()
     }
 
@@ -299,7 +299,7 @@ impl<const D: usize> Simulation<D> {
     pub fn time_products(&self, count: usize) -> Vec<f64> {
         let (k, _) = self.velocity.solver.operator();
         let x = &self.velocity.load_free;
-        let mut y = vec![0.0; k.nrows];
+        let mut y = vec![0.0; k.nrows()];
         k.mul_vec(x, &mut y);
         (0..count)
             .map(|_| {

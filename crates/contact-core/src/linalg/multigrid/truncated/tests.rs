@@ -94,7 +94,7 @@ fn jacobian_is_the_masked_operator_plus_blocks() {
     let mut is_fixed = vec![false; a.nrows];
     fixed.iter().for_each(|&s| is_fixed[s] = true);
     let op = Jacobian {
-        a: &a,
+        a: &Sparse::from(a.clone()),
         fixed: &fixed,
         is_fixed: &is_fixed,
         blocks: &blocks,

@@ -1,28 +1,51 @@
-//! A multigrid level's operator in single precision and node-block storage, for the
-//! mixed-precision V-cycle (docs/src/speed/speed.md#mixed-precision-levels): y = A x with A's
-//! entries rounded to f32, x, y and every sum in f64.
+//! A square operator in node-block storage: block CSR with one column index per block, the
+//! entries in f64 (K of the velocity step on the multigrid path) or rounded to f32 (a level
+//! operator of the mixed-precision V-cycle, docs/src/speed/speed.md#mixed-precision-levels);
+//! y = A x with x, y and every sum in f64 either way.
 //!
-//! The rows are cut into the level's node blocks (a node's free velocity components, an
+//! The rows are cut into the operator's node blocks (a node's free velocity components, an
 //! aggregate's coarse DOFs, or single DOFs), consecutive DOF ranges in order. Every block is
 //! stored as S × S, S the largest block's size: block row b holds, for every block column c
 //! that meets it, A's s_b × s_c block padded with zeros, row-major, and one index per block,
 //! the first DOF of a window of S consecutive DOFs that holds c's DOFs (c's first DOF, moved
 //! back at the end of the vector). The product then reads S entries of x from one index
 //! without looking up block sizes; the few smaller blocks (Γ3 nodes, partly fixed nodes)
-//! cost their padding. A 3D node block of nine f32 entries and one index is 40 bytes against
-//! 108 in scalar f64 CSR.
+//! cost their padding. A 3D node block is 9 entries and one index: 76 bytes in f64 and 40
+//! in f32, against 108 in scalar f64 CSR, and a product streams those bytes.
 //!
-//! The rounding is a perturbation of relative size 2⁻²⁴ of the preconditioner only: the
-//! outer conjugate gradients, the residuals and the operator K itself stay in f64, so the
+//! In f32 the rounding is a perturbation of relative size 2⁻²⁴ of the preconditioner only:
+//! the outer conjugate gradients, the residuals and the operator K itself stay in f64, so the
 //! solution is the same to the solver's tolerance (crates/contact-core/tests/multigrid.rs
-//! checks both precisions against the direct path).
+//! checks both precisions against the direct path). In f64 a product differs from the scalar
+//! CSR one only in the order of its sums.
 
 use super::{par, Csr, LinearOperator};
 use std::ops::Range;
 
-/// A square operator in block CSR with S × S blocks of f32 entries.
+/// An entry type of [`BlockCsr`]: f64, or f32 for the mixed-precision levels.
+pub trait Entry: Copy + Default + Send + Sync + Into<f64> + std::fmt::Debug + 'static {
+    /// A's entry in this type (rounded to nearest for f32).
+    fn from_f64(v: f64) -> Self;
+}
+
+impl Entry for f32 {
+    fn from_f64(v: f64) -> f32 {
+        v as f32
+    }
+}
+
+impl Entry for f64 {
+    fn from_f64(v: f64) -> f64 {
+        v
+    }
+}
+
+/// A level operator in f32 node blocks (the mixed-precision V-cycle).
+pub type BlockCsr32 = BlockCsr<f32>;
+
+/// A square operator in block CSR with S × S blocks of entries of type T.
 #[derive(Debug, Clone)]
-pub struct BlockCsr32 {
+pub struct BlockCsr<T: Entry> {
     /// Block b covers DOFs ptr[b]..ptr[b + 1].
     ptr: Vec<usize>,
     /// The block size S.
@@ -32,7 +55,7 @@ pub struct BlockCsr32 {
     /// The first DOF of each entry's window of S columns.
     window: Vec<u32>,
     /// S² entries per block entry, row-major.
-    values: Vec<f32>,
+    values: Vec<T>,
     /// Pieces of whole block rows for the threads: piece s is blocks split_blocks[s]..
     /// (DOFs split_dofs[s]..), each about [`par::ROW_CHUNK`] DOFs, the same for any thread
     /// count.
@@ -40,10 +63,10 @@ pub struct BlockCsr32 {
     split_dofs: Vec<usize>,
 }
 
-impl BlockCsr32 {
+impl<T: Entry> BlockCsr<T> {
     /// `a` in the blocks of consecutive DOFs ptr[b]..ptr[b + 1] (increasing from 0 to n;
     /// [`super::multigrid::Blocks::consecutive_bounds`] of a level's node blocks).
-    pub fn new(a: &Csr, ptr: &[usize]) -> BlockCsr32 {
+    pub fn new(a: &Csr, ptr: &[usize]) -> BlockCsr<T> {
         let n = a.nrows;
         assert!(
             ptr.first() == Some(&0)
@@ -91,7 +114,7 @@ impl BlockCsr32 {
         row.push(cols.len());
         // The entries, in one allocation (the copy is the only transient).
         let start = |c: u32| ptr[c as usize].min(n - s);
-        let mut values = vec![0.0f32; s * s * cols.len()];
+        let mut values = vec![T::default(); s * s * cols.len()];
         for b in 0..nb {
             let row_cols = &cols[row[b]..row[b + 1]];
             for (i, r) in (ptr[b]..ptr[b + 1]).enumerate() {
@@ -100,12 +123,12 @@ impl BlockCsr32 {
                     let cb = block_of[c as usize];
                     let k = row_cols.binary_search(&cb).expect("column listed");
                     let j = c as usize - start(cb);
-                    values[s * s * (row[b] + k) + i * s + j] = a.values[p] as f32;
+                    values[s * s * (row[b] + k) + i * s + j] = T::from_f64(a.values[p]);
                 }
             }
         }
         let window = cols.iter().map(|&c| start(c) as u32).collect();
-        BlockCsr32 {
+        BlockCsr {
             ptr,
             s,
             row,
@@ -118,7 +141,9 @@ impl BlockCsr32 {
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        8 * (self.ptr.len() + self.row.len()) + 4 * (self.window.len() + self.values.len())
+        8 * (self.ptr.len() + self.row.len())
+            + 4 * self.window.len()
+            + std::mem::size_of::<T>() * self.values.len()
     }
 
     /// y ← A x.
@@ -151,7 +176,7 @@ impl BlockCsr32 {
                 for (a, sum) in sum.iter_mut().enumerate() {
                     let mut t = 0.0;
                     for j in 0..S {
-                        t += v[a * S + j] as f64 * xw[j];
+                        t += v[a * S + j].into() * xw[j];
                     }
                     *sum += t;
                 }
@@ -174,11 +199,11 @@ impl BlockCsr32 {
             let (w_rest, v_rest) = (w4.remainder(), v4.remainder());
             for (w, v) in w4.zip(v4) {
                 for k in 0..4 {
-                    sum[k] += v[k] as f64 * x[w[k] as usize];
+                    sum[k] += v[k].into() * x[w[k] as usize];
                 }
             }
             for (k, (&w, &v)) in w_rest.iter().zip(v_rest).enumerate() {
-                sum[k] += v as f64 * x[w as usize];
+                sum[k] += v.into() * x[w as usize];
             }
             y[self.ptr[b] - base] = (sum[0] + sum[1]) + (sum[2] + sum[3]);
         }
@@ -198,13 +223,49 @@ impl BlockCsr32 {
                 let w = self.window[p] as usize;
                 let v = &self.values[s * s * p + i * s..s * s * p + (i + 1) * s];
                 for (j, v) in v.iter().enumerate() {
-                    y[w + j] -= *v as f64 * x[d];
+                    y[w + j] -= (*v).into() * x[d];
                 }
             }
         }
     }
 
-    /// [`BlockCsr32::rows`] for any S.
+    /// The block row holding DOF i.
+    fn block_row(&self, i: usize) -> usize {
+        self.ptr.partition_point(|&p| p <= i) - 1
+    }
+
+    /// f(j, a_ij) for the nonzero entries of row i, in increasing j. Zero entries are not
+    /// listed: the padding cannot be told from a stored zero, and neither adds to a product.
+    pub fn for_each_in_row(&self, i: usize, mut f: impl FnMut(usize, f64)) {
+        let s = self.s;
+        let b = self.block_row(i);
+        let r = i - self.ptr[b];
+        for p in self.row[b]..self.row[b + 1] {
+            let w = self.window[p] as usize;
+            let v = &self.values[s * s * p + r * s..s * s * p + (r + 1) * s];
+            for (j, &v) in v.iter().enumerate() {
+                let v: f64 = v.into();
+                if v != 0.0 {
+                    f(w + j, v);
+                }
+            }
+        }
+    }
+
+    /// Entry (i, j), 0 when absent.
+    pub fn get(&self, i: usize, j: usize) -> f64 {
+        let s = self.s;
+        let b = self.block_row(i);
+        let r = i - self.ptr[b];
+        // A column lies in one block column; a moved-back window may also cover it with
+        // padding, which is zero, so the sum over every window that covers j is a_ij.
+        (self.row[b]..self.row[b + 1])
+            .filter(|&p| (self.window[p] as usize..self.window[p] as usize + s).contains(&j))
+            .map(|p| self.values[s * s * p + r * s + j - self.window[p] as usize].into())
+            .sum()
+    }
+
+    /// [`BlockCsr::rows`] for any S.
     fn rows_any(&self, blocks: Range<usize>, x: &[f64], y: &mut [f64], base: usize) {
         let s = self.s;
         for b in blocks {
@@ -219,7 +280,7 @@ impl BlockCsr32 {
                     *y += v[a * s..(a + 1) * s]
                         .iter()
                         .zip(&x[w..w + s])
-                        .map(|(v, x)| *v as f64 * x)
+                        .map(|(v, x)| (*v).into() * x)
                         .sum::<f64>();
                 }
             }
@@ -227,7 +288,7 @@ impl BlockCsr32 {
     }
 }
 
-impl LinearOperator for BlockCsr32 {
+impl<T: Entry> LinearOperator for BlockCsr<T> {
     fn dim(&self) -> usize {
         *self.ptr.last().unwrap_or(&0)
     }
