@@ -112,21 +112,26 @@ impl<T: Entry> BlockCsr<T> {
             cols.extend(c);
         }
         row.push(cols.len());
-        // The entries, in one allocation (the copy is the only transient).
+        // The entries, in one allocation (the copy is the only transient), each piece of
+        // block rows filling its own part.
         let start = |c: u32| ptr[c as usize].min(n - s);
         let mut values = vec![T::default(); s * s * cols.len()];
-        for b in 0..nb {
-            let row_cols = &cols[row[b]..row[b + 1]];
-            for (i, r) in (ptr[b]..ptr[b + 1]).enumerate() {
-                for p in a.indptr[r]..a.indptr[r + 1] {
-                    let c = a.indices[p];
-                    let cb = block_of[c as usize];
-                    let k = row_cols.binary_search(&cb).expect("column listed");
-                    let j = c as usize - start(cb);
-                    values[s * s * (row[b] + k) + i * s + j] = T::from_f64(a.values[p]);
+        let value_bounds: Vec<usize> = split_blocks.iter().map(|&b| s * s * row[b]).collect();
+        par::for_each_segment_mut(&mut values, &value_bounds, |piece, values| {
+            let first = row[split_blocks[piece]];
+            for b in split_blocks[piece]..split_blocks[piece + 1] {
+                let row_cols = &cols[row[b]..row[b + 1]];
+                for (i, r) in (ptr[b]..ptr[b + 1]).enumerate() {
+                    for p in a.indptr[r]..a.indptr[r + 1] {
+                        let c = a.indices[p];
+                        let cb = block_of[c as usize];
+                        let k = row_cols.binary_search(&cb).expect("column listed");
+                        let j = c as usize - start(cb);
+                        values[s * s * (row[b] + k - first) + i * s + j] = T::from_f64(a.values[p]);
+                    }
                 }
             }
-        }
+        });
         let window = cols.iter().map(|&c| start(c) as u32).collect();
         BlockCsr {
             ptr,

@@ -255,10 +255,10 @@ pub fn min(a: &[f64]) -> f64 {
 
 /// Calls `f(segment, piece)` for the pieces of `y` between consecutive `bounds` (increasing,
 /// from 0 to `y.len()`): a split where chunks must end at given indices (node blocks).
-pub fn for_each_segment_mut(
-    y: &mut [f64],
+pub fn for_each_segment_mut<T: Send>(
+    y: &mut [T],
     bounds: &[usize],
-    f: impl Fn(usize, &mut [f64]) + Sync + Send,
+    f: impl Fn(usize, &mut [T]) + Sync + Send,
 ) {
     debug_assert_eq!(bounds.first().copied().unwrap_or(0), 0);
     debug_assert_eq!(bounds.last().copied().unwrap_or(0), y.len());
