@@ -146,7 +146,8 @@ const FULL_SPACE_GEOMETRIC: f64 = 0.35;
 /// The same with smoothed aggregation: the truncated cycles' updates of the first coarse
 /// operator and the levels rebuilt below it (no copy of P: its rows are masked). Fitted to
 /// `benches/part` (82k nodes, one thread): 604 MiB sticking, predicted 1.15×; 661 MiB
-/// slipping (g = 0.5, T = 8/32), 1.05×.
+/// slipping (g = 0.5, T = 8/32), 1.05×; with K in node blocks since, 571 MiB sticking,
+/// 1.15×, and 643 MiB slipping all 32 steps, 1.02×.
 const FULL_SPACE_AGGREGATION: f64 = 0.25;
 
 /// Smoothed aggregation's hierarchy of K as a multiple of K's bytes, beside 25 vectors: with
