@@ -3,6 +3,7 @@
 
 use contact_core::fem::rigid_modes::{node_blocks, rigid_modes};
 use contact_core::fem::{assembly, multilevel, DofMap, Geometry};
+use contact_core::linalg::multigrid::prolongator::Prolongator;
 use contact_core::linalg::multigrid::*;
 use contact_core::linalg::pcg::Preconditioner;
 use contact_core::linalg::pcg::{self, PcgWork};
@@ -106,29 +107,44 @@ fn assert_symmetric_positive(h: &Arc<Hierarchy>, n: usize) {
 
 /// 3D elasticity aggregated on the distance-two graph has few enough coarse DOFs that the
 /// first level restricts from P's rows by pieces instead of a stored Pᵀ: that restriction is
-/// Pᵀ to rounding, and the V-cycle stays symmetric and positive.
+/// Pᵀ to rounding, and the V-cycle stays symmetric and positive. With mixed precision P is
+/// held in f32 node blocks: its products are those of its entries in scalar CSR.
 #[test]
 fn v_cycle_restricting_by_pieces_is_symmetric() {
     let (a, blocks, modes) = elasticity_3d(12);
-    let params = Params {
-        coarse_size: 200,
-        ..Params::default()
-    };
-    let h = aggregation(a.clone(), blocks, modes, 6, params);
-    assert!(h.restriction_scratch(0) > 0, "levels {:?}", h.sizes());
-    let p = h.prolongator(0).unwrap();
-    let pt = contact_core::linalg::galerkin::transpose(p);
-    let n = a.nrows;
-    let x = pseudo_random(n, 3.0);
-    let (mut want, mut got) = (vec![0.0; p.ncols], vec![f64::NAN; p.ncols]);
-    pt.mul_vec(&x, &mut want);
-    h.restrict(0, &x, &mut got, &mut vec![0.0; h.restriction_scratch(0)]);
-    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    assert!(want
-        .iter()
-        .zip(&got)
-        .all(|(w, g)| (w - g).abs() <= 1e-13 * scale));
-    assert_symmetric_positive(&h, n);
+    for mixed in [false, true] {
+        let params = Params {
+            coarse_size: 200,
+            mixed,
+            ..Params::default()
+        };
+        let h = aggregation(a.clone(), blocks.clone(), modes.clone(), 6, params);
+        assert!(h.restriction_scratch(0) > 0, "levels {:?}", h.sizes());
+        let p = h.prolongator(0).unwrap();
+        assert_eq!(matches!(p, Prolongator::Blocks(_)), mixed);
+        let scalar = p.to_csr();
+        let pt = contact_core::linalg::galerkin::transpose(&scalar);
+        let n = a.nrows;
+        let x = pseudo_random(n, 3.0);
+        let (mut want, mut got) = (vec![0.0; p.ncols()], vec![f64::NAN; p.ncols()]);
+        pt.mul_vec(&x, &mut want);
+        h.restrict(0, &x, &mut got, &mut vec![0.0; h.restriction_scratch(0)]);
+        let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(want
+            .iter()
+            .zip(&got)
+            .all(|(w, g)| (w - g).abs() <= 1e-13 * scale));
+        let xc = pseudo_random(p.ncols(), 1.0);
+        let (mut want, mut got) = (vec![0.0; n], vec![f64::NAN; n]);
+        scalar.mul_vec(&xc, &mut want);
+        p.mul_vec(&xc, &mut got);
+        let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(want
+            .iter()
+            .zip(&got)
+            .all(|(w, g)| (w - g).abs() <= 1e-13 * scale));
+        assert_symmetric_positive(&h, n);
+    }
 }
 
 /// Below the geometric levels of box-exp3 (halved down to a few hundred nodes), a coarsest

@@ -19,6 +19,7 @@
 //! checks both precisions against the direct path). In f64 a product differs from the scalar
 //! CSR one only in the order of its sums.
 
+use super::csr::TRANSPOSE_PIECES;
 use super::{par, Csr, LinearOperator};
 use std::ops::Range;
 
@@ -43,43 +44,54 @@ impl Entry for f64 {
 /// A level operator in f32 node blocks (the mixed-precision V-cycle).
 pub type BlockCsr32 = BlockCsr<f32>;
 
-/// A square operator in block CSR with S × S blocks of entries of type T.
+/// An operator in block CSR with R × C blocks of entries of type T: square (R = C, the
+/// node blocks of a level) or rectangular (a smoothed-aggregation prolongator: a fine node's
+/// DOFs by an aggregate's coarse DOFs).
 #[derive(Debug, Clone)]
 pub struct BlockCsr<T: Entry> {
-    /// Block b covers DOFs ptr[b]..ptr[b + 1].
+    /// Block row b covers rows ptr[b]..ptr[b + 1] ...
     ptr: Vec<usize>,
-    /// The block size S.
+    /// ... and block column c columns col_ptr[c]..col_ptr[c + 1].
+    col_ptr: Vec<usize>,
+    /// The block sizes R and C.
     s: usize,
+    sc: usize,
     /// Block row b's entries are window[row[b]..row[b + 1]].
     row: Vec<usize>,
-    /// The first DOF of each entry's window of S columns.
+    /// The first column of each entry's window of C columns.
     window: Vec<u32>,
-    /// S² entries per block entry, row-major.
+    /// R × C entries per block entry, row-major.
     values: Vec<T>,
     /// Pieces of whole block rows for the threads: piece s is blocks split_blocks[s]..
-    /// (DOFs split_dofs[s]..), each about [`par::ROW_CHUNK`] DOFs, the same for any thread
+    /// (rows split_dofs[s]..), each about [`par::ROW_CHUNK`] rows, the same for any thread
     /// count.
     split_blocks: Vec<usize>,
     split_dofs: Vec<usize>,
 }
 
 impl<T: Entry> BlockCsr<T> {
-    /// `a` in the blocks of consecutive DOFs ptr[b]..ptr[b + 1] (increasing from 0 to n;
-    /// [`super::multigrid::Blocks::consecutive_bounds`] of a level's node blocks).
+    /// `a` (square) in the blocks of consecutive DOFs ptr[b]..ptr[b + 1] (increasing from 0
+    /// to n; [`super::multigrid::Blocks::consecutive_bounds`] of a level's node blocks).
     pub fn new(a: &Csr, ptr: &[usize]) -> BlockCsr<T> {
-        let n = a.nrows;
-        assert!(
-            ptr.first() == Some(&0)
-                && ptr.last() == Some(&n)
-                && ptr.windows(2).all(|w| w[0] < w[1])
-        );
-        let ptr = ptr.to_vec();
+        assert_eq!(a.nrows, a.ncols, "a square operator");
+        Self::rectangular(a, ptr, ptr)
+    }
+
+    /// `a` in blocks of the consecutive rows ptr[b]..ptr[b + 1] and the consecutive columns
+    /// col_ptr[c]..col_ptr[c + 1].
+    pub fn rectangular(a: &Csr, ptr: &[usize], col_ptr: &[usize]) -> BlockCsr<T> {
+        let (n, m) = (a.nrows, a.ncols);
+        let bounds = |ptr: &[usize], n: usize| {
+            ptr.first() == Some(&0) && ptr.last() == Some(&n) && ptr.windows(2).all(|w| w[0] < w[1])
+        };
+        assert!(bounds(ptr, n) && bounds(col_ptr, m), "block bounds");
+        let (ptr, col_ptr) = (ptr.to_vec(), col_ptr.to_vec());
         let nb = ptr.len() - 1;
-        let size = |b: usize| ptr[b + 1] - ptr[b];
-        let s = (0..nb).map(size).max().unwrap_or(1);
-        let mut block_of = vec![0u32; n];
-        for b in 0..nb {
-            block_of[ptr[b]..ptr[b + 1]].fill(b as u32);
+        let largest = |ptr: &[usize]| ptr.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(1);
+        let (s, sc) = (largest(&ptr), largest(&col_ptr));
+        let mut block_of = vec![0u32; m];
+        for c in 0..col_ptr.len() - 1 {
+            block_of[col_ptr[c]..col_ptr[c + 1]].fill(c as u32);
         }
         // The block pattern: each piece of block rows on its own, joined in order.
         let (split_blocks, split_dofs) = split(&ptr);
@@ -114,9 +126,10 @@ impl<T: Entry> BlockCsr<T> {
         row.push(cols.len());
         // The entries, in one allocation (the copy is the only transient), each piece of
         // block rows filling its own part.
-        let start = |c: u32| ptr[c as usize].min(n - s);
-        let mut values = vec![T::default(); s * s * cols.len()];
-        let value_bounds: Vec<usize> = split_blocks.iter().map(|&b| s * s * row[b]).collect();
+        let start = |c: u32| col_ptr[c as usize].min(m - sc);
+        let rc = s * sc;
+        let mut values = vec![T::default(); rc * cols.len()];
+        let value_bounds: Vec<usize> = split_blocks.iter().map(|&b| rc * row[b]).collect();
         par::for_each_segment_mut(&mut values, &value_bounds, |piece, values| {
             let first = row[split_blocks[piece]];
             for b in split_blocks[piece]..split_blocks[piece + 1] {
@@ -127,7 +140,7 @@ impl<T: Entry> BlockCsr<T> {
                         let cb = block_of[c as usize];
                         let k = row_cols.binary_search(&cb).expect("column listed");
                         let j = c as usize - start(cb);
-                        values[s * s * (row[b] + k - first) + i * s + j] = T::from_f64(a.values[p]);
+                        values[rc * (row[b] + k - first) + i * sc + j] = T::from_f64(a.values[p]);
                     }
                 }
             }
@@ -135,7 +148,9 @@ impl<T: Entry> BlockCsr<T> {
         let window = cols.iter().map(|&c| start(c) as u32).collect();
         BlockCsr {
             ptr,
+            col_ptr,
             s,
+            sc,
             row,
             window,
             values,
@@ -144,44 +159,61 @@ impl<T: Entry> BlockCsr<T> {
         }
     }
 
+    pub fn nrows(&self) -> usize {
+        *self.ptr.last().unwrap_or(&0)
+    }
+
+    pub fn ncols(&self) -> usize {
+        *self.col_ptr.last().unwrap_or(&0)
+    }
+
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        8 * (self.ptr.len() + self.row.len())
+        8 * (self.ptr.len() + self.col_ptr.len() + self.row.len())
             + 4 * self.window.len()
             + std::mem::size_of::<T>() * self.values.len()
     }
 
     /// y ← A x.
     pub fn mul_vec(&self, x: &[f64], y: &mut [f64]) {
-        debug_assert_eq!(x.len(), self.dim());
-        debug_assert_eq!(y.len(), self.dim());
+        debug_assert_eq!(x.len(), self.ncols());
+        debug_assert_eq!(y.len(), self.nrows());
         par::for_each_segment_mut(y, &self.split_dofs, |seg, y| {
             let base = self.split_dofs[seg];
             let blocks = self.split_blocks[seg]..self.split_blocks[seg + 1];
-            match self.s {
-                1 => self.scalar_rows(blocks, x, y, base),
-                2 => self.rows::<2>(blocks, x, y, base),
-                3 => self.rows::<3>(blocks, x, y, base),
-                6 => self.rows::<6>(blocks, x, y, base),
+            match (self.s, self.sc) {
+                (1, 1) => self.scalar_rows(blocks, x, y, base),
+                (2, 2) => self.rows::<2, 2>(blocks, x, y, base),
+                (3, 3) => self.rows::<3, 3>(blocks, x, y, base),
+                (6, 6) => self.rows::<6, 6>(blocks, x, y, base),
+                (2, 3) => self.rows::<2, 3>(blocks, x, y, base),
+                (3, 6) => self.rows::<3, 6>(blocks, x, y, base),
                 _ => self.rows_any(blocks, x, y, base),
             }
         });
     }
 
-    /// The block rows `blocks` of y (which starts at DOF `base`) for blocks of S × S, spelled
-    /// out for the compiler: 2D and 3D node blocks, smoothed aggregation's six rigid modes.
+    /// The block rows `blocks` of y (which starts at row `base`) for blocks of R × C, spelled
+    /// out for the compiler: 2D and 3D node blocks, smoothed aggregation's six rigid modes,
+    /// and the prolongators between them.
     #[inline(always)]
-    fn rows<const S: usize>(&self, blocks: Range<usize>, x: &[f64], y: &mut [f64], base: usize) {
+    fn rows<const R: usize, const C: usize>(
+        &self,
+        blocks: Range<usize>,
+        x: &[f64],
+        y: &mut [f64],
+        base: usize,
+    ) {
         for b in blocks {
             let entries = self.row[b]..self.row[b + 1];
-            let values = &self.values[S * S * entries.start..S * S * entries.end];
-            let mut sum = [0.0f64; S];
-            for (&w, v) in self.window[entries].iter().zip(values.chunks_exact(S * S)) {
-                let xw: &[f64; S] = x[w as usize..w as usize + S].try_into().expect("S");
+            let values = &self.values[R * C * entries.start..R * C * entries.end];
+            let mut sum = [0.0f64; R];
+            for (&w, v) in self.window[entries].iter().zip(values.chunks_exact(R * C)) {
+                let xw: &[f64; C] = x[w as usize..w as usize + C].try_into().expect("C");
                 for (a, sum) in sum.iter_mut().enumerate() {
                     let mut t = 0.0;
-                    for j in 0..S {
-                        t += v[a * S + j].into() * xw[j];
+                    for j in 0..C {
+                        t += v[a * C + j].into() * xw[j];
                     }
                     *sum += t;
                 }
@@ -214,27 +246,121 @@ impl<T: Entry> BlockCsr<T> {
         }
     }
 
-    /// y ← y − A[:, F] x_F for the DOFs F in `dofs`, from A's rows of F (A symmetric: the
-    /// same rounded entries as the product's columns, so A − A[:, F] stays symmetric).
-    pub fn sub_columns(&self, dofs: &[usize], x: &[f64], y: &mut [f64]) {
-        let s = self.s;
-        for &d in dofs {
-            if x[d] == 0.0 {
-                continue;
-            }
-            let b = self.ptr.partition_point(|&p| p <= d) - 1;
-            let i = d - self.ptr[b];
+    /// [`BlockCsr::rows`] for any R and C.
+    fn rows_any(&self, blocks: Range<usize>, x: &[f64], y: &mut [f64], base: usize) {
+        let (s, sc) = (self.s, self.sc);
+        for b in blocks {
+            let r0 = self.ptr[b] - base;
+            let sr = self.ptr[b + 1] - self.ptr[b];
+            let yb = &mut y[r0..r0 + sr];
+            yb.fill(0.0);
             for p in self.row[b]..self.row[b + 1] {
                 let w = self.window[p] as usize;
-                let v = &self.values[s * s * p + i * s..s * s * p + (i + 1) * s];
-                for (j, v) in v.iter().enumerate() {
-                    y[w + j] -= (*v).into() * x[d];
+                let v = &self.values[s * sc * p..s * sc * (p + 1)];
+                for (a, y) in yb.iter_mut().enumerate() {
+                    *y += v[a * sc..(a + 1) * sc]
+                        .iter()
+                        .zip(&x[w..w + sc])
+                        .map(|(v, x)| (*v).into() * x)
+                        .sum::<f64>();
                 }
             }
         }
     }
 
-    /// The block row holding DOF i.
+    /// y ← Aᵀ x without Aᵀ stored, as [`Csr::tmul_vec_by_pieces`]: [`TRANSPOSE_PIECES`] fixed
+    /// pieces of block rows each add into their own ncols-long slice of `scratch`
+    /// (TRANSPOSE_PIECES × ncols, contents ignored), and y sums the slices in piece order,
+    /// so the bits do not depend on the thread count.
+    pub fn tmul_vec_by_pieces(&self, x: &[f64], y: &mut [f64], scratch: &mut [f64]) {
+        debug_assert_eq!(x.len(), self.nrows());
+        debug_assert_eq!(y.len(), self.ncols());
+        let m = self.ncols();
+        assert_eq!(scratch.len(), TRANSPOSE_PIECES * m, "scratch of the pieces");
+        if m == 0 {
+            return;
+        }
+        let nb = self.ptr.len() - 1;
+        let per_piece = nb.div_ceil(TRANSPOSE_PIECES);
+        par::for_each_chunk_mut(scratch, m, |start, part| {
+            part.fill(0.0);
+            let piece = start / m;
+            let blocks = (piece * per_piece).min(nb)..((piece + 1) * per_piece).min(nb);
+            match (self.s, self.sc) {
+                (3, 6) => self.scatter_rows::<3, 6>(blocks, x, part),
+                (2, 3) => self.scatter_rows::<2, 3>(blocks, x, part),
+                _ => self.scatter_rows_any(blocks, x, part),
+            }
+        });
+        let scratch = &*scratch;
+        par::for_each_chunk_mut(y, par::VECTOR_CHUNK, |start, ys| {
+            for (j, y) in ys.iter_mut().enumerate() {
+                *y = (0..TRANSPOSE_PIECES)
+                    .map(|piece| scratch[piece * m + start + j])
+                    .sum();
+            }
+        });
+    }
+
+    /// part += A[blocks, :]ᵀ x[blocks] for blocks of R × C.
+    #[inline(always)]
+    fn scatter_rows<const R: usize, const C: usize>(
+        &self,
+        blocks: Range<usize>,
+        x: &[f64],
+        part: &mut [f64],
+    ) {
+        for b in blocks {
+            let mut xb = [0.0f64; R];
+            let r0 = self.ptr[b];
+            let sr = self.ptr[b + 1] - r0;
+            xb[..sr].copy_from_slice(&x[r0..r0 + sr]);
+            let entries = self.row[b]..self.row[b + 1];
+            let values = &self.values[R * C * entries.start..R * C * entries.end];
+            for (&w, v) in self.window[entries].iter().zip(values.chunks_exact(R * C)) {
+                let out: &mut [f64; C] = (&mut part[w as usize..w as usize + C])
+                    .try_into()
+                    .expect("C");
+                for (j, out) in out.iter_mut().enumerate() {
+                    let mut t = 0.0;
+                    for a in 0..R {
+                        t += v[a * C + j].into() * xb[a];
+                    }
+                    *out += t;
+                }
+            }
+        }
+    }
+
+    /// [`BlockCsr::scatter_rows`] for any R and C.
+    fn scatter_rows_any(&self, blocks: Range<usize>, x: &[f64], part: &mut [f64]) {
+        let (s, sc) = (self.s, self.sc);
+        for b in blocks {
+            for (a, r) in (self.ptr[b]..self.ptr[b + 1]).enumerate() {
+                for p in self.row[b]..self.row[b + 1] {
+                    let w = self.window[p] as usize;
+                    let v = &self.values[s * sc * p + a * sc..s * sc * p + (a + 1) * sc];
+                    for (j, v) in v.iter().enumerate() {
+                        part[w + j] += (*v).into() * x[r];
+                    }
+                }
+            }
+        }
+    }
+
+    /// y ← y − A[:, F] x_F for the DOFs F in `dofs`, from A's rows of F (A square and
+    /// symmetric: the same entries as the product's columns, so A − A[:, F] stays
+    /// symmetric).
+    pub fn sub_columns(&self, dofs: &[usize], x: &[f64], y: &mut [f64]) {
+        debug_assert_eq!(self.s, self.sc);
+        for &d in dofs {
+            if x[d] != 0.0 {
+                self.for_each_in_row(d, |j, v| y[j] -= v * x[d]);
+            }
+        }
+    }
+
+    /// The block row holding row i.
     fn block_row(&self, i: usize) -> usize {
         self.ptr.partition_point(|&p| p <= i) - 1
     }
@@ -242,12 +368,12 @@ impl<T: Entry> BlockCsr<T> {
     /// f(j, a_ij) for the nonzero entries of row i, in increasing j. Zero entries are not
     /// listed: the padding cannot be told from a stored zero, and neither adds to a product.
     pub fn for_each_in_row(&self, i: usize, mut f: impl FnMut(usize, f64)) {
-        let s = self.s;
+        let (s, sc) = (self.s, self.sc);
         let b = self.block_row(i);
         let r = i - self.ptr[b];
         for p in self.row[b]..self.row[b + 1] {
             let w = self.window[p] as usize;
-            let v = &self.values[s * s * p + r * s..s * s * p + (r + 1) * s];
+            let v = &self.values[s * sc * p + r * sc..s * sc * p + (r + 1) * sc];
             for (j, &v) in v.iter().enumerate() {
                 let v: f64 = v.into();
                 if v != 0.0 {
@@ -259,43 +385,21 @@ impl<T: Entry> BlockCsr<T> {
 
     /// Entry (i, j), 0 when absent.
     pub fn get(&self, i: usize, j: usize) -> f64 {
-        let s = self.s;
+        let (s, sc) = (self.s, self.sc);
         let b = self.block_row(i);
         let r = i - self.ptr[b];
         // A column lies in one block column; a moved-back window may also cover it with
         // padding, which is zero, so the sum over every window that covers j is a_ij.
         (self.row[b]..self.row[b + 1])
-            .filter(|&p| (self.window[p] as usize..self.window[p] as usize + s).contains(&j))
-            .map(|p| self.values[s * s * p + r * s + j - self.window[p] as usize].into())
+            .filter(|&p| (self.window[p] as usize..self.window[p] as usize + sc).contains(&j))
+            .map(|p| self.values[s * sc * p + r * sc + j - self.window[p] as usize].into())
             .sum()
-    }
-
-    /// [`BlockCsr::rows`] for any S.
-    fn rows_any(&self, blocks: Range<usize>, x: &[f64], y: &mut [f64], base: usize) {
-        let s = self.s;
-        for b in blocks {
-            let r0 = self.ptr[b] - base;
-            let sr = self.ptr[b + 1] - self.ptr[b];
-            let yb = &mut y[r0..r0 + sr];
-            yb.fill(0.0);
-            for p in self.row[b]..self.row[b + 1] {
-                let w = self.window[p] as usize;
-                let v = &self.values[s * s * p..s * s * (p + 1)];
-                for (a, y) in yb.iter_mut().enumerate() {
-                    *y += v[a * s..(a + 1) * s]
-                        .iter()
-                        .zip(&x[w..w + s])
-                        .map(|(v, x)| (*v).into() * x)
-                        .sum::<f64>();
-                }
-            }
-        }
     }
 }
 
 impl<T: Entry> LinearOperator for BlockCsr<T> {
     fn dim(&self) -> usize {
-        *self.ptr.last().unwrap_or(&0)
+        self.nrows()
     }
 
     fn apply(&self, x: &[f64], y: &mut [f64]) {
@@ -346,11 +450,16 @@ mod tests {
         (Csr::from_triplets(11, 11, t), ptr.to_vec())
     }
 
-    fn reference(a: &Csr, x: &[f64]) -> Vec<f64> {
-        let rounded = Csr {
+    /// `a` with its entries rounded to f32.
+    fn reference_matrix(a: &Csr) -> Csr {
+        Csr {
             values: a.values.iter().map(|&v| v as f32 as f64).collect(),
             ..a.clone()
-        };
+        }
+    }
+
+    fn reference(a: &Csr, x: &[f64]) -> Vec<f64> {
+        let rounded = reference_matrix(a);
         let mut y = vec![0.0; a.nrows];
         rounded.mul_vec(x, &mut y);
         y
@@ -433,6 +542,65 @@ mod tests {
         // The blocked sums group the terms differently from the scalar rows.
         for (i, (e, v)) in reference(&a, &x).iter().zip(&one).enumerate() {
             assert!((e - v).abs() <= 1e-13 * e.abs().max(1.0), "row {i}");
+        }
+    }
+
+    /// A prolongator-like 40 × 27 matrix in blocks of 3 rows (2 for some, like Γ3 nodes) by
+    /// 6 columns (the last aggregate of 3): its product and its transpose product by pieces
+    /// are those of the rounded entries in scalar CSR, row by row and for any thread count.
+    #[test]
+    fn rectangular_blocks_multiply_and_restrict_like_scalar_rows() {
+        let rows: Vec<usize> = (0..=40)
+            .filter(|&r| r % 3 == 0 || r == 40 || r == 20)
+            .collect();
+        let cols = vec![0usize, 6, 12, 18, 24, 27];
+        let (n, m) = (40, 27);
+        let mut t = Vec::new();
+        for i in 0..n {
+            let home = (i * 5 / n).min(4);
+            for j in 0..m {
+                let block = cols.iter().rposition(|&c| c <= j).unwrap();
+                if block.abs_diff(home) <= 1 && (i + 2 * j) % 7 != 3 {
+                    t.push((i, j, 0.1 + ((i * 13 + j * 7) % 11) as f64 / 9.0));
+                }
+            }
+        }
+        let a = Csr::from_triplets(n, m, t);
+        let rounded = reference_matrix(&a);
+        let b = BlockCsr32::rectangular(&a, &rows, &cols);
+        assert_eq!((b.nrows(), b.ncols()), (n, m));
+        let xc: Vec<f64> = (0..m).map(|j| (0.7 * j as f64).cos()).collect();
+        let x: Vec<f64> = (0..n).map(|i| (0.3 * i as f64).sin() + 0.1).collect();
+        let mut want = vec![0.0; n];
+        rounded.mul_vec(&xc, &mut want);
+        let mut want_t = vec![0.0; m];
+        crate::linalg::galerkin::transpose(&rounded).mul_vec(&x, &mut want_t);
+        let run = |threads: usize| {
+            par::Threads::new(threads).install(|| {
+                let (mut y, mut yt) = (vec![f64::NAN; n], vec![f64::NAN; m]);
+                b.mul_vec(&xc, &mut y);
+                b.tmul_vec_by_pieces(&x, &mut yt, &mut vec![f64::NAN; TRANSPOSE_PIECES * m]);
+                (y, yt)
+            })
+        };
+        let (y, yt) = run(1);
+        assert_eq!((y.clone(), yt.clone()), run(2));
+        assert_eq!((y.clone(), yt.clone()), run(3));
+        for (got, want) in [(&y, &want), (&yt, &want_t)] {
+            for (i, (g, w)) in got.iter().zip(want.iter()).enumerate() {
+                assert!((g - w).abs() <= 1e-13 * w.abs().max(1.0), "entry {i}");
+            }
+        }
+        for i in 0..n {
+            let mut listed = Vec::new();
+            b.for_each_in_row(i, |j, v| listed.push((j, v)));
+            let row = rounded.indptr[i]..rounded.indptr[i + 1];
+            let stored: Vec<(usize, f64)> = rounded.indices[row.clone()]
+                .iter()
+                .zip(&rounded.values[row])
+                .map(|(&j, &v)| (j as usize, v))
+                .collect();
+            assert_eq!(listed, stored, "row {i}");
         }
     }
 

@@ -50,6 +50,21 @@ pub fn product(a: &Csr, b: &Csr) -> Csr {
     })
 }
 
+/// A·B for A (n × m) and a B (m × `ncols`) given by its rows: `b_row(k, f)` calls f(j, b_kj)
+/// for row k's entries in increasing j (B in another storage: a prolongator in node blocks).
+pub fn product_with_rows(
+    a: &Csr,
+    ncols: usize,
+    b_row: impl Fn(usize, &mut dyn FnMut(usize, f64)) + Sync + Send,
+) -> Csr {
+    by_rows(a.nrows, ncols, |r, acc| {
+        for p in a.indptr[r]..a.indptr[r + 1] {
+            let (k, av) = (a.indices[p] as usize, a.values[p]);
+            b_row(k, &mut |j, v| acc.add(j, av * v));
+        }
+    })
+}
+
 /// The dense accumulator of one row of a product (Gustavson): the entries of the row being
 /// formed, and which columns it has.
 struct Accumulator {

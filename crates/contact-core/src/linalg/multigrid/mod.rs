@@ -10,6 +10,7 @@
 //! the same polynomial — B is symmetric positive definite, fit for conjugate gradients.
 
 pub mod aggregation;
+pub mod prolongator;
 pub mod smoother;
 pub mod truncated;
 
@@ -21,6 +22,7 @@ use super::galerkin::{galerkin, transpose};
 use super::par;
 use super::pcg::Preconditioner;
 use super::{Csr, LinearOperator};
+use prolongator::Prolongator;
 use smoother::Chebyshev;
 use std::sync::Arc;
 
@@ -201,11 +203,8 @@ struct Level {
     /// `a` in f32 node blocks, with [`Params::mixed`].
     a32: Option<BlockCsr32>,
     smoother: Chebyshev,
-    /// To the next coarser level.
-    p: Csr,
-    /// Pᵀ, stored for a sparse P (geometric levels); a smoothed-aggregation P, as large as
-    /// half of A, restricts by pieces instead ([`Csr::tmul_vec_by_pieces`]).
-    pt: Option<Csr>,
+    /// To the next coarser level, with its restriction.
+    p: Prolongator,
 }
 
 impl Level {
@@ -216,22 +215,30 @@ impl Level {
         blocks: &Blocks,
         coarse: &Blocks,
         smoother: Chebyshev,
-        p: Csr,
+        mut p: Csr,
         params: Params,
     ) -> (Level, Arc<Csr>) {
         // Pᵀ is formed only where it is kept: a P that restricts by pieces has its Galerkin
         // product summed from its rows too. A wide P (smoothed aggregation) takes the
-        // product in node blocks where their sizes allow.
+        // product in node blocks where their sizes allow, and with mixed precision is held
+        // in f32 node blocks, its entries rounded before the product.
         let bounds = blocks.consecutive_bounds(a.nrows);
-        let pt = (!restricts_by_pieces(&p)).then(|| transpose(&p));
+        let coarse_bounds = coarse.consecutive_bounds(p.ncols);
+        let by_pieces = restricts_by_pieces(&p);
+        let in_f32 = params.mixed && by_pieces;
+        if in_f32 {
+            p.values.iter_mut().for_each(|v| *v = *v as f32 as f64);
+        }
+        let pt = (!by_pieces).then(|| transpose(&p));
         let in_blocks = (p.nnz() > 2 * p.nrows)
-            .then(|| {
-                let coarse_bounds = coarse.consecutive_bounds(p.ncols);
-                block_products::galerkin(&a, &p, &bounds, &coarse_bounds)
-            })
+            .then(|| block_products::galerkin(&a, &p, &bounds, &coarse_bounds))
             .flatten();
         let coarse = Arc::new(in_blocks.unwrap_or_else(|| galerkin(&a, &p, pt.as_ref())));
         let a32 = params.mixed.then(|| BlockCsr32::new(&a, &bounds));
+        let p = match in_f32 {
+            true => Prolongator::Blocks(BlockCsr32::rectangular(&p, &bounds, &coarse_bounds)),
+            false => Prolongator::Scalar { p, pt },
+        };
         let level = Level {
             n: a.nrows,
             nnz: a.nnz(),
@@ -239,7 +246,6 @@ impl Level {
             a32,
             smoother,
             p,
-            pt,
         };
         (level, coarse)
     }
@@ -250,23 +256,6 @@ impl Level {
 /// most a fine vector.
 fn restricts_by_pieces(p: &Csr) -> bool {
     p.nnz() > 2 * p.nrows && TRANSPOSE_PIECES * p.ncols <= p.nrows
-}
-
-impl Level {
-    /// y ← Pᵀ x, with `scratch` of [`Level::scratch_len`].
-    fn restrict(&self, x: &[f64], y: &mut [f64], scratch: &mut [f64]) {
-        match &self.pt {
-            Some(pt) => pt.mul_vec(x, y),
-            None => self.p.tmul_vec_by_pieces(x, y, scratch),
-        }
-    }
-
-    fn scratch_len(&self) -> usize {
-        match self.pt {
-            Some(_) => 0,
-            None => TRANSPOSE_PIECES * self.p.ncols,
-        }
-    }
 }
 
 /// The multigrid hierarchy of one operator: the fine operator, the coarser Galerkin
@@ -379,7 +368,10 @@ impl Hierarchy {
             None => self.coarse_blocks.clone(),
         };
         let coarsening = Coarsening::Geometric {
-            prolongators: self.levels[level..].iter().map(|l| l.p.clone()).collect(),
+            prolongators: self.levels[level..]
+                .iter()
+                .map(|l| l.p.to_csr().into_owned())
+                .collect(),
             blocks: (level + 1..=self.levels.len()).map(blocks).collect(),
             below: None,
         };
@@ -389,19 +381,19 @@ impl Hierarchy {
     }
 
     /// Level l's prolongator to level l + 1 (l below the coarsest).
-    pub fn prolongator(&self, l: usize) -> Option<&Csr> {
+    pub fn prolongator(&self, l: usize) -> Option<&Prolongator> {
         self.levels.get(l).map(|level| &level.p)
     }
 
     /// y ← P_lᵀ x, the restriction from level l to l + 1, with `scratch` of
     /// [`Hierarchy::restriction_scratch`] entries.
     pub fn restrict(&self, l: usize, x: &[f64], y: &mut [f64], scratch: &mut [f64]) {
-        self.levels[l].restrict(x, y, scratch);
+        self.levels[l].p.restrict(x, y, scratch);
     }
 
     /// The scratch entries that [`Hierarchy::restrict`] on level l needs.
     pub fn restriction_scratch(&self, l: usize) -> usize {
-        self.levels.get(l).map_or(0, Level::scratch_len)
+        self.levels.get(l).map_or(0, |level| level.p.scratch_len())
     }
 
     /// Level l's single-precision operator, with [`Params::mixed`].
@@ -410,7 +402,7 @@ impl Hierarchy {
     }
 
     /// Level l's smoother and prolongator to level l + 1 (l below the coarsest).
-    pub fn level(&self, l: usize) -> Option<(&Chebyshev, &Csr)> {
+    pub fn level(&self, l: usize) -> Option<(&Chebyshev, &Prolongator)> {
         self.levels.get(l).map(|v| (&v.smoother, &v.p))
     }
 
@@ -566,7 +558,7 @@ impl VCycle {
         }
         let (fine, coarse) = self.work.split_at_mut(l + 1);
         let w = &mut fine[l];
-        level.restrict(&w.t, &mut coarse[0].b, &mut w.pieces);
+        level.p.restrict(&w.t, &mut coarse[0].b, &mut w.pieces);
         self.cycle(l + 1);
         let (fine, coarse) = self.work.split_at_mut(l + 1);
         let w = &mut fine[l];

@@ -134,28 +134,6 @@ fn add_blocks(blocks: &[NodeBlock], x: &[f64], y: &mut [f64]) {
     }
 }
 
-/// The rows of `a` (a prolongator) listed in `rows` (the others empty), same shape.
-fn rows_of(a: &Csr, rows: &[bool]) -> Csr {
-    let mut indptr = Vec::with_capacity(a.nrows + 1);
-    let (mut indices, mut values) = (Vec::new(), Vec::new());
-    indptr.push(0);
-    for (r, &keep) in rows.iter().enumerate() {
-        if keep {
-            let row = a.indptr[r]..a.indptr[r + 1];
-            indices.extend_from_slice(&a.indices[row.clone()]);
-            values.extend_from_slice(&a.values[row]);
-        }
-        indptr.push(indices.len());
-    }
-    Csr {
-        nrows: a.nrows,
-        ncols: a.ncols,
-        indptr,
-        indices,
-        values,
-    }
-}
-
 /// The block-diagonal n × n matrix of `blocks`.
 fn block_matrix(n: usize, blocks: &[NodeBlock]) -> Csr {
     let t = blocks
@@ -274,11 +252,11 @@ impl Truncated {
                         in_e[i] = !is_fixed[i];
                     }
                 }
-                let p_e = rows_of(p, &in_e);
-                let p_f = rows_of(p, &is_fixed);
+                let p_e = p.rows_of(&in_e);
+                let p_f = p.rows_of(&is_fixed);
                 let a_f = a.rows_of(&is_fixed);
                 let p_ft = transpose(&p_f);
-                let x = product(&p_ft, &product(&a_f, p));
+                let x = product(&p_ft, &p.left_product(&a_f));
                 let y = product(&p_ft, &product(&a_f, &p_f));
                 let z = product(
                     &transpose(&p_e),
@@ -295,7 +273,7 @@ impl Truncated {
                 let mut coarse = h.rebuilt_from(1, Arc::new(add(1.0, a1, 1.0, &delta)))?;
                 coarse.shed_operators(&[]);
                 let coarse = Arc::new(coarse);
-                let nc = p.ncols;
+                let nc = p.ncols();
                 Cycle::Levels(Box::new(Levels {
                     smoother,
                     fine: h.clone(),

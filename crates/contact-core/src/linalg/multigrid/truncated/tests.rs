@@ -125,10 +125,10 @@ fn first_coarse_operator_is_galerkin_for_the_truncated_prolongator() {
     let Levels { fine, coarse, .. } = &**levels;
     // P̃: A's first prolongator with the rows of F removed (the cycle masks them instead).
     let p_full = fine.prolongator(0).unwrap();
-    let mut is_fixed = vec![false; p_full.nrows];
+    let mut is_fixed = vec![false; p_full.nrows()];
     fixed.iter().for_each(|&s| is_fixed[s] = true);
     let not_fixed: Vec<bool> = is_fixed.iter().map(|f| !f).collect();
-    let p = &rows_of(p_full, &not_fixed);
+    let p = &p_full.rows_of(&not_fixed);
     let pt = &transpose(p);
     // A₁' from its definition, P̃ᵀ M⁺ P̃ with M⁺'s fixed rows zeroed.
     let mut m_plus = explicit(&a, &fixed, &positive);
