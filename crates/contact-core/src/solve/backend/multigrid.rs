@@ -493,6 +493,50 @@ pub fn min_eig_by_lanczos(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::{self, presets};
+    use serde_json::json;
+
+    /// K is held once on the multigrid path, with or without a Γ3: with mixed precision in
+    /// f64 node blocks and no scalar copy left in the hierarchy; in double precision as the
+    /// one scalar K that the hierarchy smooths with. (A contact-free run once held K twice:
+    /// as the step's K and as a K_II copy for CG.)
+    #[test]
+    fn k_is_held_once_with_and_without_a_contact_boundary() {
+        for contact in [true, false] {
+            let mut doc = presets::get("box-exp3").unwrap();
+            doc["mesh"]["h"] = json!("1/16");
+            if !contact {
+                let boundary = doc["boundary"].as_array_mut().unwrap();
+                boundary.retain(|b| b["type"] != "contact");
+            }
+            let p = scene::validate(&doc).unwrap();
+            let mesh = p.mesh::<3>().unwrap();
+            let geo = Geometry::new(&mesh);
+            let dofs = DofMap::new(&mesh, &p.boundary);
+            assert_eq!(dofs.n_contact() > 0, contact);
+            let visc = p.material.viscosity;
+            for mixed in [false, true] {
+                let backend = Multigrid::new(0, mixed);
+                let k = Backend::<3>::stiffness(&backend, &mesh, &geo, &dofs, visc.eta, visc.xi);
+                let step = backend
+                    .velocity(Arc::new(k), &mesh, &dofs, p.friction.clone())
+                    .unwrap();
+                let h = step.linear_solver().hierarchy().unwrap();
+                assert!(h.n_levels() > 1, "{:?}", h.sizes());
+                match step.operator().0 {
+                    Sparse::Blocks(_) => {
+                        assert!(mixed, "contact {contact}");
+                        assert!(h.operator_at(0).is_none(), "contact {contact}");
+                    }
+                    Sparse::Scalar(k) => {
+                        assert!(!mixed, "contact {contact}");
+                        let finest = h.operator_at(0).unwrap();
+                        assert!(std::ptr::eq(k.as_ref(), finest), "contact {contact}");
+                    }
+                }
+            }
+        }
+    }
 
     /// The masked product from H's storage equals the product with the masked matrix formed
     /// entry by entry: rows of every length around the four partial sums, free and active
