@@ -72,6 +72,37 @@ impl Csr {
         }
     }
 
+    /// The `nrows` × `ncols` matrix of the rows flagged in `keep` (the others empty), row i
+    /// listed by `row(i, f)` calling f(j, a_ij) in increasing j (a matrix in another
+    /// storage, or a few of its rows).
+    pub fn from_rows(
+        nrows: usize,
+        ncols: usize,
+        keep: &[bool],
+        row: impl Fn(usize, &mut dyn FnMut(usize, f64)),
+    ) -> Csr {
+        assert_eq!(keep.len(), nrows, "a flag per row");
+        let mut indptr = Vec::with_capacity(nrows + 1);
+        let (mut indices, mut values) = (Vec::new(), Vec::new());
+        indptr.push(0);
+        for (i, &keep) in keep.iter().enumerate() {
+            if keep {
+                row(i, &mut |j, v| {
+                    indices.push(j as u32);
+                    values.push(v);
+                });
+            }
+            indptr.push(indices.len());
+        }
+        Csr {
+            nrows,
+            ncols,
+            indptr,
+            indices,
+            values,
+        }
+    }
+
     pub fn nnz(&self) -> usize {
         self.values.len()
     }

@@ -91,25 +91,7 @@ impl Sparse {
     /// The rows flagged in `keep` (the others empty), same shape, in scalar CSR.
     pub fn rows_of(&self, keep: &[bool]) -> Csr {
         let n = self.nrows();
-        let mut indptr = Vec::with_capacity(n + 1);
-        let (mut indices, mut values) = (Vec::new(), Vec::new());
-        indptr.push(0);
-        for (i, &keep) in keep.iter().enumerate() {
-            if keep {
-                self.for_each_in_row(i, |j, v| {
-                    indices.push(j as u32);
-                    values.push(v);
-                });
-            }
-            indptr.push(indices.len());
-        }
-        Csr {
-            nrows: n,
-            ncols: n,
-            indptr,
-            indices,
-            values,
-        }
+        Csr::from_rows(n, n, keep, |i, f| self.for_each_in_row(i, f))
     }
 
     /// The block rows `rows`, columns `cols` (half-open ranges), in scalar CSR.

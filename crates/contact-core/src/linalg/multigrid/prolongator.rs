@@ -78,25 +78,9 @@ impl Prolongator {
 
     /// The rows flagged in `keep` (the others empty), same shape, in scalar CSR.
     pub fn rows_of(&self, keep: &[bool]) -> Csr {
-        let mut indptr = Vec::with_capacity(self.nrows() + 1);
-        let (mut indices, mut values) = (Vec::new(), Vec::new());
-        indptr.push(0);
-        for (i, &keep) in keep.iter().enumerate() {
-            if keep {
-                self.for_each_in_row(i, &mut |j, v| {
-                    indices.push(j as u32);
-                    values.push(v);
-                });
-            }
-            indptr.push(indices.len());
-        }
-        Csr {
-            nrows: self.nrows(),
-            ncols: self.ncols(),
-            indptr,
-            indices,
-            values,
-        }
+        Csr::from_rows(self.nrows(), self.ncols(), keep, |i, f| {
+            self.for_each_in_row(i, f)
+        })
     }
 
     /// A·P for A with P's rows as columns.
