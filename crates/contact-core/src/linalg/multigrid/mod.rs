@@ -252,10 +252,13 @@ impl Level {
 }
 
 /// Whether Pᵀ is applied by pieces rather than stored: a wide P (more than two entries a row:
-/// smoothed aggregation) whose pieces' scratch ([`TRANSPOSE_PIECES`] coarse vectors) is at
-/// most a fine vector.
+/// smoothed aggregation) whose pieces' scratch ([`TRANSPOSE_PIECES`] coarse vectors, in each
+/// V-cycle's work space) holds fewer numbers than P has entries, and so than a stored Pᵀ.
+/// Measured on the 82k-node part: the coarser velocity levels and the damage hierarchy
+/// (8,819 coarse unknowns under 81,738) held 15 MB of transposes that this rule removes,
+/// for 1.1 MB of scratch a work space.
 fn restricts_by_pieces(p: &Csr) -> bool {
-    p.nnz() > 2 * p.nrows && TRANSPOSE_PIECES * p.ncols <= p.nrows
+    p.nnz() > 2 * p.nrows && TRANSPOSE_PIECES * p.ncols <= p.nnz()
 }
 
 /// The multigrid hierarchy of one operator: the fine operator, the coarser Galerkin
