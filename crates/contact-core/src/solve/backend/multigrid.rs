@@ -109,6 +109,10 @@ impl<const D: usize> Backend<D> for Multigrid {
             let blocked = Sparse::in_blocks(&k, &bounds);
             let contact_free = dofs.n_contact() == 0;
             h.shed_operators(if contact_free { &[] } else { &[1] });
+            // The scalar K goes before the truncated cycle is made, not at the end of
+            // set-up: held beside its blocks it was the set-up's peak (123 of 470 MB on the
+            // 82k-node part).
+            drop(k);
             blocked
         } else {
             Sparse::from(k)
