@@ -95,9 +95,9 @@ pub struct StepData<'a, const D: usize> {
     pub w: &'a [f64],
     /// w_{n−1}; None at n = 1.
     pub w_prev: Option<&'a [f64]>,
-    /// B_{n−1} and ε(u_{n−1}) per cell.
+    /// B_{n−1} per cell, and u_{n−1} (global, interleaved).
     pub b: &'a CellTensors<D>,
-    pub eps: &'a CellTensors<D>,
+    pub u_prev: &'a [f64],
     pub zeta_prev: &'a [f64],
     pub zeta: &'a [f64],
 }
@@ -203,7 +203,7 @@ impl<const D: usize> Estimator<D> {
                     Some((e0, a0)) => {
                         // ∇ψ_a = −|F_a| ν_a / (d |T|): the facet opposite vertex a, its
                         // outward normal and measure from the cell's gradients.
-                        let g = geo.grads(e0)[a0];
+                        let g = geo.grad(e0, a0);
                         let len = dot(&g, &g).sqrt();
                         interior.push(Interior {
                             cells: [e0, e],
@@ -303,6 +303,7 @@ impl<const D: usize> Estimator<D> {
                     p[4] = vol * d.norm_squared();
                 }
                 if let Some(dm) = damage {
+                    let eps_u = geo.strain(mesh, e, s.u_prev);
                     let r2: f64 = rule
                         .iter()
                         .map(|(l, wq)| {
@@ -310,14 +311,14 @@ impl<const D: usize> Estimator<D> {
                                 cell.iter().enumerate().map(|(a, &n)| l[a] * z[n]).sum()
                             };
                             let (zp, zn) = (at(s.zeta_prev), at(s.zeta));
-                            let r = phi(&dm.source, &s.eps.get(e), zp) - (zn - zp) / s.k;
+                            let r = phi(&dm.source, &eps_u, zp) - (zn - zp) / s.k;
                             wq * vol * obstacle_residual(r, zn).powi(2)
                         })
                         .sum();
                     p[5] = h * h * r2 / dm.kappa;
-                    let dz = gradient(geo.grads(e), cell, s.zeta, s.zeta_prev);
+                    let dz = gradient(&geo.grads(e), cell, s.zeta, s.zeta_prev);
                     p[7] = dm.kappa * vol * dot(&dz, &dz);
-                    c.grad = gradient(geo.grads(e), cell, s.zeta, &[]);
+                    c.grad = gradient(&geo.grads(e), cell, s.zeta, &[]);
                 }
             }
         });

@@ -199,11 +199,13 @@ fn terms(c: &Counts) -> Terms {
     let n = c.d * c.nodes;
     let nnz_k = c.d * c.d * c.nodes * c.stencil;
     let nnz_h = c.nodes * c.stencil;
-    // Vertices, gradients, measure, ε and B per cell (upper triangles, fem::CellTensors),
-    // and the cells around each node that the step's element scatters gather over
-    // (fem::NodeCells: a u32 per cell and vertex, an offset per node).
+    // Vertices, gradients (d of a tetrahedron, fem::Geometry, all three of a triangle),
+    // measure and B per cell (its upper triangle, fem::CellTensors), and the cells around
+    // each node that the step's element scatters gather over (fem::NodeCells: a u32 per
+    // cell and vertex, an offset per node).
+    let gradients = if c.d == 3.0 { 9.0 } else { 6.0 };
     let per_cell =
-        8.0 * ((c.d + 1.0) + (c.d + 1.0) * c.d + 1.0 + c.d * (c.d + 1.0)) + 4.0 * (c.d + 1.0);
+        8.0 * ((c.d + 1.0) + gradients + 1.0 + c.d * (c.d + 1.0) / 2.0) + 4.0 * (c.d + 1.0);
     // The a posteriori estimate: (d + 1)/2 interior facets per cell (two cells, a normal,
     // |F| and h_F) with the hash map that pairs them at set-up, h_T, the step's per-cell σ,
     // ∇ζ, |ε(w)|² and eight indicators, the cell indicators with their stored copy and

@@ -276,7 +276,7 @@ fn on_a_manufactured_solution_the_estimate_converges_with_the_error() {
             w: &w,
             w_prev: None,
             b: &zero,
-            eps: &zero,
+            u_prev: &vec![0.0; w.len()],
             zeta_prev: &[],
             zeta: &[],
         };

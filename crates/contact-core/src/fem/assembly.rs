@@ -59,12 +59,12 @@ pub fn viscous_stiffness_in_pattern<const D: usize>(
             let (g, m) = (geo.grads(e), geo.measure[e]);
             if cell.iter().all(|&v| dofs.frame(v).is_none()) {
                 for b in 0..=D {
-                    let gab = gradient_dot(g, a, b);
+                    let gab = gradient_dot(&g, a, b);
                     for d in 0..D {
                         if let Slot::Free(j) = dofs.slot[D * cell[b] + d] {
                             let mut v = [0.0; D];
                             for (v, &(_, c)) in v.iter_mut().zip(comps) {
-                                *v = entry_from_dot(g, m, eta, xi, gab, (a, c), (b, d));
+                                *v = entry_from_dot(&g, m, eta, xi, gab, (a, c), (b, d));
                             }
                             add(j, &v[..comps.len()]);
                         }
@@ -80,7 +80,7 @@ pub fn viscous_stiffness_in_pattern<const D: usize>(
                     for b in 0..=D {
                         for d in 0..D {
                             ke[(a * D + c) * nd + b * D + d] =
-                                stiffness_entry(g, m, eta, xi, (a, c), (b, d));
+                                stiffness_entry(&g, m, eta, xi, (a, c), (b, d));
                         }
                     }
                 }
@@ -362,8 +362,9 @@ fn viscous_entries<const D: usize>(
     let mut ke = vec![0.0; nd * nd];
     for (e, cell) in mesh.cells().enumerate() {
         let (g, m) = (geo.grads(e), geo.measure[e]);
-        let entry =
-            |a: usize, c: usize, b: usize, d: usize| stiffness_entry(g, m, eta, xi, (a, c), (b, d));
+        let entry = |a: usize, c: usize, b: usize, d: usize| {
+            stiffness_entry(&g, m, eta, xi, (a, c), (b, d))
+        };
         if cell.iter().all(|&v| dofs.frame(v).is_none()) {
             for a in 0..=D {
                 for c in 0..D {

@@ -1,6 +1,6 @@
-//! A symmetric tensor field constant on each cell (ε(u_{n−1}) and B_{n−1} of the time step),
-//! stored as each tensor's upper triangle: D(D + 1)/2 numbers a cell instead of D², 48 bytes
-//! of a tetrahedron's 72 (two such fields are 64 MB of the 441k-cell part's 651 MiB peak).
+//! A symmetric tensor field constant on each cell (B_{n−1} of the time step), stored as each
+//! tensor's upper triangle: D(D + 1)/2 numbers a cell instead of D², 48 bytes of a
+//! tetrahedron's 72.
 //!
 //! The tensors stored are symmetric to the bit (the strain is formed symmetric, and the
 //! elastic laws act on its entries alike), so a tensor read back is the one stored.

@@ -261,7 +261,7 @@ pub fn add_stress_divergence<const D: usize>(
     out: &mut [f64],
 ) {
     cells.gather(out, D, |e, a, out| {
-        let (s, vol, g) = (b.get(e), geo.measure[e], geo.grads(e)[a]);
+        let (s, vol, g) = (b.get(e), geo.measure[e], geo.grad(e, a));
         for c in 0..D {
             let mut v = 0.0;
             for k in 0..D {
@@ -275,14 +275,16 @@ pub fn add_stress_divergence<const D: usize>(
 /// F_i = ∫_Ω φ_T(ζ) ψ_i by the cell rule of [`cell_rule`] (triangles: the 3 edge
 /// midpoints, weights |T|/3; tetrahedra: the 4-point rule, weights |T|/4), with ζ
 /// interpolated linearly to the points and the strain constant on T
-/// (docs/src/explanation/numerics.md#damage-source-vector). `phi(e, ζ)` is the source on element e at
-/// damage value ζ; `out` has one entry per node.
-pub fn damage_source<const D: usize>(
+/// (docs/src/explanation/numerics.md#damage-source-vector). `phi(&strain(e), ζ)` is the
+/// source on element e at damage value ζ (`strain(e)` is formed once per element);
+/// `out` has one entry per node.
+pub fn damage_source<const D: usize, S>(
     mesh: &Mesh<D>,
     cells: &NodeCells,
     geo: &Geometry<D>,
     zeta: &[f64],
-    phi: impl Fn(usize, f64) -> f64 + Sync,
+    strain: impl Fn(usize) -> S + Sync,
+    phi: impl Fn(&S, f64) -> f64 + Sync,
     out: &mut [f64],
 ) {
     // The source values at the points (φ reads the cell's strain), once per point in fixed
@@ -298,12 +300,13 @@ pub fn damage_source<const D: usize>(
             for (i, f) in chunk.chunks_mut(q).enumerate() {
                 let e = start / q + i;
                 let cell = mesh.cell(e);
+                let s = strain(e);
                 for ((l, wq), f) in rule.iter().zip(f) {
                     let z: f64 = cell.iter().enumerate().map(|(a, &n)| l[a] * zeta[n]).sum();
                     *f = if D == 2 {
-                        phi(e, z)
+                        phi(&s, z)
                     } else {
-                        wq * geo.measure[e] * phi(e, z)
+                        wq * geo.measure[e] * phi(&s, z)
                     };
                 }
             }
@@ -348,7 +351,7 @@ mod tests {
         let mut div = vec![0.25; D * mesh.n_nodes()];
         for (e, cell) in mesh.cells().enumerate() {
             for (a, &n) in cell.iter().enumerate() {
-                let g = geo.grads(e)[a];
+                let g = geo.grad(e, a);
                 for c in 0..D {
                     let mut v = 0.0;
                     for k in 0..D {
@@ -419,7 +422,7 @@ mod tests {
             );
             Threads::new(t).install(|| {
                 add_stress_divergence(&cells, &geo, &stored, &mut d);
-                damage_source(mesh, &cells, &geo, &zeta, phi, &mut f);
+                damage_source(mesh, &cells, &geo, &zeta, |e| e, |&e, z| phi(e, z), &mut f);
             });
             assert_eq!(bits(&d), bits(&div), "(B, ε(ψ)) on {t} threads");
             assert_eq!(bits(&f), bits(&src), "F on {t} threads");

@@ -116,7 +116,7 @@ struct DamagePart {
 }
 
 /// What the two sub-problems of step n read, borrowed from the [`Simulation`]: the data, the
-/// discretisation, and the state at t_{n−1} with its per-element ε(u_{n−1}) and B_{n−1}.
+/// discretisation, and the state at t_{n−1} with its per-element B_{n−1}.
 struct StepInput<'a, const D: usize> {
     n: usize,
     k: f64,
@@ -128,8 +128,9 @@ struct StepInput<'a, const D: usize> {
     dofs: &'a DofMap<D>,
     settings: &'a SolverSettings,
     mass: &'a Csr,
+    /// u_{n−1} and ζ_{n−1} (global, interleaved; per node).
+    u_prev: &'a [f64],
     zeta_prev: &'a [f64],
-    eps: &'a CellTensors<D>,
     b: &'a CellTensors<D>,
 }
 
@@ -203,7 +204,8 @@ impl DamagePart {
             s.cells,
             s.geo,
             s.zeta_prev,
-            |e, z| phi(&source, &s.eps.get(e), z),
+            |e| s.geo.strain(s.mesh, e, s.u_prev),
+            |eps, z| phi(&source, eps, z),
             &mut self.f,
         );
         s.mass.mul_vec(s.zeta_prev, &mut self.g);
@@ -249,8 +251,9 @@ pub struct Simulation<const D: usize = 2> {
     mass: Csr,
     velocity: VelocityPart,
     damage: Option<DamagePart>,
-    /// Per-element ε(u_{n−1}) and B_{n−1} of the current step.
-    eps: CellTensors<D>,
+    /// Per-element B_{n−1} of the current step. ε(u_{n−1}) is formed again where it is read
+    /// (the damage source, the norms, the estimate) rather than kept: 48 bytes a
+    /// tetrahedron, 21 MB of the 441k-cell part's peak.
     b: CellTensors<D>,
     /// The a posteriori estimator when the scene's output asks for it, with the cell
     /// indicators of the last step.
@@ -385,13 +388,13 @@ impl<const D: usize> Simulation<D> {
         let t = n as f64 * k;
         self.history_stress();
         let (velocity, damage) = self.solve_sub_problems(n, k, t)?;
-        self.advance(n, k);
-        self.report(n, k, t, velocity, damage)
+        let norms = self.advance(n, k);
+        self.report(n, t, norms, velocity, damage)
     }
 
     /// B_{n−1} = B(ε(u_{n−1}), ζ̄_{n−1}) on every element, the history term of (3.8) and (3.13),
     /// with ζ̄ the mean of ζ_{n−1} at the element's vertices (the P0 projection of (3.8) for
-    /// the paper's B (4.1)); keeps ε(u_{n−1}), which the damage source φ reads too.
+    /// the paper's B (4.1)).
     fn history_stress(&mut self) {
         history_stress(
             &self.problem,
@@ -399,7 +402,6 @@ impl<const D: usize> Simulation<D> {
             &self.geo,
             &self.state.u,
             &self.state.zeta,
-            &mut self.eps,
             &mut self.b,
         );
     }
@@ -425,8 +427,8 @@ impl<const D: usize> Simulation<D> {
             dofs: &self.dofs,
             settings: &self.settings,
             mass: &self.mass,
+            u_prev: &self.state.u,
             zeta_prev: &self.state.zeta,
-            eps: &self.eps,
             b: &self.b,
         };
         let velocity = &mut self.velocity;
@@ -442,9 +444,10 @@ impl<const D: usize> Simulation<D> {
     }
 
     /// u_n = u_{n−1} + k w_n (3.12) and ζ_n from the damage step: the state moves to t_n.
-    /// A run that estimates its error does so in between, while w_{n−1} and ζ_{n−1} are at
-    /// hand.
-    fn advance(&mut self, n: usize, k: f64) {
+    /// A run that estimates its error does so in between, while w_{n−1}, u_{n−1} and ζ_{n−1}
+    /// are at hand, and so are |w_n|_V and |u_n|_V (returned, in that order), from
+    /// ε(u_n) = ε(u_{n−1}) + k ε(w_n) per element.
+    fn advance(&mut self, n: usize, k: f64) -> (f64, f64) {
         if self.estimator.is_some() {
             std::mem::swap(&mut self.w, &mut self.w_prev);
         }
@@ -461,50 +464,51 @@ impl<const D: usize> Simulation<D> {
                 w: &self.w,
                 w_prev: self.w_known.then_some(self.w_prev.as_slice()),
                 b: &self.b,
-                eps: &self.eps,
+                u_prev: &self.state.u,
                 zeta_prev: &self.state.zeta,
                 zeta,
             };
             self.estimate = Some(estimator.step(&self.problem, &self.mesh, &self.geo, &data));
             self.w_known = true;
         }
-        par::zip_apply(&mut self.state.u, &self.w, |u, w| u + k * w);
-        if let Some(d) = &self.damage {
-            self.state.zeta.copy_from_slice(&d.next);
-        }
-        self.state.step = n;
-    }
-
-    /// The report of step n: |w_n|_V and |u_n|_V (|v|_V = ‖ε(v)‖_L2(Ω)), |ζ_n|_Z0 =
-    /// (ζ_nᵀ M ζ_n)^½, min ζ_n, the solvers' reports and the slipping Γ3 nodes. A norm that
-    /// is not finite is an error.
-    fn report(
-        &self,
-        n: usize,
-        k: f64,
-        t: f64,
-        velocity: SolverReport,
-        damage: Option<SolverReport>,
-    ) -> Result<StepReport, SolveError> {
-        // Both in one pass: ε(u_n) = ε(u_{n−1}) + k ε(w_n) per element.
         // Chunk partials added in chunk order: the same bits for any thread count.
-        let (w2, u2) = par::map_ranges(self.eps.len(), par::VECTOR_CHUNK, |cells| {
+        let (w2, u2) = par::map_ranges(self.mesh.n_cells(), par::VECTOR_CHUNK, |cells| {
             let (mut w2, mut u2) = (0.0, 0.0);
             for e in cells {
                 let ew = self.geo.strain(&self.mesh, e, &self.w);
+                let eu = self.geo.strain(&self.mesh, e, &self.state.u);
                 w2 += self.geo.measure[e] * ew.norm_squared();
-                u2 += self.geo.measure[e] * (self.eps.get(e) + ew * k).norm_squared();
+                u2 += self.geo.measure[e] * (eu + ew * k).norm_squared();
             }
             (w2, u2)
         })
         .into_iter()
         .fold((0.0, 0.0), |(a, b), (w, u)| (a + w, b + u));
+        par::zip_apply(&mut self.state.u, &self.w, |u, w| u + k * w);
+        if let Some(d) = &self.damage {
+            self.state.zeta.copy_from_slice(&d.next);
+        }
+        self.state.step = n;
+        (w2.sqrt(), u2.sqrt())
+    }
+
+    /// The report of step n: |w_n|_V and |u_n|_V (|v|_V = ‖ε(v)‖_L2(Ω); `norms`, from
+    /// [`Simulation::advance`]), |ζ_n|_Z0 = (ζ_nᵀ M ζ_n)^½, min ζ_n, the solvers' reports and
+    /// the slipping Γ3 nodes. A norm that is not finite is an error.
+    fn report(
+        &self,
+        n: usize,
+        t: f64,
+        (w_v, u_v): (f64, f64),
+        velocity: SolverReport,
+        damage: Option<SolverReport>,
+    ) -> Result<StepReport, SolveError> {
         let mut scratch = vec![0.0; self.mesh.n_nodes()];
         let report = StepReport {
             n,
             t,
-            w_v: w2.sqrt(),
-            u_v: u2.sqrt(),
+            w_v,
+            u_v,
             zeta_l2: norms::mass_norm(&self.mass, &self.state.zeta, &mut scratch),
             zeta_min: par::min(&self.state.zeta),
             velocity,
@@ -525,23 +529,20 @@ impl<const D: usize> Simulation<D> {
     }
 }
 
-/// ε(u)|_T and B(ε(u), ζ̄)|_T on every element, ζ̄ the mean of ζ at the element's vertices
-/// (the P0 projection of (3.8) for the paper's B (4.1)).
+/// B(ε(u), ζ̄)|_T on every element, ζ̄ the mean of ζ at the element's vertices (the P0
+/// projection of (3.8) for the paper's B (4.1)).
 fn history_stress<const D: usize>(
     problem: &Problem,
     mesh: &Mesh<D>,
     geo: &Geometry<D>,
     u: &[f64],
     zeta: &[f64],
-    eps: &mut CellTensors<D>,
     b: &mut CellTensors<D>,
 ) {
     let elasticity = problem.material.elasticity;
-    eps.fill(|e| geo.strain(mesh, e, u));
-    let eps = &*eps;
     b.fill(|e| {
         let zbar = mesh.cell(e).iter().map(|&n| zeta[n]).sum::<f64>() / (D + 1) as f64;
-        elastic_stress(&elasticity, &eps.get(e), zbar)
+        elastic_stress(&elasticity, &geo.strain(mesh, e, u), zbar)
     });
 }
 

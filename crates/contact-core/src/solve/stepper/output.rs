@@ -335,17 +335,8 @@ pub fn initial_fields<const D: usize>(
     let sel = problem.output.fields;
     let (sigma, von_mises) = if sel.sigma || sel.von_mises {
         let nt = mesh.n_cells();
-        let mut eps = CellTensors::zeros(nt);
         let mut b = CellTensors::zeros(nt);
-        history_stress(
-            problem,
-            mesh,
-            &Geometry::new(mesh),
-            &u,
-            &zeta,
-            &mut eps,
-            &mut b,
-        );
+        history_stress(problem, mesh, &Geometry::new(mesh), &u, &zeta, &mut b);
         let b: Vec<Tensor<D>> = (0..nt).map(|e| b.get(e)).collect();
         stress_fields(problem, &b)
     } else {

@@ -160,7 +160,6 @@ impl<const D: usize> Simulation<D> {
                 w_free: vec![0.0; n_free],
             },
             damage,
-            eps: CellTensors::zeros(nt),
             b: CellTensors::zeros(nt),
             estimator: problem
                 .output
