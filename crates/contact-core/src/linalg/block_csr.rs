@@ -287,7 +287,9 @@ impl<T: Entry> BlockCsr<T> {
             let piece = start / m;
             let blocks = (piece * per_piece).min(nb)..((piece + 1) * per_piece).min(nb);
             match (self.s, self.sc) {
+                (1, 1) => self.scatter_rows::<1, 1>(blocks, x, part),
                 (3, 6) => self.scatter_rows::<3, 6>(blocks, x, part),
+                (6, 6) => self.scatter_rows::<6, 6>(blocks, x, part),
                 (2, 3) => self.scatter_rows::<2, 3>(blocks, x, part),
                 _ => self.scatter_rows_any(blocks, x, part),
             }
@@ -546,18 +548,30 @@ mod tests {
     }
 
     /// A prolongator-like 40 × 27 matrix in blocks of 3 rows (2 for some, like Γ3 nodes) by
-    /// 6 columns (the last aggregate of 3): its product and its transpose product by pieces
-    /// are those of the rounded entries in scalar CSR, row by row and for any thread count.
+    /// 6 columns (the last aggregate of 3), and in 1 × 1, 6 × 6 and 4 × 5 blocks (each
+    /// kernel of the product and the transpose product): its product and its transpose
+    /// product by pieces are those of the rounded entries in scalar CSR, row by row and for
+    /// any thread count.
     #[test]
     fn rectangular_blocks_multiply_and_restrict_like_scalar_rows() {
+        let every = |step: usize, end: usize| -> Vec<usize> {
+            (0..end).step_by(step).chain([end]).collect()
+        };
         let rows: Vec<usize> = (0..=40)
             .filter(|&r| r % 3 == 0 || r == 40 || r == 20)
             .collect();
-        let cols = vec![0usize, 6, 12, 18, 24, 27];
+        multiply_and_restrict_like_scalar_rows(&rows, &[0, 6, 12, 18, 24, 27]);
+        multiply_and_restrict_like_scalar_rows(&every(1, 40), &every(1, 27));
+        multiply_and_restrict_like_scalar_rows(&every(6, 40), &every(6, 27));
+        multiply_and_restrict_like_scalar_rows(&every(4, 40), &every(5, 27));
+    }
+
+    fn multiply_and_restrict_like_scalar_rows(rows: &[usize], cols: &[usize]) {
         let (n, m) = (40, 27);
+        let col_blocks = cols.len() - 1;
         let mut t = Vec::new();
         for i in 0..n {
-            let home = (i * 5 / n).min(4);
+            let home = (i * col_blocks / n).min(col_blocks - 1);
             for j in 0..m {
                 let block = cols.iter().rposition(|&c| c <= j).unwrap();
                 if block.abs_diff(home) <= 1 && (i + 2 * j) % 7 != 3 {
@@ -567,7 +581,7 @@ mod tests {
         }
         let a = Csr::from_triplets(n, m, t);
         let rounded = reference_matrix(&a);
-        let b = BlockCsr32::rectangular(&a, &rows, &cols);
+        let b = BlockCsr32::rectangular(&a, rows, cols);
         assert_eq!((b.nrows(), b.ncols()), (n, m));
         let xc: Vec<f64> = (0..m).map(|j| (0.7 * j as f64).cos()).collect();
         let x: Vec<f64> = (0..n).map(|i| (0.3 * i as f64).sin() + 0.1).collect();

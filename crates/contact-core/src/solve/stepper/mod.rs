@@ -107,8 +107,10 @@ struct DamagePart {
     solver: DamageStep,
     /// The linear term M ζ_{n−1}/k + F_{n−1}.
     g: Vec<f64>,
-    /// The source vector F_{n−1}.
+    /// The source vector F_{n−1}, and its values at the cells' points
+    /// ([`loads::damage_source`]).
     f: Vec<f64>,
+    at_points: Vec<f64>,
     /// ζ_n once solved; on entry ζ_{n−1}, from which the starting point is predicted.
     next: Vec<f64>,
     /// ζ_{n−2} (empty at the start and after a resume: no prediction then).
@@ -206,6 +208,7 @@ impl DamagePart {
             s.zeta_prev,
             |e| s.geo.strain(s.mesh, e, s.u_prev),
             |eps, z| phi(&source, eps, z),
+            &mut self.at_points,
             &mut self.f,
         );
         s.mass.mul_vec(s.zeta_prev, &mut self.g);
@@ -475,8 +478,7 @@ impl<const D: usize> Simulation<D> {
         let (w2, u2) = par::map_ranges(self.mesh.n_cells(), par::VECTOR_CHUNK, |cells| {
             let (mut w2, mut u2) = (0.0, 0.0);
             for e in cells {
-                let ew = self.geo.strain(&self.mesh, e, &self.w);
-                let eu = self.geo.strain(&self.mesh, e, &self.state.u);
+                let [ew, eu] = self.geo.strains(&self.mesh, e, [&self.w, &self.state.u]);
                 w2 += self.geo.measure[e] * ew.norm_squared();
                 u2 += self.geo.measure[e] * (eu + ew * k).norm_squared();
             }

@@ -135,6 +135,7 @@ impl<const D: usize> Simulation<D> {
                     solver,
                     g: vec![0.0; nn],
                     f: vec![0.0; nn],
+                    at_points: Vec::new(),
                     next: zeta.clone(),
                     before: Vec::new(),
                 })
