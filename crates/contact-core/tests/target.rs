@@ -9,6 +9,17 @@ use contact_core::study::target::{self, Discard, Limits};
 use contact_core::study::{self, Execution, StudyError, TargetResult};
 use serde_json::json;
 use std::ops::ControlFlow;
+use std::sync::{Mutex, MutexGuard};
+
+/// The tests of this file run one at a time: `paper_targets_are_met_without_waste` compares
+/// two wall times of one study, which a sibling test's study running beside it on the same
+/// cores skews (it failed so under load).
+fn one_at_a_time() -> MutexGuard<'static, ()> {
+    static SERIAL: Mutex<()> = Mutex::new(());
+    SERIAL
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
 
 fn go(doc: serde_json::Value, limits: Limits) -> Result<TargetResult, StudyError> {
     let (spec, _) = target::parse(&doc, "").unwrap_or_else(|e| panic!("{e}"));
@@ -35,6 +46,7 @@ fn paper(e: f64) -> serde_json::Value {
 /// figures as the study reports them).
 #[test]
 fn paper_targets_are_met_without_waste() {
+    let _serial = one_at_a_time();
     let mut chosen = Vec::new();
     for e in [0.2, 0.1, 0.05] {
         let r = go(paper(e), Limits::default()).unwrap();
@@ -78,6 +90,7 @@ fn paper_targets_are_met_without_waste() {
 #[test]
 #[ignore = "a reference at h = 1/256 (about 16 s); run with --ignored"]
 fn the_finest_paper_choice_is_measured_against_a_finer_reference() {
+    let _serial = one_at_a_time();
     let e = 0.05;
     let r = go(paper(e), Limits::default()).unwrap();
     let (n, steps) = level(&r);
@@ -105,6 +118,7 @@ fn the_finest_paper_choice_is_measured_against_a_finer_reference() {
 /// k = 1/2, where w(T) = 0); the planner's walk stops at (1/16, 1/8), 2 ×.
 #[test]
 fn the_choice_costs_at_most_twice_the_brute_force_optimum() {
+    let _serial = one_at_a_time();
     brute_force_comparison(&[0.2], 2.0, false);
 }
 
@@ -115,6 +129,7 @@ fn the_choice_costs_at_most_twice_the_brute_force_optimum() {
 #[test]
 #[ignore = "not attainable with the (2h, 2k) check: the bar at h = 1/8 is 0.33 > 0.25 (see above)"]
 fn the_choice_for_a_target_next_to_a_level_s_error_costs_at_most_twice_the_optimum() {
+    let _serial = one_at_a_time();
     brute_force_comparison(&[0.25], 2.0, false);
 }
 
@@ -122,6 +137,7 @@ fn the_choice_for_a_target_next_to_a_level_s_error_costs_at_most_twice_the_optim
 /// error bar at most the target): the planner's choice costs at most 2 × the cheapest.
 #[test]
 fn the_choice_costs_at_most_twice_the_cheapest_checked_pair() {
+    let _serial = one_at_a_time();
     brute_force_comparison(&[0.25, 0.2], 2.0, true);
 }
 
@@ -204,6 +220,7 @@ fn brute_force_comparison(targets: &[f64], bound: f64, checked: bool) {
 /// made on their nested levels, the check passes, and the result names the refinement.
 #[test]
 fn a_given_mesh_and_a_box_are_planned_the_same_way() {
+    let _serial = one_at_a_time();
     let plate = go(
         json!({"scene": "plate-with-hole", "target": {"error": 0.2, "quantity": "w"}}),
         Limits::default(),
@@ -233,6 +250,7 @@ fn a_given_mesh_and_a_box_are_planned_the_same_way() {
 /// that stops it and the best error reachable within the limits, with its cost.
 #[test]
 fn an_unreachable_target_is_refused_with_the_reason() {
+    let _serial = one_at_a_time();
     let err = go(
         paper(0.02),
         Limits {
@@ -276,6 +294,7 @@ fn an_unreachable_target_is_refused_with_the_reason() {
 /// the mesh is exported. The uniform attempt stays in the report as the level checked.
 #[test]
 fn a_target_study_takes_an_adaptive_mesh_where_it_is_cheaper() {
+    let _serial = one_at_a_time();
     let doc_auto = || json!({"scene": "l-bracket", "target": {"error": 0.1, "quantity": "w", "meshes": "auto"}});
     let r = go(doc_auto(), Limits::default()).unwrap();
     eprintln!("{}", r.text_table());
