@@ -362,6 +362,15 @@ impl<T: Entry> BlockCsr<T> {
         }
     }
 
+    /// The operator in scalar CSR, its nonzero entries widened to f64: for what reads an f64
+    /// operator where only this copy is kept ([`super::multigrid::Hierarchy::operator_in_f64`]).
+    pub fn to_csr(&self) -> Csr {
+        let keep = vec![true; self.nrows()];
+        Csr::from_rows(self.nrows(), self.ncols(), &keep, |i, push| {
+            self.for_each_in_row(i, push)
+        })
+    }
+
     /// The block row holding row i.
     fn block_row(&self, i: usize) -> usize {
         self.ptr.partition_point(|&p| p <= i) - 1
@@ -583,6 +592,11 @@ mod tests {
         let rounded = reference_matrix(&a);
         let b = BlockCsr32::rectangular(&a, rows, cols);
         assert_eq!((b.nrows(), b.ncols()), (n, m));
+        // Widened back, the same pattern and the rounded entries.
+        let widened = b.to_csr();
+        assert_eq!(widened.indptr, rounded.indptr);
+        assert_eq!(widened.indices, rounded.indices);
+        assert_eq!(widened.values, rounded.values);
         let xc: Vec<f64> = (0..m).map(|j| (0.7 * j as f64).cos()).collect();
         let x: Vec<f64> = (0..n).map(|i| (0.3 * i as f64).sin() + 0.1).collect();
         let mut want = vec![0.0; n];

@@ -24,6 +24,7 @@ use super::pcg::Preconditioner;
 use super::{Csr, LinearOperator};
 use prolongator::Prolongator;
 use smoother::Chebyshev;
+use std::borrow::Cow;
 use std::sync::Arc;
 
 /// The DOFs of each node block (a node's free velocity components; an aggregate's coarse
@@ -418,14 +419,23 @@ impl Hierarchy {
         }
     }
 
+    /// Level l's operator in f64: the one kept, or where it was shed its f32 copy widened
+    /// (a preconditioner's rounding of it, 2⁻²⁴ relative); `None` past the coarsest.
+    pub fn operator_in_f64(&self, l: usize) -> Option<Cow<'_, Csr>> {
+        match (self.operator_at(l), self.level_f32(l)) {
+            (Some(a), _) => Some(Cow::Borrowed(a)),
+            (None, Some(a32)) => Some(Cow::Owned(a32.to_csr())),
+            (None, None) => None,
+        }
+    }
+
     /// Drops the f64 operators of the levels not in `keep` that have a single-precision
-    /// copy ([`Params::mixed`]), which is all the V-cycle reads there. What still needs them
-    /// must keep them: the truncated cycle updates A₁ = P₀ᵀ A P₀ of K's hierarchy for every
-    /// slipping Jacobian; the finest operator is kept where its owner reads it from here (the
-    /// damage step's H), not where the owner holds it in another storage (the velocity
-    /// step's K in f64 node blocks); a hierarchy rebuilt for one Jacobian
-    /// ([`Hierarchy::rebuilt_from`]) keeps none. On the 82k-node part this is K, the K_II
-    /// cycle's first coarse operator and H's first coarse level.
+    /// copy ([`Params::mixed`]), which is all the V-cycle reads there. The finest operator
+    /// is kept where its owner reads it from here (the damage step's H), not where the owner
+    /// holds it in another storage (the velocity step's K in f64 node blocks). The truncated
+    /// cycles, which update A₁ = P₀ᵀ A P₀ of K's hierarchy for each Jacobian, read it
+    /// widened from its f32 copy ([`Hierarchy::operator_in_f64`]): a preconditioner's
+    /// rounding, for 20 MB on the 82k-node part.
     pub fn shed_operators(&mut self, keep: &[usize]) {
         for (l, level) in self.levels.iter_mut().enumerate() {
             if level.a32.is_some() && !keep.contains(&l) {
@@ -689,7 +699,6 @@ mod tests {
         let whole = Arc::new(build(true));
         assert!(whole.n_levels() >= 3, "{:?}", whole.sizes());
         let mut shed = build(true);
-        // What the velocity step keeps of K's hierarchy: A₁ only (K is held in node blocks).
         shed.shed_operators(&[1]);
         assert!(shed.operator_at(1).is_some());
         for l in (0..shed.n_levels() - 1).filter(|&l| l != 1) {
@@ -709,6 +718,27 @@ mod tests {
             z
         };
         assert_eq!(apply(&Arc::new(shed)), apply(&whole));
+        // What the velocity step keeps of K's hierarchy: no level's f64 operator (K is held
+        // in node blocks); A₁ read back for the truncated cycles is each entry rounded to f32.
+        let mut none = build(true);
+        none.shed_operators(&[]);
+        assert!(none.operator_at(1).is_none());
+        let widened = none.operator_in_f64(1).expect("level 1");
+        let kept = whole.operator_at(1).expect("kept");
+        let rows = |a: &Csr| -> Vec<Vec<(u32, f64)>> {
+            (0..a.nrows)
+                .map(|i| {
+                    let row = a.indptr[i]..a.indptr[i + 1];
+                    let entries = a.indices[row.clone()].iter().zip(&a.values[row]);
+                    entries
+                        .map(|(&j, &v)| (j, v as f32 as f64))
+                        .filter(|&(_, v)| v != 0.0)
+                        .collect()
+                })
+                .collect()
+        };
+        assert_eq!(rows(&widened), rows(kept));
+        assert!(matches!(whole.operator_in_f64(1), Some(Cow::Borrowed(_))));
         let mut plain = build(false);
         plain.shed_operators(&[]);
         assert!((0..plain.n_levels()).all(|l| plain.operator_at(l).is_some()));

@@ -23,6 +23,7 @@
 //! With every Γ3 node fixed this is multigrid for K_II with contact-free coarse spaces below
 //! the first level; with none fixed and E = 0 it is A's own V-cycle.
 
+use super::prolongator::Prolongator;
 use super::smoother::Chebyshev;
 use super::{Hierarchy, VCycle};
 use crate::linalg::block_csr::BlockCsr32;
@@ -145,6 +146,41 @@ fn block_matrix(n: usize, blocks: &[NodeBlock]) -> Csr {
     Csr::from_triplets(n, n, t)
 }
 
+/// A₁' = A₁ − X − Xᵀ + P_Fᵀ A P_F + P̃ᵀ E⁺ P̃, the first coarse operator of the truncated
+/// cycle: Galerkin for M⁺ with P̃ = P with F's rows zeroed (X = P_Fᵀ A P). E⁺ P̃ has rows only
+/// on E's DOFs of R, so P̃ᵀ E⁺ P̃ = P_Eᵀ E⁺ P_E with P_E those rows of P: the same terms in the
+/// same order as with all of P̃, without a copy and a transpose of P. Its own function so
+/// that the products and the widened A₁ are freed before the levels below are rebuilt.
+fn first_coarse_updated(
+    h: &Hierarchy,
+    p: &Prolongator,
+    a: &Sparse,
+    is_fixed: &[bool],
+    positive: &[NodeBlock],
+) -> Csr {
+    let n = a.nrows();
+    let mut in_e = vec![false; n];
+    for b in positive {
+        for i in b.start..b.start + b.size {
+            in_e[i] = !is_fixed[i];
+        }
+    }
+    let p_e = p.rows_of(&in_e);
+    let p_f = p.rows_of(is_fixed);
+    let a_f = a.rows_of(is_fixed);
+    let p_ft = transpose(&p_f);
+    let x = product(&p_ft, &p.left_product(&a_f));
+    let y = product(&p_ft, &product(&a_f, &p_f));
+    let z = product(&transpose(&p_e), &product(&block_matrix(n, positive), &p_e));
+    let delta = add(1.0, &add(1.0, &y, 1.0, &z), -1.0, &x);
+    let delta = add(1.0, &delta, -1.0, &transpose(&x));
+    let delta = add(0.5, &delta, 0.5, &transpose(&delta));
+    let a1 = h
+        .operator_in_f64(1)
+        .expect("A's hierarchy has a first coarse operator");
+    add(1.0, &a1, 1.0, &delta)
+}
+
 /// The truncated V-cycle's finest level and the hierarchy below it.
 #[derive(Clone)]
 struct Levels {
@@ -243,34 +279,10 @@ impl Truncated {
                     jacobi.set_block(b as usize, &m);
                 }
                 let smoother = smoother.with_jacobi(jacobi);
-                // A₁' = A₁ − X − Xᵀ + P_Fᵀ A P_F + P̃ᵀ E⁺ P̃. E⁺ P̃ has rows only on E's DOFs
-                // of R, so P̃ᵀ E⁺ P̃ = P_Eᵀ E⁺ P_E with P_E those rows of P: the same terms in
-                // the same order as with all of P̃, without a copy and a transpose of P.
-                let mut in_e = vec![false; n];
-                for b in &positive {
-                    for i in b.start..b.start + b.size {
-                        in_e[i] = !is_fixed[i];
-                    }
-                }
-                let p_e = p.rows_of(&in_e);
-                let p_f = p.rows_of(&is_fixed);
-                let a_f = a.rows_of(&is_fixed);
-                let p_ft = transpose(&p_f);
-                let x = product(&p_ft, &p.left_product(&a_f));
-                let y = product(&p_ft, &product(&a_f, &p_f));
-                let z = product(
-                    &transpose(&p_e),
-                    &product(&block_matrix(n, &positive), &p_e),
-                );
-                let delta = add(1.0, &add(1.0, &y, 1.0, &z), -1.0, &x);
-                let delta = add(1.0, &delta, -1.0, &transpose(&x));
-                let delta = add(0.5, &delta, 0.5, &transpose(&delta));
-                let a1 = h
-                    .operator_at(1)
-                    .expect("A's hierarchy keeps its first coarse operator");
                 // Only this cycle reads the rebuilt levels, through their f32 copies where
                 // there are any.
-                let mut coarse = h.rebuilt_from(1, Arc::new(add(1.0, a1, 1.0, &delta)))?;
+                let a1 = first_coarse_updated(h, p, &a, &is_fixed, &positive);
+                let mut coarse = h.rebuilt_from(1, Arc::new(a1))?;
                 coarse.shed_operators(&[]);
                 let coarse = Arc::new(coarse);
                 let nc = p.ncols();

@@ -104,11 +104,10 @@ impl<const D: usize> Backend<D> for Multigrid {
             Hierarchy::new(k.clone(), blocks, levels, self.params()).map_err(factor_error)?;
         // After set-up K is only multiplied and read on Γ3 rows: with mixed precision, where
         // the V-cycle reads its f32 copy, the step holds it in f64 node blocks and the
-        // hierarchy sheds its scalar copy, keeping A₁ where the truncated cycles update it.
+        // hierarchy sheds its scalar copy, and A₁'s (the truncated cycles widen its f32 copy).
         let k = if self.mixed {
             let blocked = Sparse::in_blocks(&k, &bounds);
-            let contact_free = dofs.n_contact() == 0;
-            h.shed_operators(if contact_free { &[] } else { &[1] });
+            h.shed_operators(&[]);
             // The scalar K goes before the truncated cycle is made, not at the end of
             // set-up: held beside its blocks it was the set-up's peak (123 of 470 MB on the
             // 82k-node part).
