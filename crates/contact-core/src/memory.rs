@@ -140,15 +140,18 @@ const GEOMETRIC_HIERARCHY: f64 = 0.8;
 /// run slips. The cycles share the finest block diagonal and keep the levels they rebuild
 /// in f32 only ([`crate::linalg::multigrid::Hierarchy::shed_operators`]); fitted to
 /// box-exp3 on one thread, release: 1/32 sticking (g = 20) 442 MiB, predicted 1.19×;
-/// slipping (g = 2) 480 MiB, 1.07×; 1/64 sticking, two steps, 3,205 MiB, 1.23×.
-const FULL_SPACE_GEOMETRIC: f64 = 0.35;
+/// slipping (g = 2) 480 MiB, 1.07×; 1/64 sticking, two steps, 3,205 MiB, 1.23×. Since the
+/// cycles widen A₁ from its f32 copy instead of holding it in f64, 0.13 less (1/32: 14.5 MB
+/// of K's 115 MB; 386 MiB on two threads, predicted 1.14×).
+const FULL_SPACE_GEOMETRIC: f64 = 0.22;
 
 /// The same with smoothed aggregation: the truncated cycles' updates of the first coarse
 /// operator and the levels rebuilt below it (no copy of P: its rows are masked). Fitted to
 /// `benches/part` (82k nodes, one thread): 604 MiB sticking, predicted 1.15×; 661 MiB
 /// slipping (g = 0.5, T = 8/32), 1.05×; with K in node blocks since, 571 MiB sticking,
-/// 1.15×, and 643 MiB slipping all 32 steps, 1.02×.
-const FULL_SPACE_AGGREGATION: f64 = 0.25;
+/// 1.15×, and 643 MiB slipping all 32 steps, 1.02×. Since A₁ is widened from its f32 copy
+/// when a cycle is made (20.5 MB of K's 123 MB on the part), 0.17 less.
+const FULL_SPACE_AGGREGATION: f64 = 0.08;
 
 /// Smoothed aggregation's hierarchy of K as a multiple of K's bytes, beside 25 vectors: with
 /// the finest level aggregated on the distance-two graph the coarse operators are small; P
@@ -158,7 +161,10 @@ const FULL_SPACE_AGGREGATION: f64 = 0.25;
 /// 1/31 (85 and 580 MiB, predicted 0.93× and 1.01×) and the gmsh part of `benches/part` at
 /// 21k and 82k nodes (168 MiB for the whole run and 600 MiB for its first step, predicted
 /// 1.15× and 1.23×); [`FULL_SPACE_AGGREGATION`] has since fallen with the cycles' copies.
-const AGGREGATION_HIERARCHY: f64 = 1.1;
+/// Lowered from 1.1 when the part's run stopped holding its mesh twice and A₁ in f64 (39 MB
+/// of its peak): the part, one thread, 450 MiB sticking and 536 MiB slipping (32 steps),
+/// predicted 1.20× and 1.01×; its first step 1.23×.
+const AGGREGATION_HIERARCHY: f64 = 0.9;
 
 /// The smoothed-aggregation P of the finest level, part of [`AGGREGATION_HIERARCHY`], as a
 /// multiple of K's bytes (the part of `benches/part`: 52 MB against K's 121 MB). With mixed

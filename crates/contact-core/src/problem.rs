@@ -11,7 +11,7 @@ use crate::expr::Expr;
 use crate::mesh::locality::Numbering;
 pub use crate::mesh::support::Support;
 use crate::mesh::support::TagError;
-use crate::mesh::{AnyMesh, Mesh};
+use crate::mesh::{AnyMesh, Mesh, SharedMesh};
 pub use crate::mesh::{MeshPattern, Segment};
 
 /// A scalar datum f(x, y, z, t): a constant or a user formula parsed once (z = 0 in 2D).
@@ -259,38 +259,66 @@ pub struct Problem {
 
 /// A body given as a mesh (imported from gmsh or meshed from a polygon), its boundary
 /// facets already tagged with the problem's parts, refined `refine` times before use.
+///
+/// The mesh is held once, renumbered for locality ([`Mesh::ordered_for_locality`]), in the
+/// order every run on it computes in: an unrefined body's run shares it
+/// ([`Body::mesh_and_numbering`]), and outputs are given in the file's numbering through
+/// `numbering` ([`Body::output_mesh`]).
 #[derive(Debug, Clone)]
 pub struct Body {
     /// Where it came from, for summaries: `mesh <id or file>` or `polygon`.
     pub source: String,
-    pub base: AnyMesh,
+    /// The mesh as given, renumbered where [`Mesh::ordered_for_locality`] renumbers it.
+    pub base: Arc<AnyMesh>,
+    /// How `base` relates to the mesh as given, where it was renumbered.
+    pub numbering: Option<Arc<Numbering>>,
     pub refine: usize,
 }
 
 impl Body {
-    /// The mesh the scheme runs on: `base` renumbered for locality
-    /// ([`Mesh::ordered_for_locality`]) after `refine` red refinements (its dimension is D;
-    /// panics on the other one, a programming error since [`Problem::dim`] tells which).
-    pub fn mesh<const D: usize>(&self) -> Mesh<D> {
-        self.mesh_and_numbering().0
-    }
-
-    /// [`Body::mesh`] and, where its numbering differs from [`Body::output_mesh`]'s (an
-    /// unrefined base that was renumbered), how the two relate.
-    pub fn mesh_and_numbering<const D: usize>(&self) -> (Mesh<D>, Option<Numbering>) {
-        let base = self.base.get::<D>();
-        match (base.ordered_for_locality(), self.refine) {
-            (Some((ordered, numbering)), 0) => (ordered, Some(numbering)),
-            (Some((ordered, _)), r) => (refined(&ordered, r), None),
-            (None, r) => (refined(base, r), None),
+    /// The body of the mesh `given` (tagged), refined `refine` times before use.
+    pub fn new(source: String, given: AnyMesh, refine: usize) -> Body {
+        let (base, numbering) = match given {
+            AnyMesh::Plane(m) => {
+                let (m, n) = m.into_ordered_for_locality();
+                (AnyMesh::Plane(m), n)
+            }
+            AnyMesh::Solid(m) => {
+                let (m, n) = m.into_ordered_for_locality();
+                (AnyMesh::Solid(m), n)
+            }
+        };
+        Body {
+            source,
+            base: Arc::new(base),
+            numbering: numbering.map(Arc::new),
+            refine,
         }
     }
 
-    /// The mesh outputs are given on: the base as given when it is not refined (fields in
+    /// The mesh the scheme runs on (its dimension is D; panics on the other one, a
+    /// programming error since [`Problem::dim`] tells which): `base` after `refine` red
+    /// refinements.
+    pub fn mesh<const D: usize>(&self) -> Mesh<D> {
+        (*self.mesh_and_numbering::<D>().0).clone()
+    }
+
+    /// [`Body::mesh`], shared with the body where it is not refined, and, where its
+    /// numbering differs from [`Body::output_mesh`]'s (an unrefined base that was
+    /// renumbered), how the two relate.
+    pub fn mesh_and_numbering<const D: usize>(&self) -> (SharedMesh<D>, Option<Arc<Numbering>>) {
+        match self.refine {
+            0 => (SharedMesh::of(self.base.clone()), self.numbering.clone()),
+            r => (SharedMesh::new(refined(self.base.get::<D>(), r)), None),
+        }
+    }
+
+    /// The mesh outputs are given on: the mesh as given when it is not refined (fields in
     /// the numbering of the uploaded file), else [`Body::mesh`].
     pub fn output_mesh<const D: usize>(&self) -> Mesh<D> {
-        match self.refine {
-            0 => self.base.get::<D>().clone(),
+        match (self.refine, &self.numbering) {
+            (0, Some(numbering)) => numbering.mesh_back(self.base.get::<D>()),
+            (0, None) => self.base.get::<D>().clone(),
             _ => self.mesh(),
         }
     }
@@ -308,13 +336,13 @@ impl Body {
             self.base.n_cells(),
         );
         // 3D: faces F = (4C + B)/2, B boundary faces.
-        let mut f = match &self.base {
+        let mut f = match &*self.base {
             AnyMesh::Plane(_) => 0,
             AnyMesh::Solid(m) => (4 * c + m.facets.len()) / 2,
         };
         for _ in 0..self.refine {
             n += e;
-            match self.base {
+            match *self.base {
                 // A triangle's red refinement: every edge splits in two, each cell adds 3 edges.
                 AnyMesh::Plane(_) => {
                     e = 2 * e + 3 * c;
@@ -383,13 +411,13 @@ impl Problem {
     /// ([`Body::mesh_and_numbering`]), how the two relate.
     pub fn mesh_and_numbering<const D: usize>(
         &self,
-    ) -> Result<(Mesh<D>, Option<Numbering>), TagError> {
+    ) -> Result<(SharedMesh<D>, Option<Arc<Numbering>>), TagError> {
         match &self.body {
             Some(b) => {
                 assert_eq!(D, self.dim(), "mesh of the problem's dimension");
                 Ok(b.mesh_and_numbering())
             }
-            None => Ok((self.mesh()?, None)),
+            None => Ok((SharedMesh::new(self.mesh()?), None)),
         }
     }
 

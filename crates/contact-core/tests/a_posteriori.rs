@@ -34,7 +34,7 @@ fn level<const D: usize>(p: Problem) -> Level<D> {
     let mut mesh = None;
     let summary = run::<D>(p, SolverSettings::default(), |sim: &Simulation<D>, _| {
         w.push(sim.w.clone());
-        mesh.get_or_insert_with(|| sim.mesh.clone());
+        mesh.get_or_insert_with(|| (*sim.mesh).clone());
         ControlFlow::Continue(())
     })
     .unwrap();

@@ -136,11 +136,7 @@ fn the_efficiency_index_stays_in_its_band_on_the_plate_with_a_hole() {
 /// The scene of `doc` on `mesh`, on the linear path `path`.
 fn on(doc: &serde_json::Value, mesh: &AnyMesh, path: LinearPath) -> Problem {
     let mut p = scene::validate(doc).unwrap();
-    p.body = Some(Arc::new(Body {
-        source: "adaptive".into(),
-        base: mesh.clone(),
-        refine: 0,
-    }));
+    p.body = Some(Arc::new(Body::new("adaptive".into(), mesh.clone(), 0)));
     p.linear = path;
     p
 }

@@ -2,6 +2,8 @@
 //! body of a problem, and the service's outputs (mesh JSON, VTU) of a stored job.
 
 use super::Mesh;
+use std::ops::Deref;
+use std::sync::Arc;
 
 /// Triangles (d = 2) or tetrahedra (d = 3).
 #[derive(Debug, Clone)]
@@ -89,5 +91,31 @@ impl AnyMesh {
             AnyMesh::Plane(m) => AnyMesh::Plane((0..levels).fold(m.clone(), |m, _| m.refine())),
             AnyMesh::Solid(m) => AnyMesh::Solid((0..levels).fold(m.clone(), |m, _| m.refine())),
         }
+    }
+}
+
+/// A `Mesh<D>` shared, not copied: a given body's mesh is held once, by its problem
+/// ([`crate::problem::Body`]), and read through this by the run that computes on it.
+#[derive(Debug, Clone)]
+pub struct SharedMesh<const D: usize>(Arc<AnyMesh>);
+
+impl<const D: usize> SharedMesh<D> {
+    /// A mesh of its own (a rectangle, a box, a refined body).
+    pub fn new(mesh: Mesh<D>) -> SharedMesh<D> {
+        SharedMesh(Arc::new(AnyMesh::from_mesh(mesh)))
+    }
+
+    /// `any`, shared; panics when its dimension is not D (a programming error).
+    pub fn of(any: Arc<AnyMesh>) -> SharedMesh<D> {
+        assert_eq!(any.dim(), D, "a mesh of dimension {D}");
+        SharedMesh(any)
+    }
+}
+
+impl<const D: usize> Deref for SharedMesh<D> {
+    type Target = Mesh<D>;
+
+    fn deref(&self) -> &Mesh<D> {
+        self.0.get::<D>()
     }
 }

@@ -43,6 +43,25 @@ impl Numbering {
     pub fn cells_back<T: Copy>(&self, v: &[T]) -> Vec<T> {
         permute_back(&self.cell, v, 1)
     }
+
+    /// The mesh `ordered` was made from ([`Mesh::ordered_for_locality`]), the same bits:
+    /// nodes and cells back in their places and their labels back, each cell's vertices and
+    /// the facets in their order. What outputs are given on, made when asked for instead
+    /// of held beside the mesh a run computes on.
+    pub fn mesh_back<const D: usize>(&self, ordered: &Mesh<D>) -> Mesh<D> {
+        let nodes = self.nodes_back(&ordered.nodes, 1);
+        let relabelled: Vec<usize> = (0..ordered.n_cells())
+            .flat_map(|e| ordered.cell(e).iter().map(|&v| self.node[v]))
+            .collect();
+        let cells = permute_back(&self.cell, &relabelled, D + 1);
+        let mut facets = ordered.facets.clone();
+        for f in &mut facets {
+            for v in &mut f.nodes {
+                *v = self.node[*v];
+            }
+        }
+        Mesh::from_parts(nodes, cells, facets, ordered.groups.clone(), Vec::new())
+    }
 }
 
 /// out[width·to[i] + c] = v[width·i + c].
@@ -68,44 +87,77 @@ impl<const D: usize> Mesh<D> {
     /// structured mesh (its lattice numbering is local already, and its geometric levels are
     /// made for it) and for a refined one (its numbering relates it to its coarse mesh).
     pub fn ordered_for_locality(&self) -> Option<(Mesh<D>, Numbering)> {
+        let (mesh, numbering) = self.clone().into_ordered_for_locality();
+        numbering.map(|n| (mesh, n))
+    }
+
+    /// [`Mesh::ordered_for_locality`] in place: the mesh's own storage is permuted, so a body
+    /// made from an imported mesh holds no second copy of it, nor leaves one freed in
+    /// another thread's allocator arena than the run's.
+    pub fn into_ordered_for_locality(mut self) -> (Mesh<D>, Option<Numbering>) {
         if !self.nesting.is_empty() || self.grid.is_some() || self.lattice.is_some() {
-            return None;
+            return (self, None);
         }
-        let node = NodeGraph::new(self).reverse_cuthill_mckee();
+        let node = NodeGraph::new(&self).reverse_cuthill_mckee();
         let mut new_of = vec![0; node.len()];
         for (i, &old) in node.iter().enumerate() {
             new_of[old] = i;
         }
-        let nodes = node.iter().map(|&old| self.nodes[old]).collect();
-        let relabelled: Vec<usize> = self.cells.iter().map(|&v| new_of[v]).collect();
-        let vertices = |e: usize| &relabelled[(D + 1) * e..(D + 1) * (e + 1)];
+        gather_in_place(&mut self.nodes, &node, 1);
+        for v in &mut self.cells {
+            *v = new_of[*v];
+        }
         // Cells by lowest node, ties in cell order: a counting sort.
-        let lowest = |e: usize| *vertices(e).iter().min().expect("a cell has vertices");
+        let lowest = |cells: &[usize], e: usize| {
+            let vertices = &cells[(D + 1) * e..(D + 1) * (e + 1)];
+            *vertices.iter().min().expect("a cell has vertices")
+        };
         let mut start = vec![0usize; node.len() + 1];
         for e in 0..self.n_cells() {
-            start[lowest(e) + 1] += 1;
+            start[lowest(&self.cells, e) + 1] += 1;
         }
         for v in 0..node.len() {
             start[v + 1] += start[v];
         }
         let mut cell = vec![0usize; self.n_cells()];
         for e in 0..self.n_cells() {
-            let v = lowest(e);
+            let v = lowest(&self.cells, e);
             cell[start[v]] = e;
             start[v] += 1;
         }
-        let cells = cell
-            .iter()
-            .flat_map(|&e| vertices(e).iter().copied())
-            .collect();
-        let mut facets = self.facets.clone();
-        for f in &mut facets {
+        gather_in_place(&mut self.cells, &cell, D + 1);
+        for f in &mut self.facets {
             for v in &mut f.nodes {
                 *v = new_of[*v];
             }
         }
-        let mesh = Mesh::from_parts(nodes, cells, facets, self.groups.clone(), Vec::new());
-        Some((mesh, Numbering { node, cell }))
+        (self, Some(Numbering { node, cell }))
+    }
+}
+
+/// v[width·i + c] ← v[width·from[i] + c] for a permutation `from`, along its cycles: no copy
+/// of v.
+fn gather_in_place<T: Copy>(v: &mut [T], from: &[usize], width: usize) {
+    assert_eq!(v.len(), width * from.len());
+    let mut done = vec![false; from.len()];
+    let mut first = Vec::with_capacity(width);
+    for i in 0..from.len() {
+        if done[i] {
+            continue;
+        }
+        first.clear();
+        first.extend_from_slice(&v[width * i..width * (i + 1)]);
+        let mut j = i;
+        loop {
+            done[j] = true;
+            let k = from[j];
+            if k == i {
+                v[width * j..width * (j + 1)].copy_from_slice(&first);
+                break;
+            }
+            v.copy_within(width * k..width * (k + 1), width * j);
+            j = k;
+        }
     }
 }
 
@@ -334,6 +386,28 @@ mod tests {
         let cb = numbering.cells_back(&c);
         for (e, &old) in numbering.cell.iter().enumerate() {
             assert_eq!(cb[old], e);
+        }
+    }
+
+    /// An imported part (its facets in physical groups) and the scrambled box come back from
+    /// their renumbered copies bit for bit: what outputs are given on.
+    #[test]
+    fn the_mesh_as_given_comes_back_bit_for_bit() {
+        let cylinder: Mesh<3> =
+            crate::mesh::import::import(include_bytes!("../../tests/meshes/cylinder.msh")).unwrap();
+        assert!(!cylinder.groups.is_empty());
+        for given in [cylinder, scrambled_box()] {
+            let (ordered, numbering) = given.ordered_for_locality().unwrap();
+            assert_ne!(ordered.nodes, given.nodes);
+            let back = numbering.mesh_back(&ordered);
+            let cells = |m: &Mesh<3>| -> Vec<usize> {
+                (0..m.n_cells()).flat_map(|e| m.cell(e).to_vec()).collect()
+            };
+            assert_eq!(back.nodes, given.nodes);
+            assert_eq!(cells(&back), cells(&given));
+            assert_eq!(back.facets, given.facets);
+            assert_eq!(back.groups, given.groups);
+            assert!(back.nesting.is_empty() && back.grid.is_none() && back.lattice.is_none());
         }
     }
 

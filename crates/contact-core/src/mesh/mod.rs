@@ -31,7 +31,7 @@ pub mod quality;
 pub mod refine;
 pub mod support;
 
-pub use any::AnyMesh;
+pub use any::{AnyMesh, SharedMesh};
 pub use quality::MeshError;
 
 /// How each square cell of the structured mesh is cut into triangles.

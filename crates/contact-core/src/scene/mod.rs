@@ -256,13 +256,7 @@ fn scene(cx: &mut Cx, doc: &Value, files: &dyn MeshFiles) -> Option<Problem> {
         Shape::Mesh { name, .. } => Some(format!("mesh {name}")),
         Shape::Polygon { .. } => Some("polygon".to_string()),
     }
-    .map(|source| {
-        Arc::new(Body {
-            source,
-            base,
-            refine: spec.refine,
-        })
-    });
+    .map(|source| Arc::new(Body::new(source, base, spec.refine)));
     let problem = Problem {
         name: name?,
         body,

@@ -2,7 +2,7 @@
 //! the time nodes the study compares, and the solver figures of the run.
 
 use crate::linalg::par::Threads;
-use crate::mesh::Mesh;
+use crate::mesh::SharedMesh;
 use crate::problem::Problem;
 use crate::run::{Hooks, Run, RunError};
 use crate::solve::stepper::{Prepared, StepReport};
@@ -62,7 +62,7 @@ pub struct RunStats {
 }
 
 pub struct LevelRun<const D: usize = 2> {
-    pub mesh: Mesh<D>,
+    pub mesh: SharedMesh<D>,
     pub unknowns: usize,
     pub steps: usize,
     /// Wall time of the whole run, set-up (assembly, factorisation) included.

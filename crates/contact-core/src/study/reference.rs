@@ -5,7 +5,7 @@
 use super::levels::{LevelRun, RunStats};
 use crate::fem::{assembly, norms, Geometry};
 use crate::linalg::Csr;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, SharedMesh};
 use std::any::Any;
 use std::collections::{BTreeSet, VecDeque};
 use std::sync::{Arc, Mutex};
@@ -14,7 +14,7 @@ use std::sync::{Arc, Mutex};
 /// ε(w) on every cell (w itself is never needed: errors in |·|_V compare strains) and ζ,
 /// with the norms |w|_V and |ζ|_Z0; the mesh, its geometry and mass matrix.
 pub struct Reference<const D: usize = 2> {
-    pub mesh: Mesh<D>,
+    pub mesh: SharedMesh<D>,
     pub geo: Geometry<D>,
     pub mass: Csr,
     pub unknowns: usize,

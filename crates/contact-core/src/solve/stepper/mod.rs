@@ -30,9 +30,10 @@ use crate::laws::constitutive::elastic_stress;
 use crate::laws::damage_source::phi;
 use crate::linalg::{par, Csr, LinearPath};
 use crate::mesh::locality::Numbering;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, SharedMesh};
 use crate::problem::Problem;
 use setup::formula_text;
+use std::sync::Arc;
 
 /// Below this many nodes the two sub-problems run one after the other (thread hand-off
 /// would cost more than it saves).
@@ -237,13 +238,13 @@ impl DamagePart {
 /// One job's assembled operators, factorisations and current state, in dimension D.
 pub struct Simulation<const D: usize = 2> {
     pub problem: Problem,
-    /// The mesh the scheme runs on ([`Problem::mesh`]); every vector of the run is in its
-    /// numbering.
-    pub mesh: Mesh<D>,
+    /// The mesh the scheme runs on ([`Problem::mesh`]), shared with the problem's body
+    /// where it is not refined; every vector of the run is in its numbering.
+    pub mesh: SharedMesh<D>,
     /// How `mesh` relates to the mesh outputs and checkpoints are given on
     /// ([`Problem::any_mesh`]), where the two differ: [`Simulation::fields`],
     /// [`Simulation::checkpoint_state`] and [`Simulation::restore`] map through it.
-    numbering: Option<Numbering>,
+    numbering: Option<Arc<Numbering>>,
     pub geo: Geometry<D>,
     pub dofs: DofMap<D>,
     pub settings: SolverSettings,

@@ -167,9 +167,9 @@ impl<const D: usize> Simulation<D> {
     /// The mesh outputs are given on ([`crate::problem::Problem::any_mesh`]): the run's
     /// mesh, or the body as given where the run renumbered it.
     pub fn output_mesh(&self) -> Mesh<D> {
-        match (&self.numbering, &self.problem.body) {
-            (Some(_), Some(body)) => body.output_mesh(),
-            _ => self.mesh.clone(),
+        match &self.numbering {
+            Some(numbering) => numbering.mesh_back(&self.mesh),
+            None => (*self.mesh).clone(),
         }
     }
 

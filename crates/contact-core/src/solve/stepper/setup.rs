@@ -8,7 +8,7 @@ use crate::a_posteriori::Estimator;
 use crate::fem::{assembly, CellTensors, DofMap, Geometry, NodeCells};
 use crate::linalg::{Csr, LinearPath};
 use crate::mesh::locality::Numbering;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, SharedMesh};
 use crate::problem::{Problem, SmallnessPolicy};
 use crate::solve::backend::{self, Backend};
 use crate::solve::smallness::{self, SmallnessReport};
@@ -27,9 +27,9 @@ pub struct Prepared<const D: usize = 2> {
     pub linear: LinearPath,
     pub predicted_bytes: u64,
     backend: Arc<dyn Backend<D>>,
-    mesh: Mesh<D>,
+    mesh: SharedMesh<D>,
     /// How `mesh` relates to the mesh outputs are given on, where the two differ.
-    numbering: Option<Numbering>,
+    numbering: Option<Arc<Numbering>>,
     geo: Geometry<D>,
     dofs: DofMap<D>,
     velocity: VelocityStep,

@@ -341,11 +341,7 @@ impl AdaptSpec {
                 .expect("the scene's mesh was tagged at validation"),
         };
         Problem {
-            body: Some(Arc::new(Body {
-                source: "reference".into(),
-                base,
-                refine: r,
-            })),
+            body: Some(Arc::new(Body::new("reference".into(), base, r))),
             ..self.base.clone()
         }
     }
@@ -365,11 +361,7 @@ fn on_mesh<const D: usize>(base: &Problem, mesh: &Mesh<D>, source: String) -> Pr
 /// [`on_mesh`] for a mesh of either dimension.
 pub(crate) fn on_any_mesh(base: &Problem, mesh: AnyMesh, source: String) -> Problem {
     let mut p = base.clone();
-    p.body = Some(Arc::new(Body {
-        source,
-        base: mesh,
-        refine: 0,
-    }));
+    p.body = Some(Arc::new(Body::new(source, mesh, 0)));
     p.cells_per_unit = 0;
     p.output.estimate = true;
     p.error_estimate = false;
