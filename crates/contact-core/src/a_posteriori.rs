@@ -208,7 +208,7 @@ impl<const D: usize> Estimator<D> {
                         interior.push(Interior {
                             cells: [e0, e],
                             normal: std::array::from_fn(|c| -g[c] / len),
-                            measure: D as f64 * geo.measure[e0] * len,
+                            measure: D as f64 * geo.measure(e0) * len,
                             h: diameter(&k[..D], &mesh.nodes),
                         });
                     }
@@ -283,7 +283,7 @@ impl<const D: usize> Estimator<D> {
             for (i, c) in out.iter_mut().enumerate() {
                 let e = first + i;
                 let cell = mesh.cell(e);
-                let (vol, h) = (geo.measure[e], self.h[e]);
+                let (vol, h) = (geo.measure(e), self.h[e]);
                 let eps_w = geo.strain(mesh, e, s.w);
                 c.sigma = viscous_stress(&problem.material.viscosity, &eps_w) + s.b.get(e);
                 c.w2 = vol * eps_w.norm_squared();

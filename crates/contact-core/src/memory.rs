@@ -67,6 +67,8 @@ struct Counts {
     /// Nodes of the coarsest geometric level when it is a given mesh (a refined body's
     /// base); 0 when the levels go down to a few cells (generated meshes).
     coarse_nodes: f64,
+    /// A generated box: its geometry is six cells' ([`crate::fem::Geometry`]).
+    kuhn: bool,
 }
 
 fn counts(p: &Problem) -> Counts {
@@ -100,6 +102,7 @@ fn counts(p: &Problem) -> Counts {
             Some(b) if b.refine > 0 => b.base.n_nodes() as f64,
             _ => 0.0,
         },
+        kuhn: p.body.is_none() && p.depth_cells().is_some(),
         contact: p
             .boundary
             .iter()
@@ -205,13 +208,16 @@ fn terms(c: &Counts) -> Terms {
     let n = c.d * c.nodes;
     let nnz_k = c.d * c.d * c.nodes * c.stencil;
     let nnz_h = c.nodes * c.stencil;
-    // Vertices, gradients (d of a tetrahedron, fem::Geometry, all three of a triangle),
-    // measure and B per cell (its upper triangle, fem::CellTensors), and the cells around
-    // each node that the step's element scatters gather over (fem::NodeCells: a u32 per
-    // cell and vertex, an offset per node).
-    let gradients = if c.d == 3.0 { 9.0 } else { 6.0 };
-    let per_cell =
-        8.0 * ((c.d + 1.0) + gradients + 1.0 + c.d * (c.d + 1.0) / 2.0) + 4.0 * (c.d + 1.0);
+    // Vertices, gradients (d of a tetrahedron, fem::Geometry, all three of a triangle) and
+    // measure (none per cell on a generated box), B per cell (its upper triangle,
+    // fem::CellTensors), and the cells around each node that the step's element scatters
+    // gather over (fem::NodeCells: a u32 per cell and vertex, an offset per node).
+    let geometry = match (c.kuhn, c.d == 3.0) {
+        (true, _) => 0.0,
+        (false, true) => 9.0 + 1.0,
+        (false, false) => 6.0 + 1.0,
+    };
+    let per_cell = 8.0 * ((c.d + 1.0) + geometry + c.d * (c.d + 1.0) / 2.0) + 4.0 * (c.d + 1.0);
     // The a posteriori estimate: (d + 1)/2 interior facets per cell (two cells, a normal,
     // |F| and h_F) with the hash map that pairs them at set-up, h_T, the step's per-cell σ,
     // ∇ζ, |ε(w)|² and eight indicators, the cell indicators with their stored copy and

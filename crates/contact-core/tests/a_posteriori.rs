@@ -265,7 +265,7 @@ fn on_a_manufactured_solution_the_estimate_converges_with_the_error() {
                     2.0 * x * y - h[(1, 1)],
                     0.5 * (x * x + y * y) - h[(0, 1)],
                 ];
-                e2 += geo.measure[t] / 3.0 * (d[0] * d[0] + d[1] * d[1] + 2.0 * d[2] * d[2]);
+                e2 += geo.measure(t) / 3.0 * (d[0] * d[0] + d[1] * d[1] + 2.0 * d[2] * d[2]);
             }
         }
         let zero = CellTensors::<2>::zeros(mesh.n_cells());

@@ -44,7 +44,7 @@ fn strain_error(mesh: &Mesh<3>, w: &[f64], eps: impl Fn([f64; 3]) -> [f64; 6]) -
                 + d[1] * d[1]
                 + d[2] * d[2]
                 + 2.0 * (d[3] * d[3] + d[4] * d[4] + d[5] * d[5]);
-            sum += wq * geo.measure[e] * sq;
+            sum += wq * geo.measure(e) * sq;
         }
     }
     sum.sqrt()

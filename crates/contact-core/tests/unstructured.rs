@@ -39,7 +39,7 @@ fn strain_error(mesh: &Mesh, w: &[f64], eps: impl Fn([f64; 2]) -> [f64; 3]) -> f
             let (p, q) = (mesh.nodes[tri[a]], mesh.nodes[tri[(a + 1) % 3]]);
             let x = eps([0.5 * (p[0] + q[0]), 0.5 * (p[1] + q[1])]);
             let d = [x[0] - h[(0, 0)], x[1] - h[(1, 1)], x[2] - h[(0, 1)]];
-            sum += geo.measure[e] / 3.0 * (d[0] * d[0] + d[1] * d[1] + 2.0 * d[2] * d[2]);
+            sum += geo.measure(e) / 3.0 * (d[0] * d[0] + d[1] * d[1] + 2.0 * d[2] * d[2]);
         }
     }
     sum.sqrt()

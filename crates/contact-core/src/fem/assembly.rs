@@ -56,7 +56,7 @@ pub fn viscous_stiffness_in_pattern<const D: usize>(
         let comps = &owner[rows.clone()];
         let mut ke = Vec::new();
         for (e, cell, a) in around(mesh, &start, &cells_of, node) {
-            let (g, m) = (geo.grads(e), geo.measure[e]);
+            let (g, m) = (geo.grads(e), geo.measure(e));
             if cell.iter().all(|&v| dofs.frame(v).is_none()) {
                 for b in 0..=D {
                     let gab = gradient_dot(&g, a, b);
@@ -361,7 +361,7 @@ fn viscous_entries<const D: usize>(
     let nd = (D + 1) * D;
     let mut ke = vec![0.0; nd * nd];
     for (e, cell) in mesh.cells().enumerate() {
-        let (g, m) = (geo.grads(e), geo.measure[e]);
+        let (g, m) = (geo.grads(e), geo.measure(e));
         let entry = |a: usize, c: usize, b: usize, d: usize| {
             stiffness_entry(&g, m, eta, xi, (a, c), (b, d))
         };
@@ -469,7 +469,7 @@ pub fn laplacian_in_pattern_of<const D: usize>(
 
 fn mass_entry<const D: usize>(geo: &Geometry<D>) -> impl Fn(usize, usize, usize) -> f64 + '_ {
     let denom = ((D + 1) * (D + 2)) as f64;
-    move |e, a, b| geo.measure[e] / denom * if a == b { 2.0 } else { 1.0 }
+    move |e, a, b| geo.measure(e) / denom * if a == b { 2.0 } else { 1.0 }
 }
 
 fn laplacian_entry<const D: usize>(geo: &Geometry<D>) -> impl Fn(usize, usize, usize) -> f64 + '_ {
@@ -479,7 +479,7 @@ fn laplacian_entry<const D: usize>(geo: &Geometry<D>) -> impl Fn(usize, usize, u
         for k in 1..D {
             dot += g[a][k] * g[b][k];
         }
-        geo.measure[e] * dot
+        geo.measure(e) * dot
     }
 }
 

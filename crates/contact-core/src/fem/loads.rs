@@ -70,7 +70,7 @@ pub fn add_body_force<const D: usize>(
     let constant = f0.is_constant_in_space().then(|| f0.at(&[0.0; D], t));
     let rule = cell_rule(D);
     for (e, cell) in mesh.cells().enumerate() {
-        let w = geo.measure[e] / (D + 1) as f64;
+        let w = geo.measure(e) / (D + 1) as f64;
         match constant {
             Some(f) => {
                 for &n in cell {
@@ -97,7 +97,7 @@ pub fn add_body_force<const D: usize>(
                     let f = f0.at(&point(cell, &mesh.nodes, l), t);
                     for (a, &n) in cell.iter().enumerate() {
                         for c in 0..D {
-                            out[D * n + c] += wq * geo.measure[e] * l[a] * f[c];
+                            out[D * n + c] += wq * geo.measure(e) * l[a] * f[c];
                         }
                     }
                 }
@@ -261,7 +261,7 @@ pub fn add_stress_divergence<const D: usize>(
     out: &mut [f64],
 ) {
     cells.gather(out, D, |e, a, out| {
-        let (s, vol, g) = (b.get(e), geo.measure[e], geo.grad(e, a));
+        let (s, vol, g) = (b.get(e), geo.measure(e), geo.grad(e, a));
         for c in 0..D {
             let mut v = 0.0;
             for k in 0..D {
@@ -307,7 +307,7 @@ pub fn damage_source<const D: usize, S>(
                 *f = if D == 2 {
                     phi(&s, z)
                 } else {
-                    wq * geo.measure[e] * phi(&s, z)
+                    wq * geo.measure(e) * phi(&s, z)
                 };
             }
         }
@@ -318,7 +318,7 @@ pub fn damage_source<const D: usize, S>(
         if D == 2 {
             // Edge p runs from vertex p to vertex p + 1: vertex a lies on edges a and a − 1,
             // taken in increasing p.
-            let w = geo.measure[e] / 3.0;
+            let w = geo.measure(e) / 3.0;
             for (p, f) in f.iter().enumerate() {
                 if p == a || (p + 1) % 3 == a {
                     out[0] += 0.5 * w * f;
@@ -357,7 +357,7 @@ mod tests {
                     for k in 0..D {
                         v += b[e][(c, k)] * g[k];
                     }
-                    div[D * n + c] -= geo.measure[e] * v;
+                    div[D * n + c] -= geo.measure(e) * v;
                 }
             }
         }
@@ -371,12 +371,12 @@ mod tests {
                     if D == 2 {
                         phi(e, z)
                     } else {
-                        wq * geo.measure[e] * phi(e, z)
+                        wq * geo.measure(e) * phi(e, z)
                     }
                 })
                 .collect();
             if D == 2 {
-                let w = geo.measure[e] / 3.0;
+                let w = geo.measure(e) / 3.0;
                 for (a, f) in f.iter().enumerate() {
                     let (i, j) = (cell[a], cell[(a + 1) % 3]);
                     src[i] += 0.5 * w * f;

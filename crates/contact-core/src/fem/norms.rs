@@ -7,7 +7,7 @@ use crate::mesh::Mesh;
 /// ‖ε(v)‖_L2 = (Σ_T |T| ε:ε)^½ for a global nodal vector field v.
 pub fn strain_norm<const D: usize>(mesh: &Mesh<D>, geo: &Geometry<D>, v: &[f64]) -> f64 {
     (0..mesh.n_cells())
-        .map(|t| geo.measure[t] * geo.strain(mesh, t, v).norm_squared())
+        .map(|t| geo.measure(t) * geo.strain(mesh, t, v).norm_squared())
         .sum::<f64>()
         .sqrt()
 }

@@ -196,7 +196,7 @@ fn level_errors<const D: usize>(
             .strain
             .chunks_exact(s)
             .zip(&parents)
-            .zip(&reference.geo.measure)
+            .zip(reference.geo.measures())
             .map(|((e, &p), a)| {
                 let c = &coarse_strain[s * p as usize..][..s];
                 for ((d, e), c) in diff.iter_mut().zip(e).zip(c) {

@@ -85,7 +85,7 @@ impl<const D: usize> Reference<D> {
                 let strain = strains(&mesh, &geo, &s.w);
                 let w2: f64 = strain
                     .chunks_exact(sym_len(D))
-                    .zip(&geo.measure)
+                    .zip(geo.measures())
                     .map(|(e, a)| a * double_dot::<D>(e))
                     .sum();
                 w_norms.push(w2.sqrt());

@@ -480,8 +480,8 @@ impl<const D: usize> Simulation<D> {
             let (mut w2, mut u2) = (0.0, 0.0);
             for e in cells {
                 let [ew, eu] = self.geo.strains(&self.mesh, e, [&self.w, &self.state.u]);
-                w2 += self.geo.measure[e] * ew.norm_squared();
-                u2 += self.geo.measure[e] * (eu + ew * k).norm_squared();
+                w2 += self.geo.measure(e) * ew.norm_squared();
+                u2 += self.geo.measure(e) * (eu + ew * k).norm_squared();
             }
             (w2, u2)
         })

@@ -51,7 +51,7 @@ pub fn difference<const D: usize>(
             let s = sym_len(D);
             let mut d = [0.0; 6];
             let (mut diff2, mut norm2) = (0.0, 0.0);
-            for ((ef, &p), a) in sf.chunks_exact(s).zip(&parents).zip(&geo.measure) {
+            for ((ef, &p), a) in sf.chunks_exact(s).zip(&parents).zip(geo.measures()) {
                 let ec = &sc[s * p as usize..][..s];
                 for ((d, x), y) in d.iter_mut().zip(ef).zip(ec) {
                     *d = x - y;
