@@ -44,7 +44,10 @@ impl<const D: usize> Geometry<D> {
 
     pub fn new(mesh: &Mesh<D>) -> Geometry<D> {
         let n_cells = mesh.n_cells();
-        let kuhn = D == 3 && mesh.lattice.is_some() && n_cells.is_multiple_of(KUHN);
+        let kuhn = D == 3
+            && mesh.lattice.is_some()
+            && n_cells.is_multiple_of(KUHN)
+            && congruent_cubes(mesh);
         let slots = if kuhn { KUHN } else { n_cells };
         let mut measure = Vec::with_capacity(slots);
         let mut grads = Vec::with_capacity(slots * Self::STORED);
@@ -147,6 +150,29 @@ impl<const D: usize> Geometry<D> {
         }
         es
     }
+}
+
+/// Every cell of a generated box has its first cube's cell's measure and gradients to
+/// 1e-12 relative: what [`Geometry::new`] checks before it stores six, since a box's nodes
+/// can be moved after it is made (`Mesh::nodes` is public) without its `lattice` going.
+fn congruent_cubes<const D: usize>(mesh: &Mesh<D>) -> bool {
+    let first: Vec<_> = (0..KUHN)
+        .map(|e| simplex(mesh.cell(e), &mesh.nodes))
+        .collect();
+    mesh.cells().enumerate().all(|(e, cell)| {
+        let (m0, g0) = &first[e % KUHN];
+        let (m, g) = simplex(cell, &mesh.nodes);
+        let scale = g0[..=D]
+            .iter()
+            .flatten()
+            .fold(0.0f64, |s, v| s.max(v.abs()));
+        (m - m0).abs() <= 1e-12 * m0
+            && g[..=D]
+                .iter()
+                .flatten()
+                .zip(g0[..=D].iter().flatten())
+                .all(|(a, b)| (a - b).abs() <= 1e-12 * scale)
+    })
 }
 
 /// |T| and the gradients of the barycentric functions of one simplex (entries past D unused).
@@ -305,5 +331,15 @@ mod tests {
         let volume: f64 = geo.measures().sum();
         assert_eq!(geo.measures().len(), rounded.n_cells());
         assert!((volume - 0.21).abs() < 1e-14, "{volume}");
+        // A box whose nodes were moved keeps its lattice but not its congruent cubes: its
+        // geometry is stored per cell.
+        let mut moved = Mesh::cuboid(2.0, 1.0, 1.0, 4, 2, 2);
+        moved
+            .nodes
+            .iter_mut()
+            .for_each(|p| p[2] += 0.1 * p[0] * p[0]);
+        assert!(moved.lattice.is_some());
+        assert_eq!(Geometry::new(&moved).measure.len(), moved.n_cells());
+        read_back_as_computed(&moved);
     }
 }
