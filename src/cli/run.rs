@@ -9,7 +9,7 @@ use contact_core::mesh::AnyMesh;
 use contact_core::output::fields::MeshJson;
 use contact_core::output::stored::{decode_state, encode_state};
 use contact_core::output::Summary;
-use contact_core::problem::Problem;
+use contact_core::problem::{FieldSet, Problem};
 use contact_core::run::{Hooks, Run, RunError};
 use contact_core::scene::{self, presets, Overrides};
 use contact_core::solve::stepper::{State, StepReport};
@@ -121,7 +121,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         .map(Path::to_path_buf)
         .unwrap_or_default();
     let scene_as_run = with_absolute_mesh(&doc, &dir);
-    let problem = match scene::validate_with(&doc, &SceneDir(dir)) {
+    let mut problem = match scene::validate_with(&doc, &SceneDir(dir)) {
         Ok(p) => p,
         Err(errors) => {
             eprintln!(
@@ -137,6 +137,10 @@ pub fn main(args: RunArgs) -> ExitCode {
         }
     }
     let fields_dir = args.out.as_ref().map(|d| d.join("fields"));
+    if fields_dir.is_none() {
+        // Nothing stores the steps' fields, so the run keeps nothing for them.
+        problem.output.fields = FieldSet::default();
+    }
     if let Some(dir) = &fields_dir {
         if let Err(e) = std::fs::create_dir_all(dir) {
             return fail(1, &format!("cannot create {}: {e}", dir.display()));

@@ -64,6 +64,8 @@ struct Counts {
     contact: bool,
     /// The run computes the a posteriori estimate ([`crate::a_posteriori`]).
     estimate: bool,
+    /// The run keeps B_{n−1} per cell ([`crate::problem::OutputSpec::keeps_history_stress`]).
+    history_stress: bool,
     /// Nodes of the coarsest geometric level when it is a given mesh (a refined body's
     /// base); 0 when the levels go down to a few cells (generated meshes).
     coarse_nodes: f64,
@@ -98,6 +100,7 @@ fn counts(p: &Problem) -> Counts {
         stencil: if d == 2 { 7.0 } else { 15.0 },
         damage: p.damage.is_some(),
         estimate: p.output.estimate,
+        history_stress: p.output.keeps_history_stress(),
         coarse_nodes: match &p.body {
             Some(b) if b.refine > 0 => b.base.n_nodes() as f64,
             _ => 0.0,
@@ -134,8 +137,10 @@ fn factor_entries(d: f64, n: f64) -> f64 {
 /// H's storage with the damage step): fitted to the measured peaks of box-exp3, g = 20, at
 /// 1/16, 1/24 and 1/32 (`contact-sim bench --linear-solver multigrid`: 60, 184 and 410 MiB;
 /// predicted 73, 217 and 493 MiB with FULL_SPACE_GEOMETRIC below) and 1/64 (3,338 MiB before
-/// H was shared; 3.7 GiB predicted).
-const GEOMETRIC_HIERARCHY: f64 = 0.8;
+/// H was shared; 3.7 GiB predicted). Lowered from 0.8 when the binary began to map blocks
+/// of 128 KiB and more for themselves (the allocator's slack left the peaks): box-exp3 at
+/// 1/32, two threads, 321 MiB for 32 steps, predicted 1.18×.
+const GEOMETRIC_HIERARCHY: f64 = 0.5;
 
 /// With a Γ3 the multigrid path's hierarchy is K's on all free DOFs (K shared, K_II never
 /// copied), plus the truncated cycles (K_II's, and the slipping steps') and the Newton
@@ -166,8 +171,10 @@ const FULL_SPACE_AGGREGATION: f64 = 0.08;
 /// 1.15× and 1.23×); [`FULL_SPACE_AGGREGATION`] has since fallen with the cycles' copies.
 /// Lowered from 1.1 when the part's run stopped holding its mesh twice and A₁ in f64 (39 MB
 /// of its peak): the part, one thread, 450 MiB sticking and 536 MiB slipping (32 steps),
-/// predicted 1.20× and 1.01×; its first step 1.23×.
-const AGGREGATION_HIERARCHY: f64 = 0.9;
+/// predicted 1.20× and 1.01×; its first step 1.23×. Lowered from 0.9 when the binary began
+/// to map blocks of 128 KiB and more for themselves: the part, one thread, 403 MiB sticking
+/// and 448 MiB slipping (T = 8/32), predicted 1.15× and 1.04×; its first step 1.20×.
+const AGGREGATION_HIERARCHY: f64 = 0.45;
 
 /// The smoothed-aggregation P of the finest level, part of [`AGGREGATION_HIERARCHY`], as a
 /// multiple of K's bytes (the part of `benches/part`: 52 MB against K's 121 MB). With mixed
@@ -209,15 +216,20 @@ fn terms(c: &Counts) -> Terms {
     let nnz_k = c.d * c.d * c.nodes * c.stencil;
     let nnz_h = c.nodes * c.stencil;
     // Vertices, gradients (d of a tetrahedron, fem::Geometry, all three of a triangle) and
-    // measure (none per cell on a generated box), B per cell (its upper triangle,
-    // fem::CellTensors), and the cells around each node that the step's element scatters
-    // gather over (fem::NodeCells: a u32 per cell and vertex, an offset per node).
+    // measure (none per cell on a generated box), B per cell where outputs read it (its
+    // upper triangle, fem::CellTensors), and the cells around each node that the step's
+    // element scatters gather over (fem::NodeCells: a u32 per cell and vertex, an offset
+    // per node).
     let geometry = match (c.kuhn, c.d == 3.0) {
         (true, _) => 0.0,
         (false, true) => 9.0 + 1.0,
         (false, false) => 6.0 + 1.0,
     };
-    let per_cell = 8.0 * ((c.d + 1.0) + geometry + c.d * (c.d + 1.0) / 2.0) + 4.0 * (c.d + 1.0);
+    let history = match c.history_stress {
+        true => c.d * (c.d + 1.0) / 2.0,
+        false => 0.0,
+    };
+    let per_cell = 8.0 * ((c.d + 1.0) + geometry + history) + 4.0 * (c.d + 1.0);
     // The a posteriori estimate: (d + 1)/2 interior facets per cell (two cells, a normal,
     // |F| and h_F) with the hash map that pairs them at set-up, h_T, the step's per-cell σ,
     // ∇ζ, |ε(w)|² and eight indicators, the cell indicators with their stored copy and

@@ -198,6 +198,13 @@ pub struct OutputSpec {
 }
 
 impl OutputSpec {
+    /// Does the run keep B_{n−1} (3.8) of every cell after its step? The stress fields
+    /// (σ_n = A ε(w_n) + B_{n−1}) and the a posteriori estimate read it once the state has
+    /// moved to t_n; without them the step forms each cell's B_{n−1} where it is used.
+    pub fn keeps_history_stress(&self) -> bool {
+        self.fields.sigma || self.fields.von_mises || self.estimate
+    }
+
     /// Is step n (1..=steps) stored?
     pub fn stores(&self, n: usize, steps: usize) -> bool {
         (self.every > 0 && n.is_multiple_of(self.every)) || (self.last && n == steps)

@@ -94,12 +94,10 @@ fn experiment_1_matches_a_direct_linear_solve() {
         let mut f = vec![0.0; 2 * mesh.n_nodes()];
         loads::add_body_force(&mesh, &geo, &sim.problem.body_force, t, &mut f);
         loads::add_tractions(&mesh, &sim.problem.boundary, t, &mut f);
-        let mut stored = contact_core::fem::CellTensors::zeros(b.len());
-        stored.fill(|e| b[e]);
         loads::add_stress_divergence(
             &contact_core::fem::NodeCells::new(&mesh),
             &geo,
-            &stored,
+            |e| b[e],
             &mut f,
         );
         let mut ff = vec![0.0; n];

@@ -9,8 +9,8 @@
 
 #![allow(clippy::needless_range_loop)] // Index loops over vertices and components spell out the formulas.
 
-use super::{CellTensors, Geometry, NodeCells};
-use crate::linalg::par;
+use super::{Geometry, NodeCells};
+use crate::laws::Tensor;
 use crate::mesh::Mesh;
 use crate::problem::{BoundaryKind, BoundaryPart, VectorField};
 
@@ -250,18 +250,19 @@ pub fn find_non_finite<const D: usize>(
     None
 }
 
-/// Adds −(B_T, ε(ψ_a e_c)) = −|T| (B_T ∇ψ_a)_c for per-element stresses `b` (B symmetric,
-/// one per cell) into `out` (D per node, interleaved): gathered node by node over `cells`
-/// ([`NodeCells::gather`]), each node's cells subtracted in cell order, so the same bits as
-/// the loop over cells on any thread count.
+/// Adds −(B_T, ε(ψ_a e_c)) = −|T| (B_T ∇ψ_a)_c for per-element stresses B_T = `b(T)` (B
+/// symmetric) into `out` (D per node, interleaved): gathered node by node over `cells`
+/// ([`NodeCells::gather_cell_values`], B_T formed once per chunk of nodes around T), each
+/// node's cells subtracted in cell order, so the same bits as the loop over cells on any
+/// thread count.
 pub fn add_stress_divergence<const D: usize>(
     cells: &NodeCells,
     geo: &Geometry<D>,
-    b: &CellTensors<D>,
+    b: impl Fn(usize) -> Tensor<D> + Sync + Send,
     out: &mut [f64],
 ) {
-    cells.gather(out, D, |e, a, out| {
-        let (s, vol, g) = (b.get(e), geo.measure(e), geo.grad(e, a));
+    cells.gather_cell_values(out, D, b, |e, s, a, out| {
+        let (vol, g) = (geo.measure(e), geo.grad(e, a));
         for c in 0..D {
             let mut v = 0.0;
             for k in 0..D {
@@ -276,50 +277,42 @@ pub fn add_stress_divergence<const D: usize>(
 /// midpoints, weights |T|/3; tetrahedra: the 4-point rule, weights |T|/4), with ζ
 /// interpolated linearly to the points and the strain constant on T
 /// (docs/src/explanation/numerics.md#damage-source-vector). `phi(&strain(e), ζ)` is the
-/// source on element e at damage value ζ (`strain(e)` is formed once per element);
-/// `out` has one entry per node. `at_points` is the caller's scratch for the values at the
-/// points, resized here: kept from step to step, it is not a per-step transient (14 MB on
-/// the 441k-cell part) that a thread's allocator arena holds on to after it is freed.
-#[allow(clippy::too_many_arguments)] // The scratch is the caller's, as in faer.
+/// source on element e at damage value ζ (`strain(e)` is formed once per element and chunk
+/// of nodes); `out` has one entry per node.
 pub fn damage_source<const D: usize, S>(
     mesh: &Mesh<D>,
     cells: &NodeCells,
     geo: &Geometry<D>,
     zeta: &[f64],
-    strain: impl Fn(usize) -> S + Sync,
-    phi: impl Fn(&S, f64) -> f64 + Sync,
-    at_points: &mut Vec<f64>,
+    strain: impl Fn(usize) -> S + Sync + Send,
+    phi: impl Fn(&S, f64) -> f64 + Sync + Send,
     out: &mut [f64],
 ) {
-    // The source values at the points (φ reads the cell's strain), once per point in fixed
-    // chunks of cells; each node then gathers its cells' shares in cell order, point by
+    // The source values at a cell's points (φ reads the cell's strain), formed once per
+    // chunk of nodes around it; each node gathers its cells' shares in cell order, point by
     // point: the cell loop's sums bit for bit, whatever the thread count.
     let rule = cell_rule(D);
-    let q = rule.len();
-    at_points.resize(mesh.n_cells() * q, 0.0);
-    par::for_each_chunk_mut(at_points, q * (par::VECTOR_CHUNK / 4), |start, chunk| {
-        for (i, f) in chunk.chunks_mut(q).enumerate() {
-            let e = start / q + i;
-            let cell = mesh.cell(e);
-            let s = strain(e);
-            for ((l, wq), f) in rule.iter().zip(f) {
-                let z: f64 = cell.iter().enumerate().map(|(a, &n)| l[a] * zeta[n]).sum();
-                *f = if D == 2 {
-                    phi(&s, z)
-                } else {
-                    wq * geo.measure(e) * phi(&s, z)
-                };
-            }
+    let at_points = |e: usize| {
+        let cell = mesh.cell(e);
+        let s = strain(e);
+        let mut f = [0.0; 4];
+        for ((l, wq), f) in rule.iter().zip(&mut f) {
+            let z: f64 = cell.iter().enumerate().map(|(a, &n)| l[a] * zeta[n]).sum();
+            *f = if D == 2 {
+                phi(&s, z)
+            } else {
+                wq * geo.measure(e) * phi(&s, z)
+            };
         }
-    });
+        f
+    };
     out.iter_mut().for_each(|v| *v = 0.0);
-    cells.gather(out, 1, |e, a, out| {
-        let f = &at_points[q * e..q * (e + 1)];
+    cells.gather_cell_values(out, 1, at_points, |e, f, a, out| {
         if D == 2 {
             // Edge p runs from vertex p to vertex p + 1: vertex a lies on edges a and a − 1,
             // taken in increasing p.
             let w = geo.measure(e) / 3.0;
-            for (p, f) in f.iter().enumerate() {
+            for (p, f) in f[..3].iter().enumerate() {
                 if p == a || (p + 1) % 3 == a {
                     out[0] += 0.5 * w * f;
                 }
@@ -336,7 +329,8 @@ pub fn damage_source<const D: usize, S>(
 mod tests {
     use super::*;
     use crate::expr::Expr;
-    use crate::laws::Tensor;
+    use crate::fem::CellTensors;
+    use crate::linalg::par;
     use crate::problem::{MeshPattern, ScalarField, Segment, Support};
 
     /// The element loops of [`add_stress_divergence`] and [`damage_source`] cell by cell:
@@ -421,18 +415,8 @@ mod tests {
                 vec![f64::NAN; mesh.n_nodes()],
             );
             Threads::new(t).install(|| {
-                add_stress_divergence(&cells, &geo, &stored, &mut d);
-                let mut at_points = Vec::new();
-                damage_source(
-                    mesh,
-                    &cells,
-                    &geo,
-                    &zeta,
-                    |e| e,
-                    |&e, z| phi(e, z),
-                    &mut at_points,
-                    &mut f,
-                );
+                add_stress_divergence(&cells, &geo, |e| stored.get(e), &mut d);
+                damage_source(mesh, &cells, &geo, &zeta, |e| e, |&e, z| phi(e, z), &mut f);
             });
             assert_eq!(bits(&d), bits(&div), "(B, ε(ψ)) on {t} threads");
             assert_eq!(bits(&f), bits(&src), "F on {t} threads");

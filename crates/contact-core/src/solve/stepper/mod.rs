@@ -28,9 +28,11 @@ use crate::a_posteriori::{Estimator, Parts, StepData, StepEstimate};
 use crate::fem::{loads, norms, CellTensors, DofMap, Geometry, NodeCells};
 use crate::laws::constitutive::elastic_stress;
 use crate::laws::damage_source::phi;
+use crate::laws::Tensor;
 use crate::linalg::{par, Csr, LinearPath};
 use crate::mesh::locality::Numbering;
 use crate::mesh::{Mesh, SharedMesh};
+use crate::problem::Elasticity;
 use crate::problem::Problem;
 use setup::formula_text;
 use std::sync::Arc;
@@ -108,10 +110,8 @@ struct DamagePart {
     solver: DamageStep,
     /// The linear term M ζ_{n−1}/k + F_{n−1}.
     g: Vec<f64>,
-    /// The source vector F_{n−1}, and its values at the cells' points
-    /// ([`loads::damage_source`]).
+    /// The source vector F_{n−1} ([`loads::damage_source`]).
     f: Vec<f64>,
-    at_points: Vec<f64>,
     /// ζ_n once solved; on entry ζ_{n−1}, from which the starting point is predicted.
     next: Vec<f64>,
     /// ζ_{n−2} (empty at the start and after a resume: no prediction then).
@@ -134,7 +134,8 @@ struct StepInput<'a, const D: usize> {
     /// u_{n−1} and ζ_{n−1} (global, interleaved; per node).
     u_prev: &'a [f64],
     zeta_prev: &'a [f64],
-    b: &'a CellTensors<D>,
+    /// B_{n−1} of every cell where the run keeps it, else formed where it is read.
+    b: Option<&'a CellTensors<D>>,
 }
 
 impl VelocityPart {
@@ -159,7 +160,14 @@ impl VelocityPart {
         if load.iter().any(|v| !v.is_finite()) {
             return Err(load_fault(s.problem, s.mesh, s.t, s.n));
         }
-        loads::add_stress_divergence(s.cells, s.geo, s.b, load);
+        match s.b {
+            Some(b) => loads::add_stress_divergence(s.cells, s.geo, |e| b.get(e), load),
+            None => {
+                let elasticity = &s.problem.material.elasticity;
+                let b = |e| history_stress_of(elasticity, s.mesh, s.geo, s.u_prev, s.zeta_prev, e);
+                loads::add_stress_divergence(s.cells, s.geo, b, load)
+            }
+        }
         Ok(())
     }
 }
@@ -209,7 +217,6 @@ impl DamagePart {
             s.zeta_prev,
             |e| s.geo.strain(s.mesh, e, s.u_prev),
             |eps, z| phi(&source, eps, z),
-            &mut self.at_points,
             &mut self.f,
         );
         s.mass.mul_vec(s.zeta_prev, &mut self.g);
@@ -255,10 +262,11 @@ pub struct Simulation<const D: usize = 2> {
     mass: Csr,
     velocity: VelocityPart,
     damage: Option<DamagePart>,
-    /// Per-element B_{n−1} of the current step. ε(u_{n−1}) is formed again where it is read
-    /// (the damage source, the norms, the estimate) rather than kept: 48 bytes a
-    /// tetrahedron, 21 MB of the 441k-cell part's peak.
-    b: CellTensors<D>,
+    /// Per-element B_{n−1} of the current step where outputs read it after the step
+    /// ([`crate::problem::OutputSpec::keeps_history_stress`]): 48 bytes a tetrahedron, 21 MB
+    /// of the 441k-cell part. Otherwise the velocity load forms it where it reads it, as
+    /// ε(u_{n−1}) is formed again where it is read (the damage source, the norms).
+    b: Option<CellTensors<D>>,
     /// The a posteriori estimator when the scene's output asks for it, with the cell
     /// indicators of the last step.
     estimator: Option<Box<Estimator<D>>>,
@@ -406,7 +414,7 @@ impl<const D: usize> Simulation<D> {
             &self.geo,
             &self.state.u,
             &self.state.zeta,
-            &mut self.b,
+            self.b.as_mut(),
         );
     }
 
@@ -433,7 +441,7 @@ impl<const D: usize> Simulation<D> {
             mass: &self.mass,
             u_prev: &self.state.u,
             zeta_prev: &self.state.zeta,
-            b: &self.b,
+            b: self.b.as_ref(),
         };
         let velocity = &mut self.velocity;
         let (v, d) = match self.damage.as_mut() {
@@ -467,7 +475,7 @@ impl<const D: usize> Simulation<D> {
                 m_a: self.smallness.m_a,
                 w: &self.w,
                 w_prev: self.w_known.then_some(self.w_prev.as_slice()),
-                b: &self.b,
+                b: self.b.as_ref().expect("an estimate keeps B_{n−1}"),
                 u_prev: &self.state.u,
                 zeta_prev: &self.state.zeta,
                 zeta,
@@ -532,21 +540,34 @@ impl<const D: usize> Simulation<D> {
     }
 }
 
-/// B(ε(u), ζ̄)|_T on every element, ζ̄ the mean of ζ at the element's vertices (the P0
-/// projection of (3.8) for the paper's B (4.1)).
+/// B(ε(u), ζ̄)|_T on every element into `b` where the run keeps it
+/// ([`history_stress_of`]).
 fn history_stress<const D: usize>(
     problem: &Problem,
     mesh: &Mesh<D>,
     geo: &Geometry<D>,
     u: &[f64],
     zeta: &[f64],
-    b: &mut CellTensors<D>,
+    b: Option<&mut CellTensors<D>>,
 ) {
-    let elasticity = problem.material.elasticity;
-    b.fill(|e| {
-        let zbar = mesh.cell(e).iter().map(|&n| zeta[n]).sum::<f64>() / (D + 1) as f64;
-        elastic_stress(&elasticity, &geo.strain(mesh, e, u), zbar)
-    });
+    if let Some(b) = b {
+        let elasticity = &problem.material.elasticity;
+        b.fill(|e| history_stress_of(elasticity, mesh, geo, u, zeta, e));
+    }
+}
+
+/// B(ε(u), ζ̄)|_T on element e, ζ̄ the mean of ζ at the element's vertices (the P0
+/// projection of (3.8) for the paper's B (4.1)).
+fn history_stress_of<const D: usize>(
+    elasticity: &Elasticity,
+    mesh: &Mesh<D>,
+    geo: &Geometry<D>,
+    u: &[f64],
+    zeta: &[f64],
+    e: usize,
+) -> Tensor<D> {
+    let zbar = mesh.cell(e).iter().map(|&n| zeta[n]).sum::<f64>() / (D + 1) as f64;
+    elastic_stress(elasticity, &geo.strain(mesh, e, u), zbar)
 }
 
 /// The error for a non-finite load vector at step n: the field and point responsible.

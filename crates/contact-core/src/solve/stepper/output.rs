@@ -135,12 +135,13 @@ impl<const D: usize> Simulation<D> {
         let n = self.state.step;
         let need_sigma = sel.sigma || sel.von_mises;
         let sigma: Vec<Tensor<D>> = if need_sigma {
+            let b = self.b.as_ref().expect("stress fields keep B_{n−1}");
             (0..self.mesh.n_cells())
                 .map(|e| {
                     viscous_stress(
                         &self.problem.material.viscosity,
                         &self.geo.strain(&self.mesh, e, &self.w),
-                    ) + self.b.get(e)
+                    ) + b.get(e)
                 })
                 .collect()
         } else {
@@ -336,7 +337,7 @@ pub fn initial_fields<const D: usize>(
     let (sigma, von_mises) = if sel.sigma || sel.von_mises {
         let nt = mesh.n_cells();
         let mut b = CellTensors::zeros(nt);
-        history_stress(problem, mesh, &Geometry::new(mesh), &u, &zeta, &mut b);
+        history_stress(problem, mesh, &Geometry::new(mesh), &u, &zeta, Some(&mut b));
         let b: Vec<Tensor<D>> = (0..nt).map(|e| b.get(e)).collect();
         stress_fields(problem, &b)
     } else {

@@ -135,7 +135,6 @@ impl<const D: usize> Simulation<D> {
                     solver,
                     g: vec![0.0; nn],
                     f: vec![0.0; nn],
-                    at_points: Vec::new(),
                     next: zeta.clone(),
                     before: Vec::new(),
                 })
@@ -161,7 +160,10 @@ impl<const D: usize> Simulation<D> {
                 w_free: vec![0.0; n_free],
             },
             damage,
-            b: CellTensors::zeros(nt),
+            b: problem
+                .output
+                .keeps_history_stress()
+                .then(|| CellTensors::zeros(nt)),
             estimator: problem
                 .output
                 .estimate
