@@ -541,6 +541,44 @@ mod tests {
         }
     }
 
+    /// B_{n−1} (six numbers a tetrahedron) is counted where the stress fields or the estimate
+    /// read it after the step, and not otherwise.
+    #[test]
+    fn b_per_cell_is_counted_only_where_outputs_read_it() {
+        let mut doc = crate::scene::presets::get("box-exp3").unwrap();
+        doc["mesh"]["h"] = serde_json::json!("1/8");
+        let mut none = crate::scene::validate(&doc).unwrap();
+        none.output.fields = Default::default();
+        none.output.estimate = false;
+        let cells = 6.0 * 16.0 * 8.0 * 8.0;
+        for fields in [
+            crate::problem::FieldSet {
+                sigma: true,
+                ..Default::default()
+            },
+            crate::problem::FieldSet {
+                von_mises: true,
+                ..Default::default()
+            },
+        ] {
+            let mut stress = none.clone();
+            stress.output.fields = fields;
+            let (a, b) = (predict(&none), predict(&stress));
+            for (x, y) in [(a.direct, b.direct), (a.multigrid, b.multigrid)] {
+                assert!(((y - x) as f64 - 48.0 * cells).abs() < 1.0, "{x} → {y}");
+            }
+        }
+        let mut others = none.clone();
+        others.output.fields = crate::problem::FieldSet {
+            u: true,
+            w: true,
+            zeta: true,
+            contact: true,
+            ..Default::default()
+        };
+        assert_eq!(predict(&none).multigrid, predict(&others).multigrid);
+    }
+
     #[test]
     fn byte_counts_parse_with_suffixes() {
         assert_eq!(parse_bytes("4G").unwrap(), 4 << 30);
