@@ -63,33 +63,14 @@ impl NodeCells {
         8 * self.start.len() + 4 * self.entries.len()
     }
 
-    /// out_i ← out_i + Σ_{(e, a) around i} c(e, a) for every node i, where `add(e, a, out_i)`
-    /// adds cell e's contribution to its vertex a into node i's `width` entries
-    /// `out[width i..width (i + 1)]` (`out` has `width` entries per node). Each node adds its
-    /// cells in increasing e: the sums of the loop over cells that adds c(e, ·) to e's
-    /// vertices, bit for bit, for any thread count (chunks of [`par::ROW_CHUNK`] nodes).
-    pub fn gather(
-        &self,
-        out: &mut [f64],
-        width: usize,
-        add: impl Fn(usize, usize, &mut [f64]) + Sync + Send,
-    ) {
-        assert_eq!(out.len(), width * (self.start.len() - 1));
-        par::for_each_chunk_mut(out, width * par::ROW_CHUNK, |first, chunk| {
-            let first = first / width;
-            for (i, out_i) in chunk.chunks_mut(width).enumerate() {
-                for (e, a) in self.around(first + i) {
-                    add(e, a, out_i);
-                }
-            }
-        });
-    }
-
-    /// [`NodeCells::gather`] of contributions `add(e, &value(e), a, out_i)` that share a
-    /// per-cell value: `value(e)` is formed once for each chunk of [`CELL_VALUE_CHUNK`] nodes
+    /// out_i ← out_i + Σ_{(e, a) around i} c(e, a) for every node i, where
+    /// `add(e, &value(e), a, out_i)` adds cell e's contribution to its vertex a into node i's
+    /// `width` entries `out[width i..width (i + 1)]` (`out` has `width` entries per node).
+    /// Each node adds its cells in increasing e: the sums of the loop over cells that adds
+    /// c(e, ·) to e's vertices, bit for bit, for any thread count, as `value` is a function
+    /// of e alone. `value(e)` is formed once for each chunk of [`CELL_VALUE_CHUNK`] nodes
     /// that has cell e around it and is held only while that chunk is gathered, instead of
-    /// once per cell into a field the size of the mesh. The sums are those of the loop over
-    /// cells bit for bit, for any thread count, as `value` is a function of e alone. A chunk
+    /// once per cell into a field the size of the mesh. A chunk
     /// holds the values of the cells between its nodes' lowest and highest cell; on a mesh
     /// numbered for locality (cells by lowest node, [`crate::mesh`]) those are about the
     /// chunk's own cells, and the cells a chunk shares with the next are formed twice.
@@ -152,39 +133,6 @@ mod tests {
         }
         assert!(seen.iter().all(|&s| s));
         assert_eq!(nc.bytes(), 8 * (mesh.n_nodes() + 1) + 16 * mesh.n_cells());
-    }
-
-    #[test]
-    fn a_gather_is_the_cell_loop_bit_for_bit_on_any_thread_count() {
-        let mesh = Mesh::cuboid(1.0, 1.0, 1.0, 6, 5, 4);
-        assert!(
-            mesh.n_nodes() > 2 * par::ROW_CHUNK,
-            "several chunks of nodes"
-        );
-        // Contributions of no common scale, so that another order of the sums shows.
-        let c = |e: usize, a: usize, k: usize| {
-            ((e * 7 + a * 3 + k) as f64).sin() * 1e3f64.powi((e % 5) as i32)
-        };
-        let mut serial = vec![0.5; 2 * mesh.n_nodes()];
-        for (e, cell) in mesh.cells().enumerate() {
-            for (a, &n) in cell.iter().enumerate() {
-                for k in 0..2 {
-                    serial[2 * n + k] += c(e, a, k);
-                }
-            }
-        }
-        let nc = NodeCells::new(&mesh);
-        for t in [1, 2, 4] {
-            let mut out = vec![0.5; 2 * mesh.n_nodes()];
-            Threads::new(t).install(|| {
-                nc.gather(&mut out, 2, |e, a, o| {
-                    for (k, o) in o.iter_mut().enumerate() {
-                        *o += c(e, a, k);
-                    }
-                })
-            });
-            assert!(same_bits(&out, &serial), "{t} threads");
-        }
     }
 
     /// Cell values formed per chunk of nodes give the cell loop's sums bit for bit, on a box
