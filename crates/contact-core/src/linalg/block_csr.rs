@@ -6,12 +6,18 @@
 //! The rows are cut into the operator's node blocks (a node's free velocity components, an
 //! aggregate's coarse DOFs, or single DOFs), consecutive DOF ranges in order. Every block is
 //! stored as S × S, S the largest block's size: block row b holds, for every block column c
-//! that meets it, A's s_b × s_c block padded with zeros, row-major, and one index per block,
+//! that meets it, A's s_b × s_c block padded with zeros, column by column, and one index per block,
 //! the first DOF of a window of S consecutive DOFs that holds c's DOFs (c's first DOF, moved
 //! back at the end of the vector). The product then reads S entries of x from one index
 //! without looking up block sizes; the few smaller blocks (Γ3 nodes, partly fixed nodes)
 //! cost their padding. A 3D node block is 9 entries and one index: 76 bytes in f64 and 40
 //! in f32, against 108 in scalar f64 CSR, and a product streams those bytes.
+//!
+//! Column by column, a block's product y_b += A_bc x_c is C multiples of a column of R
+//! contiguous entries, added lane by lane in the order of a row's dot product (the same
+//! bits as row by row), which the compiler does in vector registers: in f32 the conversions
+//! to f64 dominate a row-by-row product, and the product of a 3D f32 level took 0.78 × the
+//! time of row by row here (0.92 × in f64; docs/src/speed/speed.md).
 //!
 //! In f32 the rounding is a perturbation of relative size 2⁻²⁴ of the preconditioner only:
 //! the outer conjugate gradients, the residuals and the operator K itself stay in f64, so the
@@ -60,7 +66,7 @@ pub struct BlockCsr<T: Entry> {
     row: Vec<usize>,
     /// The first column of each entry's window of C columns.
     window: Vec<u32>,
-    /// R × C entries per block entry, row-major.
+    /// R × C entries per block entry, column by column ([`BlockCsr::at`]).
     values: Vec<T>,
     /// Pieces of whole block rows for the threads: piece s is blocks split_blocks[s]..
     /// (rows split_dofs[s]..), each about [`par::ROW_CHUNK`] rows, the same for any thread
@@ -140,7 +146,7 @@ impl<T: Entry> BlockCsr<T> {
                         let cb = block_of[c as usize];
                         let k = row_cols.binary_search(&cb).expect("column listed");
                         let j = c as usize - start(cb);
-                        values[rc * (row[b] + k - first) + i * sc + j] = T::from_f64(a.values[p]);
+                        values[rc * (row[b] + k - first) + j * s + i] = T::from_f64(a.values[p]);
                     }
                 }
             }
@@ -165,6 +171,11 @@ impl<T: Entry> BlockCsr<T> {
 
     pub fn ncols(&self) -> usize {
         *self.col_ptr.last().unwrap_or(&0)
+    }
+
+    /// Where entry (a, j) of block entry p lies in `values`: column by column.
+    fn at(&self, p: usize, a: usize, j: usize) -> usize {
+        self.s * (self.sc * p + j) + a
     }
 
     /// Bytes held.
@@ -210,11 +221,14 @@ impl<T: Entry> BlockCsr<T> {
             let mut sum = [0.0f64; R];
             for (&w, v) in self.window[entries].iter().zip(values.chunks_exact(R * C)) {
                 let xw: &[f64; C] = x[w as usize..w as usize + C].try_into().expect("C");
-                for (a, sum) in sum.iter_mut().enumerate() {
-                    let mut t = 0.0;
-                    for j in 0..C {
-                        t += v[a * C + j].into() * xw[j];
+                // Row a's dot product ((v_a0 x_0 + v_a1 x_1) + …), all R rows at once.
+                let mut t = [0.0f64; R];
+                for (j, column) in v.chunks_exact(R).enumerate() {
+                    for (t, &v) in t.iter_mut().zip(column) {
+                        *t += v.into() * xw[j];
                     }
+                }
+                for (sum, t) in sum.iter_mut().zip(t) {
                     *sum += t;
                 }
             }
@@ -248,7 +262,7 @@ impl<T: Entry> BlockCsr<T> {
 
     /// [`BlockCsr::rows`] for any R and C.
     fn rows_any(&self, blocks: Range<usize>, x: &[f64], y: &mut [f64], base: usize) {
-        let (s, sc) = (self.s, self.sc);
+        let sc = self.sc;
         for b in blocks {
             let r0 = self.ptr[b] - base;
             let sr = self.ptr[b + 1] - self.ptr[b];
@@ -256,12 +270,9 @@ impl<T: Entry> BlockCsr<T> {
             yb.fill(0.0);
             for p in self.row[b]..self.row[b + 1] {
                 let w = self.window[p] as usize;
-                let v = &self.values[s * sc * p..s * sc * (p + 1)];
                 for (a, y) in yb.iter_mut().enumerate() {
-                    *y += v[a * sc..(a + 1) * sc]
-                        .iter()
-                        .zip(&x[w..w + sc])
-                        .map(|(v, x)| (*v).into() * x)
+                    *y += (0..sc)
+                        .map(|j| self.values[self.at(p, a, j)].into() * x[w + j])
                         .sum::<f64>();
                 }
             }
@@ -323,10 +334,10 @@ impl<T: Entry> BlockCsr<T> {
                 let out: &mut [f64; C] = (&mut part[w as usize..w as usize + C])
                     .try_into()
                     .expect("C");
-                for (j, out) in out.iter_mut().enumerate() {
+                for (out, column) in out.iter_mut().zip(v.chunks_exact(R)) {
                     let mut t = 0.0;
-                    for a in 0..R {
-                        t += v[a * C + j].into() * xb[a];
+                    for (&v, xb) in column.iter().zip(xb) {
+                        t += v.into() * xb;
                     }
                     *out += t;
                 }
@@ -336,14 +347,12 @@ impl<T: Entry> BlockCsr<T> {
 
     /// [`BlockCsr::scatter_rows`] for any R and C.
     fn scatter_rows_any(&self, blocks: Range<usize>, x: &[f64], part: &mut [f64]) {
-        let (s, sc) = (self.s, self.sc);
         for b in blocks {
             for (a, r) in (self.ptr[b]..self.ptr[b + 1]).enumerate() {
                 for p in self.row[b]..self.row[b + 1] {
                     let w = self.window[p] as usize;
-                    let v = &self.values[s * sc * p + a * sc..s * sc * p + (a + 1) * sc];
-                    for (j, v) in v.iter().enumerate() {
-                        part[w + j] += (*v).into() * x[r];
+                    for j in 0..self.sc {
+                        part[w + j] += self.values[self.at(p, a, j)].into() * x[r];
                     }
                 }
             }
@@ -379,14 +388,12 @@ impl<T: Entry> BlockCsr<T> {
     /// f(j, a_ij) for the nonzero entries of row i, in increasing j. Zero entries are not
     /// listed: the padding cannot be told from a stored zero, and neither adds to a product.
     pub fn for_each_in_row(&self, i: usize, mut f: impl FnMut(usize, f64)) {
-        let (s, sc) = (self.s, self.sc);
         let b = self.block_row(i);
         let r = i - self.ptr[b];
         for p in self.row[b]..self.row[b + 1] {
             let w = self.window[p] as usize;
-            let v = &self.values[s * sc * p + r * sc..s * sc * p + (r + 1) * sc];
-            for (j, &v) in v.iter().enumerate() {
-                let v: f64 = v.into();
+            for j in 0..self.sc {
+                let v: f64 = self.values[self.at(p, r, j)].into();
                 if v != 0.0 {
                     f(w + j, v);
                 }
@@ -396,14 +403,14 @@ impl<T: Entry> BlockCsr<T> {
 
     /// Entry (i, j), 0 when absent.
     pub fn get(&self, i: usize, j: usize) -> f64 {
-        let (s, sc) = (self.s, self.sc);
+        let sc = self.sc;
         let b = self.block_row(i);
         let r = i - self.ptr[b];
         // A column lies in one block column; a moved-back window may also cover it with
         // padding, which is zero, so the sum over every window that covers j is a_ij.
         (self.row[b]..self.row[b + 1])
             .filter(|&p| (self.window[p] as usize..self.window[p] as usize + sc).contains(&j))
-            .map(|p| self.values[s * sc * p + r * sc + j - self.window[p] as usize].into())
+            .map(|p| self.values[self.at(p, r, j - self.window[p] as usize)].into())
             .sum()
     }
 }
