@@ -70,7 +70,9 @@ impl NodeCells {
     /// c(e, ·) to e's vertices, bit for bit, for any thread count, as `value` is a function
     /// of e alone. `value(e)` is formed once for each chunk of [`CELL_VALUE_CHUNK`] nodes
     /// that has cell e around it and is held only while that chunk is gathered, instead of
-    /// once per cell into a field the size of the mesh. A chunk
+    /// once per cell into a field the size of the mesh; a thread reuses one buffer for the
+    /// chunks it takes (a chunk's values fill megabytes, which the allocator would map and
+    /// fault in afresh for every chunk). A chunk
     /// holds the values of the cells between its nodes' lowest and highest cell; on a mesh
     /// numbered for locality (cells by lowest node, [`crate::mesh`]) those are about the
     /// chunk's own cells, and the cells a chunk shares with the next are formed twice.
@@ -82,7 +84,9 @@ impl NodeCells {
         add: impl Fn(usize, &V, usize, &mut [f64]) + Sync + Send,
     ) {
         assert_eq!(out.len(), width * (self.start.len() - 1));
-        par::for_each_chunk_mut(out, width * CELL_VALUE_CHUNK, |first, part| {
+        let chunk = width * CELL_VALUE_CHUNK;
+        let held = Vec::<Option<V>>::new;
+        par::for_each_chunk_mut_with(out, chunk, held, |values, first, part| {
             let nodes = first / width..first / width + part.len() / width;
             let cells = |i: usize| &self.entries[self.start[i]..self.start[i + 1]];
             let lowest = nodes.clone().filter_map(|i| cells(i).first()).min();
@@ -91,7 +95,7 @@ impl NodeCells {
                 return;
             };
             let first_cell = lowest as usize / self.corners;
-            let mut values: Vec<Option<V>> = Vec::new();
+            values.clear();
             values.resize_with(highest as usize / self.corners + 1 - first_cell, || None);
             for (i, out_i) in nodes.zip(part.chunks_mut(width)) {
                 for (e, a) in self.around(i) {

@@ -111,6 +111,28 @@ pub fn for_each_chunk_mut<T: Send>(
     }
 }
 
+/// [`for_each_chunk_mut`] with scratch: `f(scratch, start, chunk)`, the scratch made by
+/// `init` once for each run of chunks a thread takes (a few per call, not one per chunk), so
+/// that a chunk's transient storage is not allocated and faulted in afresh every time.
+/// `f` must not let what a chunk leaves in the scratch change another chunk's result.
+pub fn for_each_chunk_mut_with<T: Send, S>(
+    y: &mut [T],
+    chunk_len: usize,
+    init: impl Fn() -> S + Sync + Send,
+    f: impl Fn(&mut S, usize, &mut [T]) + Sync + Send,
+) {
+    if splitting() && y.len() > chunk_len {
+        y.par_chunks_mut(chunk_len)
+            .enumerate()
+            .for_each_init(init, |s, (i, c)| f(s, i * chunk_len, c));
+    } else {
+        let mut s = init();
+        y.chunks_mut(chunk_len)
+            .enumerate()
+            .for_each(|(i, c)| f(&mut s, i * chunk_len, c));
+    }
+}
+
 /// `f(start, a_chunk, b_chunk)` over the consecutive chunks of `chunk_len` elements of two
 /// slices of one length, the results in order (fused vector updates with a reduction).
 pub fn map_chunks2_mut<R: Send>(
@@ -335,6 +357,38 @@ mod tests {
         assert_eq!(y, x);
         Threads::new(2).install(|| fill(&mut y, 0.25));
         assert!(y.iter().all(|&v| v == 0.25));
+    }
+
+    #[test]
+    fn chunks_with_scratch_cover_every_index_once_and_share_a_few_scratches() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let chunks = 64;
+        let n = chunks * 100 - 37;
+        for t in [1, 2, 4] {
+            let made = AtomicUsize::new(0);
+            let mut y = vec![0.0; n];
+            Threads::new(t).install(|| {
+                let init = || {
+                    made.fetch_add(1, Ordering::Relaxed);
+                    0usize
+                };
+                for_each_chunk_mut_with(&mut y, 100, init, |uses, s, c| {
+                    *uses += 1;
+                    c.iter_mut()
+                        .enumerate()
+                        .for_each(|(i, v)| *v += (s + i) as f64)
+                })
+            });
+            assert!(y.iter().enumerate().all(|(i, &v)| v == i as f64), "{t}");
+            let made = made.into_inner();
+            assert!(
+                (1..chunks).contains(&made),
+                "{made} scratches for {chunks} chunks"
+            );
+            if t == 1 {
+                assert_eq!(made, 1);
+            }
+        }
     }
 
     #[test]
