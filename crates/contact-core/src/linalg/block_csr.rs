@@ -6,9 +6,9 @@
 //! The rows are cut into the operator's node blocks (a node's free velocity components, an
 //! aggregate's coarse DOFs, or single DOFs), consecutive DOF ranges in order. Every block is
 //! stored as S × S, S the largest block's size: block row b holds, for every block column c
-//! that meets it, A's s_b × s_c block padded with zeros, column by column, and one index per block,
-//! the first DOF of a window of S consecutive DOFs that holds c's DOFs (c's first DOF, moved
-//! back at the end of the vector). The product then reads S entries of x from one index
+//! that meets it, A's s_b × s_c block padded with zeros, column by column, and one index per
+//! block, the first DOF of a window of S consecutive DOFs that holds c's DOFs (c's first DOF,
+//! moved back at the end of the vector). The product then reads S entries of x from one index
 //! without looking up block sizes; the few smaller blocks (Γ3 nodes, partly fixed nodes)
 //! cost their padding. A 3D node block is 9 entries and one index: 76 bytes in f64 and 40
 //! in f32, against 108 in scalar f64 CSR, and a product streams those bytes.
@@ -501,6 +501,46 @@ mod tests {
                     y[i],
                     expected[i]
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn a_row_adds_its_blocks_dot_products_in_block_and_column_order_bit_for_bit() {
+        // Row r of block row b is Σ over the block columns c meeting b, in increasing c, of
+        // ((a_r,w x_w + a_r,w+1 x_w+1) + …) over the S columns of c's window w: the sums of a
+        // row-by-row product, whatever order the entries are stored in.
+        let (a, ptr) = matrix();
+        let x: Vec<f64> = (0..11).map(|i| (0.7 * i as f64).sin() + 0.2).collect();
+        let block = |i: usize| ptr.iter().rposition(|&p| p <= i).unwrap();
+        let s = 3;
+        let mut in_f64 = vec![0.0; 11];
+        BlockCsr::<f64>::new(&a, &ptr).mul_vec(&x, &mut in_f64);
+        let mut in_f32 = vec![0.0; 11];
+        BlockCsr32::new(&a, &ptr).mul_vec(&x, &mut in_f32);
+        let widen = |v: f64| v as f32 as f64;
+        for (y, round) in [(in_f64, (|v| v) as fn(f64) -> f64), (in_f32, widen)] {
+            for r in 0..11 {
+                let entry = |c: usize| {
+                    let row = a.indptr[r]..a.indptr[r + 1];
+                    let k = a.indices[row.clone()].iter().position(|&j| j as usize == c);
+                    k.map_or(0.0, |k| round(a.values[row.start + k]))
+                };
+                let mut met: Vec<usize> = (a.indptr[ptr[block(r)]]..a.indptr[ptr[block(r) + 1]])
+                    .map(|k| block(a.indices[k] as usize))
+                    .collect();
+                met.sort_unstable();
+                met.dedup();
+                let mut sum = 0.0;
+                for c in met {
+                    let w = ptr[c].min(11 - s);
+                    let mut t = 0.0;
+                    for (j, x) in x.iter().enumerate().skip(w).take(s) {
+                        t += if block(j) == c { entry(j) } else { 0.0 } * x;
+                    }
+                    sum += t;
+                }
+                assert_eq!(y[r].to_bits(), sum.to_bits(), "row {r}");
             }
         }
     }
