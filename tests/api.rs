@@ -1492,8 +1492,7 @@ fn a_job_over_the_memory_limit_is_refused_at_submission() {
 /// direct solver demanded, refused as a job at h = 1/24, is refused as the reference of a
 /// ladder study (at `/study/reference/h`) and as a target study whose pilots need that much
 /// (at `/study/scene`), with the predicted and allowed bytes in the problem's `limit`; a larger
-/// limit admits it, and the job resource shows the largest run's prediction. The job writes
-/// no stress fields, as a study's runs write none (they would keep B per cell).
+/// limit admits it, and the job resource shows the largest run's prediction.
 #[test]
 fn a_study_over_the_memory_limit_is_refused_at_submission_like_a_job() {
     let mut scene = contact_core::scene::presets::get("box-exp3").unwrap();
@@ -1501,7 +1500,6 @@ fn a_study_over_the_memory_limit_is_refused_at_submission_like_a_job() {
     let mut reference = scene.clone();
     reference["mesh"]["h"] = json!("1/24");
     reference["time"] = json!({"t_end": 1, "k": "1/8"});
-    reference["output"] = json!({"fields": ["u", "w", "zeta"]});
     let predicted =
         contact_core::memory::predict(&contact_core::scene::validate(&reference).unwrap()).direct;
     let ladder = json!({"study": {"scene": scene, "h": ["1/4", "1/8"], "k": "1/8",
@@ -1628,11 +1626,7 @@ fn the_job_resource_shows_the_predicted_memory() {
     let study = get(a, &format!("/jobs/{id}")).json();
     assert_eq!(study["kind"], "study");
     let (plan, _) = contact_core::study::parse(&json!({"preset": "paper-table-1"}), "").unwrap();
-    // The largest run is the reference, which writes no fields (the stress ones would have
-    // it keep B per cell).
-    let mut largest = plan.base.clone();
-    largest.output.fields = Default::default();
-    let (path, reference) = contact_core::memory::choose(&largest, Some(limit)).unwrap();
+    let (path, reference) = contact_core::memory::choose(&plan.base, Some(limit)).unwrap();
     assert_eq!(
         study["memory"],
         json!({"predicted_bytes": reference, "limit_bytes": limit, "linear_path": path}),
