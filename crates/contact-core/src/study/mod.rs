@@ -325,10 +325,7 @@ pub fn with_resolution(base: &Problem, level: (usize, usize)) -> Problem {
 }
 
 /// The problem at one level: n cells per unit length on a rectangle; on a given mesh,
-/// n = 2^refine ([`spec::resolution`]). A level keeps w and ζ at the compared steps through
-/// its hooks and writes no fields, so the scene's field list is dropped: the stress fields
-/// would have the run keep B_{n−1} of every cell for nothing
-/// ([`crate::problem::OutputSpec::keeps_history_stress`]). The estimate stays where asked.
+/// n = 2^refine ([`spec::resolution`]).
 pub(crate) fn with(base: &Problem, (n, steps): (usize, usize)) -> Problem {
     let body = base.body.as_ref().map(|b| {
         std::sync::Arc::new(crate::problem::Body {
@@ -336,15 +333,10 @@ pub(crate) fn with(base: &Problem, (n, steps): (usize, usize)) -> Problem {
             ..(**b).clone()
         })
     });
-    let output = crate::problem::OutputSpec {
-        fields: crate::problem::FieldSet::default(),
-        ..base.output
-    };
     Problem {
         body,
         cells_per_unit: if base.body.is_some() { 0 } else { n },
         steps,
-        output,
         ..base.clone()
     }
 }

@@ -187,32 +187,3 @@ fn a_study_executed_under_a_limit_its_reference_cannot_fit_fails_with_the_memory
     });
     assert_eq!(result.unwrap().name(), plan.name);
 }
-
-#[test]
-fn a_level_writes_no_fields_so_it_keeps_no_stress_history_and_is_predicted_without_it() {
-    // The scene asks for every field, the stress ones included.
-    let req = direct_box_ladder();
-    let Request::Ladder(plan) = &req else {
-        panic!("a ladder")
-    };
-    assert!(plan.base.output.keeps_history_stress());
-    let level = crate::study::with(&plan.base, plan.reference);
-    assert_eq!(level.output.fields, crate::problem::FieldSet::default());
-    assert!(!level.output.keeps_history_stress());
-    let as_scene = crate::problem::Problem {
-        output: plan.base.output,
-        ..level.clone()
-    };
-    let (lean, full) = (memory::predict(&level), memory::predict(&as_scene));
-    assert!(
-        lean.direct < full.direct,
-        "{} against {}",
-        lean.direct,
-        full.direct
-    );
-    // The estimate, which reads B after the step, is kept where the scene asks for it.
-    let mut estimating = plan.base.clone();
-    estimating.output.estimate = true;
-    let level = crate::study::with(&estimating, plan.reference);
-    assert!(level.output.estimate && level.output.keeps_history_stress());
-}
