@@ -100,15 +100,8 @@ pub fn for_each_chunk_mut<T: Send>(
     chunk_len: usize,
     f: impl Fn(usize, &mut [T]) + Sync + Send,
 ) {
-    if splitting() && y.len() > chunk_len {
-        y.par_chunks_mut(chunk_len)
-            .enumerate()
-            .for_each(|(i, c)| f(i * chunk_len, c));
-    } else {
-        y.chunks_mut(chunk_len)
-            .enumerate()
-            .for_each(|(i, c)| f(i * chunk_len, c));
-    }
+    // A zero-sized scratch: the same chunks, nothing made per thread.
+    for_each_chunk_mut_with(y, chunk_len, || (), |_, start, chunk| f(start, chunk));
 }
 
 /// [`for_each_chunk_mut`] with scratch: `f(scratch, start, chunk)`, the scratch made by
