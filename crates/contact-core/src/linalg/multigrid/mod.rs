@@ -18,7 +18,7 @@ use super::block_csr::BlockCsr32;
 use super::block_products;
 use super::cholesky::{Cholesky, FactorError};
 use super::csr::TRANSPOSE_PIECES;
-use super::galerkin::{galerkin, transpose};
+use super::galerkin::{add, galerkin, transpose};
 use super::par;
 use super::pcg::Preconditioner;
 use super::{Csr, LinearOperator};
@@ -363,25 +363,54 @@ impl Hierarchy {
         })
     }
 
-    /// The hierarchy of another operator `a` on level `level` of this one (same DOFs and
-    /// blocks), with this one's prolongators below it and fresh Galerkin operators,
-    /// smoothers and coarsest factor.
-    pub fn rebuilt_from(&self, level: usize, a: Arc<Csr>) -> Result<Hierarchy, FactorError> {
-        let blocks = |l: usize| match self.levels.get(l) {
-            Some(level) => level.smoother.jacobi.blocks().clone(),
-            None => self.coarse_blocks.clone(),
-        };
-        let coarsening = Coarsening::Geometric {
-            prolongators: self.levels[level..]
-                .iter()
-                .map(|l| l.p.to_csr().into_owned())
-                .collect(),
-            blocks: (level + 1..=self.levels.len()).map(blocks).collect(),
-            below: None,
-        };
-        let mut h = Hierarchy::new(a, blocks(level), coarsening, self.params)?;
-        h.kind = self.kind;
-        Ok(h)
+    /// The hierarchy of A_level + Δ on level `level` of this one and below (same DOFs,
+    /// blocks and prolongators), with fresh smoothers and coarsest factor. Each coarser
+    /// operator is updated by the Galerkin product of the change,
+    ///   P_lᵀ (A_l + Δ_l) P_l = A_{l+1} + Δ_{l+1},   Δ_{l+1} = P_lᵀ Δ_l P_l,
+    /// whose work is on Δ_l's rows only: a change on a few nodes (the truncated cycle's Γ3)
+    /// does not pay for the whole product P_lᵀ A_l' P_l again. The operators A_l are this hierarchy's, widened from their f32 copies where shed (a
+    /// preconditioner's rounding, as the V-cycle applies them).
+    pub fn updated(&self, level: usize, delta: Csr) -> Result<Hierarchy, FactorError> {
+        let mut delta = delta;
+        let mut levels = Vec::with_capacity(self.levels.len().saturating_sub(level));
+        for (l, old) in self.levels.iter().enumerate().skip(level) {
+            let a_l = self
+                .operator_in_f64(l)
+                .expect("a level above the coarsest has an operator");
+            let a = Arc::new(add(1.0, &a_l, 1.0, &delta));
+            drop(a_l);
+            let blocks = old.smoother.jacobi.blocks();
+            let smoother = Chebyshev::new(&a, blocks, self.params.degree, self.params.ratio);
+            let p = old.p.to_csr();
+            let pt = match &old.p {
+                Prolongator::Scalar { pt, .. } => pt.as_ref(),
+                Prolongator::Blocks(_) => None,
+            };
+            delta = galerkin(&delta, &p, pt);
+            drop(p);
+            let a32 = old
+                .a32
+                .as_ref()
+                .map(|_| BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
+            levels.push(Level {
+                n: a.nrows,
+                nnz: a.nnz(),
+                a: Some(a),
+                a32,
+                smoother,
+                p: old.p.clone(),
+            });
+        }
+        let coarse_a = add(1.0, &self.coarse_a, 1.0, &delta);
+        let coarse = Cholesky::new(coarse_a.lower_csc().as_ref())?;
+        Ok(Hierarchy {
+            levels,
+            coarse_a,
+            coarse_blocks: self.coarse_blocks.clone(),
+            coarse,
+            kind: self.kind,
+            params: self.params,
+        })
     }
 
     /// Level l's prolongator to level l + 1 (l below the coarsest).

@@ -18,7 +18,8 @@
 //!   A₁' = P̃ᵀ M⁺ P̃ = A₁ − X − Xᵀ + P_Fᵀ A P_F + P̃ᵀ E⁺ P̃,   X = P_Fᵀ A P,
 //!   (P_F: the rows of F of P), an update of A₁ = Pᵀ A P that costs work on the rows of F and
 //!   of E only;
-//! - the levels below are rebuilt from A₁' with A's prolongators ([`Hierarchy::rebuilt_from`]).
+//! - the levels below are updated with A's prolongators by the Galerkin products of A₁' − A₁
+//!   ([`Hierarchy::updated`]), whose work is on the coarse rows that F and E reach.
 //!
 //! With every Γ3 node fixed this is multigrid for K_II with contact-free coarse spaces below
 //! the first level; with none fixed and E = 0 it is A's own V-cycle.
@@ -146,13 +147,14 @@ fn block_matrix(n: usize, blocks: &[NodeBlock]) -> Csr {
     Csr::from_triplets(n, n, t)
 }
 
-/// A₁' = A₁ − X − Xᵀ + P_Fᵀ A P_F + P̃ᵀ E⁺ P̃, the first coarse operator of the truncated
-/// cycle: Galerkin for M⁺ with P̃ = P with F's rows zeroed (X = P_Fᵀ A P). E⁺ P̃ has rows only
-/// on E's DOFs of R, so P̃ᵀ E⁺ P̃ = P_Eᵀ E⁺ P_E with P_E those rows of P: the same terms in the
-/// same order as with all of P̃, without a copy and a transpose of P. Its own function so
-/// that the products and the widened A₁ are freed before the levels below are rebuilt.
-fn first_coarse_updated(
-    h: &Hierarchy,
+/// Δ₁ = −X − Xᵀ + P_Fᵀ A P_F + P̃ᵀ E⁺ P̃, the change from A₁ to the first coarse operator of
+/// the truncated cycle A₁' = A₁ + Δ₁: Galerkin for M⁺ with P̃ = P with F's rows zeroed
+/// (X = P_Fᵀ A P). E⁺ P̃ has rows only on E's DOFs of R, so P̃ᵀ E⁺ P̃ = P_Eᵀ E⁺ P_E with P_E
+/// those rows of P: the same terms in the same order as with all of P̃, without a copy and a
+/// transpose of P. Δ₁ has rows only where P's columns meet F or E, so the levels below are
+/// updated by its Galerkin products ([`Hierarchy::updated`]), not formed again. Its own
+/// function so that the products are freed before they are.
+fn first_coarse_change(
     p: &Prolongator,
     a: &Sparse,
     is_fixed: &[bool],
@@ -174,11 +176,7 @@ fn first_coarse_updated(
     let z = product(&transpose(&p_e), &product(&block_matrix(n, positive), &p_e));
     let delta = add(1.0, &add(1.0, &y, 1.0, &z), -1.0, &x);
     let delta = add(1.0, &delta, -1.0, &transpose(&x));
-    let delta = add(0.5, &delta, 0.5, &transpose(&delta));
-    let a1 = h
-        .operator_in_f64(1)
-        .expect("A's hierarchy has a first coarse operator");
-    add(1.0, &a1, 1.0, &delta)
+    add(0.5, &delta, 0.5, &transpose(&delta))
 }
 
 /// The truncated V-cycle's finest level and the hierarchy below it.
@@ -281,8 +279,8 @@ impl Truncated {
                 let smoother = smoother.with_jacobi(jacobi);
                 // Only this cycle reads the rebuilt levels, through their f32 copies where
                 // there are any.
-                let a1 = first_coarse_updated(h, p, &a, &is_fixed, &positive);
-                let mut coarse = h.rebuilt_from(1, Arc::new(a1))?;
+                let delta = first_coarse_change(p, &a, &is_fixed, &positive);
+                let mut coarse = h.updated(1, delta)?;
                 coarse.shed_operators(&[]);
                 let coarse = Arc::new(coarse);
                 let nc = p.ncols();

@@ -135,17 +135,32 @@ fn first_coarse_operator_is_galerkin_for_the_truncated_prolongator() {
     for &s in &fixed {
         m_plus.values[m_plus.indptr[s]..m_plus.indptr[s + 1]].fill(0.0);
     }
-    let expected = galerkin(&m_plus, p, Some(pt));
-    let got = coarse.hierarchy().operator();
-    let nc = expected.nrows;
-    for i in 0..nc {
-        for j in 0..nc {
-            let (e, g) = (expected.get(i, j), got.get(i, j));
-            assert!(
-                (e - g).abs() < 1e-12 * (1.0 + e.abs()),
-                "({i},{j}): {e} vs {g}"
-            );
+    let same = |expected: &Csr, got: &Csr, what: &str| {
+        let nc = expected.nrows;
+        assert_eq!(got.nrows, nc, "{what}");
+        for i in 0..nc {
+            for j in 0..nc {
+                let (e, g) = (expected.get(i, j), got.get(i, j));
+                assert!(
+                    (e - g).abs() < 1e-12 * (1.0 + e.abs()),
+                    "{what} ({i},{j}): {e} vs {g}"
+                );
+            }
         }
+    };
+    let below = coarse.hierarchy();
+    same(&galerkin(&m_plus, p, Some(pt)), below.operator(), "A₁'");
+    // The levels below are Galerkin for A₁' with A's prolongators, though they are updated
+    // by the products of the change A₁' − A₁ only.
+    assert!(below.n_levels() >= 2, "{:?}", below.sizes());
+    for l in 1..below.n_levels() {
+        let p = below.prolongator(l - 1).unwrap().to_csr();
+        let expected = galerkin(below.operator_at(l - 1).unwrap(), &p, None);
+        same(
+            &expected,
+            below.operator_at(l).unwrap(),
+            &format!("level {l}"),
+        );
     }
 }
 
