@@ -368,8 +368,9 @@ impl Hierarchy {
     /// operator is updated by the Galerkin product of the change,
     ///   P_lᵀ (A_l + Δ_l) P_l = A_{l+1} + Δ_{l+1},   Δ_{l+1} = P_lᵀ Δ_l P_l,
     /// whose work is on Δ_l's rows only: a change on a few nodes (the truncated cycle's Γ3)
-    /// does not pay for the whole product P_lᵀ A_l' P_l again. The operators A_l are this hierarchy's, widened from their f32 copies where shed (a
-    /// preconditioner's rounding, as the V-cycle applies them).
+    /// does not pay for the whole product P_lᵀ A_l' P_l again. The operators A_l are this
+    /// hierarchy's, widened from their f32 copies where shed (a preconditioner's rounding,
+    /// as the V-cycle applies them).
     pub fn updated(&self, level: usize, delta: Csr) -> Result<Hierarchy, FactorError> {
         let mut delta = delta;
         let mut levels = Vec::with_capacity(self.levels.len().saturating_sub(level));
