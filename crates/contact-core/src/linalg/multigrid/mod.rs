@@ -371,8 +371,7 @@ impl Hierarchy {
     /// does not pay for the whole product P_lᵀ A_l' P_l again. The operators A_l are this
     /// hierarchy's, widened from their f32 copies where shed (a preconditioner's rounding,
     /// as the V-cycle applies them).
-    pub fn updated(&self, level: usize, delta: Csr) -> Result<Hierarchy, FactorError> {
-        let mut delta = delta;
+    pub fn updated(&self, level: usize, mut delta: Csr) -> Result<Hierarchy, FactorError> {
         let mut levels = Vec::with_capacity(self.levels.len().saturating_sub(level));
         for (l, old) in self.levels.iter().enumerate().skip(level) {
             let a_l = self
