@@ -30,9 +30,9 @@
 //!    step (α dᵀg + ½ α² dᵀK d + Σ ω ∫ μ), not from E itself, so that it can be judged near
 //!    the solution.
 //!
-//! The preconditioner is rebuilt only when the stick set changes or a block of E⁺ moves by
-//! more than a tenth of its node's stiffness plus the smaller of its old and new sizes
-//! ([`REBUILD_FLOOR`]); CG is run on the exact M either way.
+//! The preconditioner is made again (updated on the nodes that changed) only when the stick
+//! set changes or a block of E⁺ moves by more than a tenth of its node's stiffness plus the
+//! smaller of its old and new sizes ([`REBUILD_FLOOR`]); CG is run on the exact M either way.
 //! Convergence is declared on the KKT residual of the full problem (as the direct path's),
 //! from a freshly computed K w − f.
 
@@ -308,8 +308,9 @@ impl SemismoothNewton {
     }
 
     /// The Jacobian's stick DOFs for this stick set, and the preconditioner: the cached one
-    /// if it was made for this stick set and its E⁺ blocks have not moved far, else a new
-    /// one. Returns whether one was built.
+    /// if it was made for this stick set and its E⁺ blocks have not moved far, else the
+    /// cached one updated to them ([`Truncated::updated`]: the same operator as a new one,
+    /// for work on the changed nodes only). Returns whether one was made or updated.
     ///
     /// A preconditioner of a nearby stick set is not enough: a node that has just started to
     /// slip has a tiny |x_i| and so a huge curvature ω μ/|x_i|, which an old preconditioner
@@ -354,14 +355,22 @@ impl SemismoothNewton {
                 return Ok(false);
             }
         }
-        // The old preconditioner goes before the new one is built: never two at the peak.
-        self.cached = None;
-        let truncated =
-            Truncated::with_operator(&self.hierarchy, self.k.clone(), self.fixed.clone(), blocks)
-                .map_err(|source| SolveError::Factor {
-                what: "truncated multigrid coarse",
-                source,
-            })?;
+        // The old preconditioner is updated where there is one, not built again beside it.
+        let truncated = match self.cached.take() {
+            Some(c) => c
+                .truncated
+                .updated(&self.hierarchy, self.fixed.clone(), blocks),
+            None => Truncated::with_operator(
+                &self.hierarchy,
+                self.k.clone(),
+                self.fixed.clone(),
+                blocks,
+            ),
+        }
+        .map_err(|source| SolveError::Factor {
+            what: "truncated multigrid coarse",
+            source,
+        })?;
         self.cached = Some(Cached {
             stick,
             blocks: positive,

@@ -363,31 +363,42 @@ impl Hierarchy {
         })
     }
 
-    /// The hierarchy of A_level + Δ on level `level` of this one and below (same DOFs,
-    /// blocks and prolongators), with fresh smoothers and coarsest factor. Each coarser
-    /// operator is updated by the Galerkin product of the change,
+    /// The Galerkin changes that a change Δ of level `level`'s operator makes on that level
+    /// and every one below, the coarsest's last:
     ///   P_lᵀ (A_l + Δ_l) P_l = A_{l+1} + Δ_{l+1},   Δ_{l+1} = P_lᵀ Δ_l P_l,
-    /// whose work is on Δ_l's rows only: a change on a few nodes (the truncated cycle's Γ3)
-    /// does not pay for the whole product P_lᵀ A_l' P_l again. The operators A_l are this
-    /// hierarchy's, widened from their f32 copies where shed (a preconditioner's rounding,
-    /// as the V-cycle applies them).
-    pub fn updated(&self, level: usize, mut delta: Csr) -> Result<Hierarchy, FactorError> {
+    /// each product formed from P's rows that meet Δ_l's, so that a change on a few nodes
+    /// (the truncated cycle's Γ3) costs work on those only, not the whole product
+    /// P_lᵀ A_l' P_l again. Δ symmetric; each Δ_{l+1} is made exactly so.
+    pub fn changes_below(&self, level: usize, mut delta: Csr) -> Vec<Csr> {
+        let mut changes = Vec::with_capacity(self.levels.len() + 1 - level);
+        for old in self.levels.iter().skip(level) {
+            let below = old.p.galerkin_of(&delta);
+            changes.push(std::mem::replace(&mut delta, below));
+        }
+        changes.push(delta);
+        changes
+    }
+
+    /// The hierarchy of A_l + Δ_l on the levels l = `level`, `level` + 1, … of this one down
+    /// to the coarsest (`changes[l − level]`, as [`Hierarchy::changes_below`] makes them),
+    /// with the same DOFs, blocks and prolongators, and fresh smoothers and coarsest factor.
+    /// The operators A_l are this hierarchy's, widened from their f32 copies where shed (a
+    /// preconditioner's rounding, as the V-cycle applies them).
+    pub fn updated(&self, level: usize, changes: &[Csr]) -> Result<Hierarchy, FactorError> {
+        assert_eq!(
+            changes.len(),
+            self.levels.len() + 1 - level,
+            "a change per level from `level` to the coarsest"
+        );
         let mut levels = Vec::with_capacity(self.levels.len().saturating_sub(level));
-        for (l, old) in self.levels.iter().enumerate().skip(level) {
+        for ((l, old), delta) in self.levels.iter().enumerate().skip(level).zip(changes) {
             let a_l = self
                 .operator_in_f64(l)
                 .expect("a level above the coarsest has an operator");
-            let a = Arc::new(add(1.0, &a_l, 1.0, &delta));
+            let a = Arc::new(add(1.0, &a_l, 1.0, delta));
             drop(a_l);
             let blocks = old.smoother.jacobi.blocks();
             let smoother = Chebyshev::new(&a, blocks, self.params.degree, self.params.ratio);
-            let p = old.p.to_csr();
-            let pt = match &old.p {
-                Prolongator::Scalar { pt, .. } => pt.as_ref(),
-                Prolongator::Blocks(_) => None,
-            };
-            delta = galerkin(&delta, &p, pt);
-            drop(p);
             let a32 = old
                 .a32
                 .as_ref()
@@ -401,7 +412,12 @@ impl Hierarchy {
                 p: old.p.clone(),
             });
         }
-        let coarse_a = add(1.0, &self.coarse_a, 1.0, &delta);
+        let coarse_a = add(
+            1.0,
+            &self.coarse_a,
+            1.0,
+            changes.last().expect("the coarsest's"),
+        );
         let coarse = Cholesky::new(coarse_a.lower_csc().as_ref())?;
         Ok(Hierarchy {
             levels,
@@ -411,6 +427,42 @@ impl Hierarchy {
             kind: self.kind,
             params: self.params,
         })
+    }
+
+    /// Adds `changes` (one per level, the coarsest's last, as [`Hierarchy::changes_below`]
+    /// makes them from level 0) to the operators in place, and makes the smoothers and the
+    /// coarsest factor again. A shed level's operator is widened from its f32 copy, changed
+    /// and rounded again (2⁻²⁴ relative, a preconditioner's rounding); each level holds one
+    /// f64 copy of its operator at a time.
+    pub fn add_changes(&mut self, changes: &[Csr]) -> Result<(), FactorError> {
+        assert_eq!(
+            changes.len(),
+            self.levels.len() + 1,
+            "a change per level and the coarsest's"
+        );
+        let params = self.params;
+        for (level, delta) in self.levels.iter_mut().zip(changes) {
+            let (shed, single) = (level.a.is_none(), level.a32.is_some());
+            let mut a = match level.a.take() {
+                Some(a) => Arc::unwrap_or_clone(a),
+                None => level
+                    .a32
+                    .take()
+                    .expect("a shed level has its f32 copy")
+                    .to_csr(),
+            };
+            add_in_place(&mut a, delta);
+            let blocks = level.smoother.jacobi.blocks().clone();
+            level.smoother = Chebyshev::new(&a, &blocks, params.degree, params.ratio);
+            if single {
+                level.a32 = Some(BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
+            }
+            level.nnz = a.nnz();
+            level.a = (!shed).then(|| Arc::new(a));
+        }
+        add_in_place(&mut self.coarse_a, changes.last().expect("the coarsest's"));
+        self.coarse = Cholesky::new(self.coarse_a.lower_csc().as_ref())?;
+        Ok(())
     }
 
     /// Level l's prolongator to level l + 1 (l below the coarsest).
@@ -575,6 +627,11 @@ impl VCycle {
         &self.hierarchy
     }
 
+    /// The hierarchy, this cycle's work vectors and factor freed.
+    pub fn into_hierarchy(self) -> Arc<Hierarchy> {
+        self.hierarchy
+    }
+
     fn cycle(&mut self, l: usize) {
         let h = self.hierarchy.clone();
         if l == h.levels.len() {
@@ -616,6 +673,29 @@ impl Preconditioner for VCycle {
         par::copy(&mut self.work[0].b, r);
         self.cycle(0);
         par::copy(z, &self.work[0].x);
+    }
+}
+
+/// a ← a + delta, in a's pattern where it holds delta's, else into a new one.
+fn add_in_place(a: &mut Csr, delta: &Csr) {
+    let position = |i: usize, j: u32| {
+        let row = a.indptr[i]..a.indptr[i + 1];
+        a.indices[row.clone()]
+            .binary_search(&j)
+            .ok()
+            .map(|k| row.start + k)
+    };
+    let positions: Option<Vec<usize>> = (0..delta.nrows)
+        .flat_map(|i| (delta.indptr[i]..delta.indptr[i + 1]).map(move |k| (i, k)))
+        .map(|(i, k)| position(i, delta.indices[k]))
+        .collect();
+    match positions {
+        Some(positions) => {
+            for (p, v) in positions.into_iter().zip(&delta.values) {
+                a.values[p] += v;
+            }
+        }
+        None => *a = add(1.0, a, 1.0, delta),
     }
 }
 

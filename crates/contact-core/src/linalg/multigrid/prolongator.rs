@@ -11,7 +11,7 @@
 
 use crate::linalg::block_csr::BlockCsr32;
 use crate::linalg::csr::TRANSPOSE_PIECES;
-use crate::linalg::galerkin::product_with_rows;
+use crate::linalg::galerkin::{add, product_with_rows, transpose};
 use crate::linalg::Csr;
 use std::borrow::Cow;
 
@@ -87,6 +87,14 @@ impl Prolongator {
     pub fn left_product(&self, a: &Csr) -> Csr {
         assert_eq!(a.ncols, self.nrows(), "inner dimensions differ");
         product_with_rows(a, self.ncols(), |k, f| self.for_each_in_row(k, f))
+    }
+
+    /// PᵀΔP for a symmetric Δ on P's rows, made exactly symmetric: (Δ P)ᵀ P from P's rows
+    /// that meet Δ's, so the work is on Δ's rows only.
+    pub fn galerkin_of(&self, delta: &Csr) -> Csr {
+        let dp = self.left_product(delta);
+        let c = self.left_product(&transpose(&dp));
+        add(0.5, &c, 0.5, &transpose(&c))
     }
 
     /// P in scalar CSR: itself, or a copy of the node blocks' nonzero entries.

@@ -19,13 +19,17 @@
 //!   (P_F: the rows of F of P), an update of A₁ = Pᵀ A P that costs work on the rows of F and
 //!   of E only;
 //! - the levels below are updated with A's prolongators by the Galerkin products of A₁' − A₁
-//!   ([`Hierarchy::updated`]), whose work is on the coarse rows that F and E reach.
+//!   ([`Hierarchy::changes_below`]), whose work is on the coarse rows that F and E reach.
+//!
+//! A Newton iteration whose stick set or blocks moved updates the cycle it has
+//! ([`Truncated::updated`]): M⁺'s change is on the rows and columns of the nodes that changed
+//! only, and so is the work of carrying it to the coarse levels.
 //!
 //! With every Γ3 node fixed this is multigrid for K_II with contact-free coarse spaces below
 //! the first level; with none fixed and E = 0 it is A's own V-cycle.
 
 use super::prolongator::Prolongator;
-use super::smoother::Chebyshev;
+use super::smoother::{BlockJacobi, Chebyshev};
 use super::{Hierarchy, VCycle};
 use crate::linalg::block_csr::BlockCsr32;
 use crate::linalg::cholesky::{Cholesky, FactorError};
@@ -204,9 +208,130 @@ pub struct Truncated {
     a: Sparse,
     fixed: Vec<usize>,
     is_fixed: Vec<bool>,
-    /// E⁺'s blocks.
+    /// E⁺'s blocks, in increasing DOFs.
     positive: Vec<NodeBlock>,
     cycle: Cycle,
+}
+
+/// M⁺'s entry (i, j): the identity's on F, A's plus E⁺'s elsewhere. `positive` in
+/// increasing DOFs.
+fn entry(a: &Sparse, is_fixed: &[bool], positive: &[NodeBlock], i: usize, j: usize) -> f64 {
+    if is_fixed[i] || is_fixed[j] {
+        return if i == j { 1.0 } else { 0.0 };
+    }
+    a.get(i, j) + block_entry(positive, i, j)
+}
+
+/// E⁺'s entry (i, j), `positive` in increasing DOFs.
+fn block_entry(positive: &[NodeBlock], i: usize, j: usize) -> f64 {
+    let k = positive.partition_point(|b| b.start + b.size <= i);
+    positive
+        .get(k)
+        .filter(|b| b.contains(i) && b.contains(j))
+        .map_or(0.0, |b| b.value(i, j))
+}
+
+/// E⁺'s blocks in increasing DOFs.
+fn positive_parts(blocks: &[NodeBlock]) -> Vec<NodeBlock> {
+    let mut positive: Vec<NodeBlock> = blocks.iter().map(NodeBlock::positive_part).collect();
+    positive.sort_by_key(|b| b.start);
+    positive
+}
+
+/// Remakes the smoother blocks that hold any of `dofs` from M⁺.
+fn remake_blocks(
+    jacobi: &mut BlockJacobi,
+    a: &Sparse,
+    is_fixed: &[bool],
+    positive: &[NodeBlock],
+    dofs: impl Iterator<Item = usize>,
+) {
+    let block_of = jacobi.blocks().block_of(a.nrows());
+    let mut touched: Vec<u32> = dofs.map(|i| block_of[i]).collect();
+    touched.sort_unstable();
+    touched.dedup();
+    for b in touched {
+        let dofs = jacobi.blocks().dofs(b as usize).to_vec();
+        let m = DMatrix::from_fn(dofs.len(), dofs.len(), |i, j| {
+            entry(a, is_fixed, positive, dofs[i], dofs[j])
+        });
+        jacobi.set_block(b as usize, &m);
+    }
+}
+
+/// The change of M⁺'s part on R, D_R (A + E⁺) D_R (D_R zeroing F), from (`old_fixed`,
+/// `old`) to (`new_fixed`, `new`): the rows and columns of the DOFs that became fixed or
+/// free, and the blocks of E⁺ that changed on the others. Its Galerkin product with P is
+/// the change of A₁'. Block lists in increasing DOFs.
+fn fine_change(
+    a: &Sparse,
+    (old_fixed, old): (&[bool], &[NodeBlock]),
+    (new_fixed, new): (&[bool], &[NodeBlock]),
+) -> Csr {
+    let n = a.nrows();
+    let part = |fixed: &[bool], blocks: &[NodeBlock], i: usize, j: usize, aij: f64| {
+        if fixed[i] || fixed[j] {
+            0.0
+        } else {
+            aij + block_entry(blocks, i, j)
+        }
+    };
+    let flipped = |i: usize| old_fixed[i] != new_fixed[i];
+    let mut t = Vec::new();
+    for i in (0..n).filter(|&i| flipped(i)) {
+        a.for_each_in_row(i, |j, aij| {
+            let g = part(new_fixed, new, i, j, aij) - part(old_fixed, old, i, j, aij);
+            if g != 0.0 {
+                t.push((i, j, g));
+                if !flipped(j) {
+                    t.push((j, i, g));
+                }
+            }
+        });
+    }
+    // Blocks on DOFs that stayed free and changed (or came or went): E⁺'s difference only.
+    let mut changed: Vec<&NodeBlock> = Vec::new();
+    let (mut p, mut q) = (0, 0);
+    while p < old.len() || q < new.len() {
+        match (old.get(p), new.get(q)) {
+            (Some(o), Some(m)) if o.start == m.start => {
+                if o != m {
+                    changed.extend([o, m]);
+                }
+                p += 1;
+                q += 1;
+            }
+            (Some(o), Some(m)) if o.start < m.start => {
+                changed.push(o);
+                p += 1;
+            }
+            (Some(o), None) => {
+                changed.push(o);
+                p += 1;
+            }
+            (_, Some(m)) => {
+                changed.push(m);
+                q += 1;
+            }
+            (None, None) => unreachable!(),
+        }
+    }
+    let mut seen = vec![false; n];
+    for b in changed {
+        if seen[b.start] || flipped(b.start) || new_fixed[b.start] {
+            continue;
+        }
+        seen[b.start] = true;
+        for i in b.start..b.start + b.size {
+            for j in b.start..b.start + b.size {
+                let g = block_entry(new, i, j) - block_entry(old, i, j);
+                if g != 0.0 {
+                    t.push((i, j, g));
+                }
+            }
+        }
+    }
+    Csr::from_triplets(n, n, t)
 }
 
 impl Truncated {
@@ -230,21 +355,8 @@ impl Truncated {
         blocks: &[NodeBlock],
     ) -> Result<Truncated, FactorError> {
         let n = a.nrows();
-        let mut is_fixed = vec![false; n];
-        for &s in &fixed {
-            is_fixed[s] = true;
-        }
-        let positive: Vec<NodeBlock> = blocks.iter().map(NodeBlock::positive_part).collect();
-        let entry = |i: usize, j: usize| -> f64 {
-            if is_fixed[i] || is_fixed[j] {
-                return if i == j { 1.0 } else { 0.0 };
-            }
-            let e = positive
-                .iter()
-                .find(|b| b.contains(i) && b.contains(j))
-                .map_or(0.0, |b| b.value(i, j));
-            a.get(i, j) + e
-        };
+        let is_fixed = flags(n, &fixed);
+        let positive = positive_parts(blocks);
         let cycle = match h.level(0) {
             None => {
                 let pattern = a.to_csr();
@@ -253,7 +365,7 @@ impl Truncated {
                         let row = pattern.indptr[i]..pattern.indptr[i + 1];
                         pattern.indices[row].iter().map(move |&j| (i, j as usize))
                     })
-                    .map(|(i, j)| (i, j, entry(i, j)))
+                    .map(|(i, j)| (i, j, entry(&a, &is_fixed, &positive, i, j)))
                     .collect();
                 let m = Csr::from_triplets(n, n, t);
                 Cycle::Direct(Cholesky::new(m.lower_csc().as_ref())?)
@@ -261,43 +373,19 @@ impl Truncated {
             Some((smoother, p)) => {
                 // The block diagonal of M⁺: A's, with the blocks touching F or E remade.
                 let mut jacobi = smoother.jacobi.patched();
-                let block_of = jacobi.blocks().block_of(n);
-                let mut touched: Vec<u32> = fixed
+                let touched = fixed
                     .iter()
                     .copied()
-                    .chain(positive.iter().map(|b| b.start))
-                    .map(|i| block_of[i])
-                    .collect();
-                touched.sort_unstable();
-                touched.dedup();
-                for b in touched {
-                    let dofs = jacobi.blocks().dofs(b as usize).to_vec();
-                    let m =
-                        DMatrix::from_fn(dofs.len(), dofs.len(), |i, j| entry(dofs[i], dofs[j]));
-                    jacobi.set_block(b as usize, &m);
-                }
+                    .chain(positive.iter().map(|b| b.start));
+                remake_blocks(&mut jacobi, &a, &is_fixed, &positive, touched);
                 let smoother = smoother.with_jacobi(jacobi);
-                // Only this cycle reads the rebuilt levels, through their f32 copies where
-                // there are any.
                 let delta = first_coarse_change(p, &a, &is_fixed, &positive);
-                let mut coarse = h.updated(1, delta)?;
-                coarse.shed_operators(&[]);
-                let coarse = Arc::new(coarse);
-                let nc = p.ncols();
+                let coarse = coarse_levels(h, delta)?;
                 Cycle::Levels(Box::new(Levels {
                     smoother,
                     fine: h.clone(),
-                    coarse: coarse.vcycle(),
-                    work: [
-                        vec![0.0; n],
-                        vec![0.0; n],
-                        vec![0.0; n],
-                        vec![0.0; n],
-                        vec![0.0; n],
-                        vec![0.0; nc],
-                        vec![0.0; nc],
-                        vec![0.0; h.restriction_scratch(0)],
-                    ],
+                    coarse,
+                    work: work_vectors(h),
                 }))
             }
         };
@@ -309,6 +397,117 @@ impl Truncated {
             cycle,
         })
     }
+
+    /// This preconditioner for new fixed DOFs and blocks, the same operator as
+    /// [`Truncated::with_operator`] makes for less work: M⁺ changes on the rows and columns
+    /// of the nodes that changed only, so A₁' changes by the Galerkin product of that change
+    /// ([`fine_change`]), carried down the levels as at set-up. The finest smoother's blocks
+    /// on those nodes are remade; the levels' smoothers and the coarsest factor are made
+    /// afresh from the updated operators. `h` is the hierarchy it was made from.
+    ///
+    /// The levels are updated from their own operators, so where those are kept in f32 each
+    /// update rounds them again (2⁻²⁴ relative an update, a preconditioner's rounding);
+    /// where they are kept in f64 the result is the fresh one to rounding.
+    pub fn updated(
+        self,
+        h: &Arc<Hierarchy>,
+        fixed: Vec<usize>,
+        blocks: &[NodeBlock],
+    ) -> Result<Truncated, FactorError> {
+        let Truncated {
+            a,
+            is_fixed: old_fixed,
+            positive: old,
+            cycle,
+            ..
+        } = self;
+        let Cycle::Levels(levels) = cycle else {
+            return Self::with_operator(h, a, fixed, blocks);
+        };
+        let n = a.nrows();
+        let is_fixed = flags(n, &fixed);
+        let positive = positive_parts(blocks);
+        let change = fine_change(&a, (&old_fixed, &old), (&is_fixed, &positive));
+        let Levels {
+            mut smoother,
+            fine,
+            mut coarse,
+            mut work,
+        } = *levels;
+        if change.nnz() > 0 {
+            let p = h.prolongator(0).expect("A's hierarchy has a first level");
+            let first = p.galerkin_of(&change);
+            // The levels are changed in place, the work vectors freed meanwhile: the
+            // update holds no more than a new cycle would.
+            drop(work);
+            let below = coarse.into_hierarchy();
+            let changes = below.changes_below(0, first);
+            let below = match Arc::try_unwrap(below) {
+                Ok(mut own) => {
+                    own.add_changes(&changes)?;
+                    own
+                }
+                // A clone of this cycle shares the levels: they are copied with the change.
+                Err(shared) => {
+                    let mut copy = shared.updated(0, &changes)?;
+                    copy.shed_operators(&[]);
+                    copy
+                }
+            };
+            coarse = Arc::new(below).vcycle();
+            work = work_vectors(h);
+            let rows = (0..n).filter(|&i| change.indptr[i] < change.indptr[i + 1]);
+            remake_blocks(&mut smoother.jacobi, &a, &is_fixed, &positive, rows);
+        }
+        let levels = Box::new(Levels {
+            smoother,
+            fine,
+            coarse,
+            work,
+        });
+        Ok(Truncated {
+            a,
+            fixed,
+            is_fixed,
+            positive,
+            cycle: Cycle::Levels(levels),
+        })
+    }
+}
+
+/// A flag per DOF, set on `dofs`.
+fn flags(n: usize, dofs: &[usize]) -> Vec<bool> {
+    let mut flag = vec![false; n];
+    for &s in dofs {
+        flag[s] = true;
+    }
+    flag
+}
+
+/// The truncated cycle's levels below the finest: A's hierarchy `h` from its first level,
+/// that level's operator changed by `delta` and the levels below by its Galerkin products
+/// ([`Hierarchy::changes_below`]). Only this cycle reads them, through their f32 copies
+/// where there are any.
+fn coarse_levels(h: &Hierarchy, delta: Csr) -> Result<VCycle, FactorError> {
+    let mut coarse = h.updated(1, &h.changes_below(1, delta))?;
+    coarse.shed_operators(&[]);
+    Ok(Arc::new(coarse).vcycle())
+}
+
+/// The cycle's work vectors on the finest level and the first coarse one, for A's
+/// hierarchy `h`.
+fn work_vectors(h: &Hierarchy) -> [Vec<f64>; 8] {
+    let (n, nc) = (h.sizes()[0], h.sizes()[1]);
+    [
+        vec![0.0; n],
+        vec![0.0; n],
+        vec![0.0; n],
+        vec![0.0; n],
+        vec![0.0; n],
+        vec![0.0; nc],
+        vec![0.0; nc],
+        vec![0.0; h.restriction_scratch(0)],
+    ]
 }
 
 impl Preconditioner for Truncated {

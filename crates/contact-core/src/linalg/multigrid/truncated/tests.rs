@@ -251,3 +251,92 @@ fn mixed_precision_keeps_the_truncated_cycle_symmetric_and_as_strong() {
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
+
+/// A cycle updated from another stick set and other blocks is the cycle made afresh for the
+/// new ones: the same first coarse operator and levels below (to rounding; to f32's with
+/// single-precision levels), the same smoother blocks, and so the same preconditioner. The
+/// change flips DOFs both ways (fixed to free and free to fixed), alters, adds and removes
+/// blocks, and keeps some; a second update goes back, with a clone of the cycle alive (the
+/// levels then shared, so copied, not changed in place).
+#[test]
+fn an_updated_cycle_is_the_cycle_made_afresh() {
+    for mixed in [false, true] {
+        update_and_back(mixed);
+    }
+}
+
+fn update_and_back(mixed: bool) {
+    let m = 16;
+    let a = laplacian(m);
+    let n = a.nrows;
+    let h = Arc::new(hierarchy_in(&a, mixed));
+    let (fixed, blocks) = modification(m);
+    // Relative agreement: rounding, or single precision's.
+    let tol = if mixed { 1e-6 } else { 1e-13 };
+    // DOF 0 fixed → free (a block), 1 free → fixed, 3 block changed, 5 block removed, 7 kept,
+    // 2 and 4 stay fixed, 16 (second row) gains a block.
+    let new_fixed: Vec<usize> = [1, 2, 4].into_iter().chain((6..m).step_by(2)).collect();
+    let mut new_blocks: Vec<NodeBlock> = blocks
+        .iter()
+        .filter(|b| b.start != 1 && b.start != 5)
+        .map(|b| {
+            let mut b = *b;
+            if b.start == 3 {
+                b.m[0] = 0.25;
+            }
+            b
+        })
+        .collect();
+    for (start, v) in [(0, 2.0), (m, 1.5)] {
+        new_blocks.push(NodeBlock {
+            start,
+            size: 1,
+            m: [v, 0.0, 0.0, 0.0],
+        });
+    }
+    let same = |updated: Truncated, fresh: Truncated, what: &str| {
+        let levels = |t: &Truncated| match &t.cycle {
+            Cycle::Levels(l) => l.coarse.hierarchy().clone(),
+            Cycle::Direct(_) => panic!("levels expected"),
+        };
+        let (u, f) = (levels(&updated), levels(&fresh));
+        assert_eq!(u.n_levels(), f.n_levels());
+        for l in 0..u.n_levels() {
+            let (x, y) = (u.operator_in_f64(l).unwrap(), f.operator_in_f64(l).unwrap());
+            for i in 0..y.nrows {
+                for j in 0..y.nrows {
+                    let (e, g) = (y.get(i, j), x.get(i, j));
+                    assert!(
+                        (e - g).abs() < tol * (1.0 + e.abs()),
+                        "mixed {mixed}, {what}, level {l} ({i},{j}): fresh {e} against updated {g}"
+                    );
+                }
+            }
+        }
+        // The preconditioner applied: the fine smoother's blocks and every level together.
+        let r: Vec<f64> = (0..n).map(|i| (0.7 * i as f64).cos()).collect();
+        let (mut zu, mut zf) = (vec![0.0; n], vec![0.0; n]);
+        let (mut updated, mut fresh) = (updated, fresh);
+        updated.apply(&r, &mut zu);
+        fresh.apply(&r, &mut zf);
+        let scale = zf.iter().fold(0.0f64, |s, v| s.max(v.abs()));
+        for (i, (x, y)) in zu.iter().zip(&zf).enumerate() {
+            assert!(
+                (x - y).abs() < 10.0 * tol * scale,
+                "mixed {mixed}, {what}, z[{i}]: {x} against {y}"
+            );
+        }
+    };
+    let first = Truncated::new(&h, fixed.clone(), &blocks).unwrap();
+    let updated = first.updated(&h, new_fixed.clone(), &new_blocks).unwrap();
+    let fresh = Truncated::new(&h, new_fixed.clone(), &new_blocks).unwrap();
+    same(updated.clone(), fresh, "there");
+    let alive = updated.clone();
+    let back = updated.updated(&h, fixed.clone(), &blocks).unwrap();
+    same(
+        back,
+        Truncated::new(&h, fixed, &blocks).unwrap(),
+        "and back",
+    );
+    drop(alive);
+}
