@@ -429,19 +429,28 @@ impl Hierarchy {
         })
     }
 
-    /// Adds `changes` (one per level, the coarsest's last, as [`Hierarchy::changes_below`]
-    /// makes them from level 0) to the operators in place, and makes the smoothers and the
-    /// coarsest factor again. A shed level's operator is widened from its f32 copy, changed
-    /// and rounded again (2⁻²⁴ relative, a preconditioner's rounding); each level holds one
-    /// f64 copy of its operator at a time.
-    pub fn add_changes(&mut self, changes: &[Csr]) -> Result<(), FactorError> {
+    /// This hierarchy with `changes` (one per level, the coarsest's last, as
+    /// [`Hierarchy::changes_below`] makes them from level 0) added to its operators in place,
+    /// and the smoothers and the coarsest factor made again. A shed level's operator is
+    /// widened from its f32 copy, changed and rounded again (2⁻²⁴ relative, a
+    /// preconditioner's rounding). Each level holds one f64 copy of its operator at a time,
+    /// and the old coarsest factor goes before the new one is made.
+    pub fn with_changes(self, changes: &[Csr]) -> Result<Hierarchy, FactorError> {
         assert_eq!(
             changes.len(),
             self.levels.len() + 1,
             "a change per level and the coarsest's"
         );
-        let params = self.params;
-        for (level, delta) in self.levels.iter_mut().zip(changes) {
+        let Hierarchy {
+            mut levels,
+            mut coarse_a,
+            coarse_blocks,
+            coarse,
+            kind,
+            params,
+        } = self;
+        drop(coarse);
+        for (level, delta) in levels.iter_mut().zip(changes) {
             let (shed, single) = (level.a.is_none(), level.a32.is_some());
             let mut a = match level.a.take() {
                 Some(a) => Arc::unwrap_or_clone(a),
@@ -460,9 +469,16 @@ impl Hierarchy {
             level.nnz = a.nnz();
             level.a = (!shed).then(|| Arc::new(a));
         }
-        add_in_place(&mut self.coarse_a, changes.last().expect("the coarsest's"));
-        self.coarse = Cholesky::new(self.coarse_a.lower_csc().as_ref())?;
-        Ok(())
+        add_in_place(&mut coarse_a, changes.last().expect("the coarsest's"));
+        let coarse = Cholesky::new(coarse_a.lower_csc().as_ref())?;
+        Ok(Hierarchy {
+            levels,
+            coarse_a,
+            coarse_blocks,
+            coarse,
+            kind,
+            params,
+        })
     }
 
     /// Level l's prolongator to level l + 1 (l below the coarsest).

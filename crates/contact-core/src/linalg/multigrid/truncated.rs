@@ -443,10 +443,7 @@ impl Truncated {
             let below = coarse.into_hierarchy();
             let changes = below.changes_below(0, first);
             let below = match Arc::try_unwrap(below) {
-                Ok(mut own) => {
-                    own.add_changes(&changes)?;
-                    own
-                }
+                Ok(own) => own.with_changes(&changes)?,
                 // A clone of this cycle shares the levels: they are copied with the change.
                 Err(shared) => {
                     let mut copy = shared.updated(0, &changes)?;
