@@ -392,33 +392,26 @@ impl Hierarchy {
         );
         let mut levels = Vec::with_capacity(self.levels.len().saturating_sub(level));
         for ((l, old), delta) in self.levels.iter().enumerate().skip(level).zip(changes) {
-            let a_l = self
+            let a = self
                 .operator_in_f64(l)
-                .expect("a level above the coarsest has an operator");
-            let a = Arc::new(add(1.0, &a_l, 1.0, delta));
-            drop(a_l);
+                .expect("a level above the coarsest has an operator")
+                .into_owned();
             let blocks = old.smoother.jacobi.blocks();
-            let smoother = Chebyshev::new(&a, blocks, self.params.degree, self.params.ratio);
-            let a32 = old
-                .a32
-                .as_ref()
-                .map(|_| BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
+            let (a, smoother, a32) =
+                changed_operator(a, delta, blocks, old.a32.is_some(), self.params);
             levels.push(Level {
                 n: a.nrows,
                 nnz: a.nnz(),
-                a: Some(a),
+                a: Some(Arc::new(a)),
                 a32,
                 smoother,
                 p: old.p.clone(),
             });
         }
-        let coarse_a = add(
-            1.0,
-            &self.coarse_a,
-            1.0,
+        let (coarse_a, coarse) = changed_coarsest(
+            self.coarse_a.clone(),
             changes.last().expect("the coarsest's"),
-        );
-        let coarse = Cholesky::new(coarse_a.lower_csc().as_ref())?;
+        )?;
         Ok(Hierarchy {
             levels,
             coarse_a,
@@ -443,7 +436,7 @@ impl Hierarchy {
         );
         let Hierarchy {
             mut levels,
-            mut coarse_a,
+            coarse_a,
             coarse_blocks,
             coarse,
             kind,
@@ -452,7 +445,7 @@ impl Hierarchy {
         drop(coarse);
         for (level, delta) in levels.iter_mut().zip(changes) {
             let (shed, single) = (level.a.is_none(), level.a32.is_some());
-            let mut a = match level.a.take() {
+            let a = match level.a.take() {
                 Some(a) => Arc::unwrap_or_clone(a),
                 None => level
                     .a32
@@ -460,17 +453,15 @@ impl Hierarchy {
                     .expect("a shed level has its f32 copy")
                     .to_csr(),
             };
-            add_in_place(&mut a, delta);
-            let blocks = level.smoother.jacobi.blocks().clone();
-            level.smoother = Chebyshev::new(&a, &blocks, params.degree, params.ratio);
-            if single {
-                level.a32 = Some(BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
-            }
+            let blocks = level.smoother.jacobi.blocks();
+            let (a, smoother, a32) = changed_operator(a, delta, blocks, single, params);
+            level.smoother = smoother;
+            level.a32 = a32;
             level.nnz = a.nnz();
             level.a = (!shed).then(|| Arc::new(a));
         }
-        add_in_place(&mut coarse_a, changes.last().expect("the coarsest's"));
-        let coarse = Cholesky::new(coarse_a.lower_csc().as_ref())?;
+        let (coarse_a, coarse) =
+            changed_coarsest(coarse_a, changes.last().expect("the coarsest's"))?;
         Ok(Hierarchy {
             levels,
             coarse_a,
@@ -690,6 +681,28 @@ impl Preconditioner for VCycle {
         self.cycle(0);
         par::copy(z, &self.work[0].x);
     }
+}
+
+/// A level's operator `a` (f64, owned) plus `delta`, with a fresh smoother over the level's
+/// `blocks` and, where the level has one (`single`), a fresh f32 copy.
+fn changed_operator(
+    mut a: Csr,
+    delta: &Csr,
+    blocks: &Blocks,
+    single: bool,
+    params: Params,
+) -> (Csr, Chebyshev, Option<BlockCsr32>) {
+    add_in_place(&mut a, delta);
+    let smoother = Chebyshev::new(&a, blocks, params.degree, params.ratio);
+    let a32 = single.then(|| BlockCsr32::new(&a, &blocks.consecutive_bounds(a.nrows)));
+    (a, smoother, a32)
+}
+
+/// The coarsest operator plus `delta`, and its factor.
+fn changed_coarsest(mut a: Csr, delta: &Csr) -> Result<(Csr, Cholesky), FactorError> {
+    add_in_place(&mut a, delta);
+    let factor = Cholesky::new(a.lower_csc().as_ref())?;
+    Ok((a, factor))
 }
 
 /// a ← a + delta, in a's pattern where it holds delta's, else into a new one.

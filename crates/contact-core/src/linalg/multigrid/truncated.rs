@@ -494,7 +494,8 @@ fn coarse_levels(h: &Hierarchy, delta: Csr) -> Result<VCycle, FactorError> {
 /// The cycle's work vectors on the finest level and the first coarse one, for A's
 /// hierarchy `h`.
 fn work_vectors(h: &Hierarchy) -> [Vec<f64>; 8] {
-    let (n, nc) = (h.sizes()[0], h.sizes()[1]);
+    let sizes = h.sizes();
+    let (n, nc) = (sizes[0], sizes[1]);
     [
         vec![0.0; n],
         vec![0.0; n],
