@@ -401,6 +401,37 @@ impl<T: Entry> BlockCsr<T> {
         }
     }
 
+    /// A ← A + `delta` (square, A's size) in place, each changed entry rounded into T again
+    /// (in f32 a perturbation of 2⁻²⁴ relative per call, as the copy made afresh has once).
+    /// Every entry of `delta` has to lie in a stored block whose window is its block column's
+    /// alone (not one moved back and shared at the end of the vector); where one does not,
+    /// nothing changes and it returns false, and the caller forms the sum afresh.
+    pub fn add_in_place(&mut self, delta: &Csr) -> bool {
+        assert_eq!((delta.nrows, delta.ncols), (self.nrows(), self.ncols()));
+        let last_window = self.ncols() - self.sc;
+        let position = |i: usize, j: usize| {
+            let b = self.block_row(i);
+            let c = self.col_ptr.partition_point(|&p| p <= j) - 1;
+            let window = self.col_ptr[c].min(last_window) as u32;
+            let slots = &self.window[self.row[b]..self.row[b + 1]];
+            let first = slots.partition_point(|&w| w < window);
+            let end = slots.partition_point(|&w| w <= window);
+            (end == first + 1)
+                .then(|| self.at(self.row[b] + first, i - self.ptr[b], j - window as usize))
+        };
+        let positions: Option<Vec<usize>> = (0..delta.nrows)
+            .flat_map(|i| (delta.indptr[i]..delta.indptr[i + 1]).map(move |k| (i, k)))
+            .map(|(i, k)| position(i, delta.indices[k] as usize))
+            .collect();
+        let Some(positions) = positions else {
+            return false;
+        };
+        for (p, &v) in positions.into_iter().zip(&delta.values) {
+            self.values[p] = T::from_f64(self.values[p].into() + v);
+        }
+        true
+    }
+
     /// Entry (i, j), 0 when absent.
     pub fn get(&self, i: usize, j: usize) -> f64 {
         let sc = self.sc;
@@ -543,6 +574,70 @@ mod tests {
                 assert_eq!(y[r].to_bits(), sum.to_bits(), "row {r}");
             }
         }
+    }
+
+    /// A change on a's pattern (every third entry) and inside a stored block where a has
+    /// no entry (one of the holes of [`matrix`]).
+    fn change(a: &Csr) -> Csr {
+        let mut t = Vec::new();
+        for i in 0..a.nrows {
+            for k in a.indptr[i]..a.indptr[i + 1] {
+                if k % 3 == 0 {
+                    t.push((i, a.indices[k] as usize, 0.37 * a.values[k] - 0.01));
+                }
+            }
+        }
+        assert_eq!(a.get(1, 2), 0.0, "a hole inside the first diagonal block");
+        t.push((1, 2, 0.125));
+        Csr::from_triplets(a.nrows, a.ncols, t)
+    }
+
+    #[test]
+    fn a_change_added_in_place_is_the_sum_rounded_again() {
+        let (a, ptr) = matrix();
+        let delta = change(&a);
+        let mut single = BlockCsr32::new(&a, &ptr);
+        let mut double = BlockCsr::<f64>::new(&a, &ptr);
+        assert!(single.add_in_place(&delta) && double.add_in_place(&delta));
+        for i in 0..11 {
+            for j in 0..11 {
+                let d = delta.get(i, j);
+                let rounded_again = (a.get(i, j) as f32 as f64 + d) as f32 as f64;
+                assert_eq!(single.get(i, j), rounded_again, "({i}, {j})");
+                assert_eq!(double.get(i, j), a.get(i, j) + d, "({i}, {j})");
+            }
+        }
+    }
+
+    #[test]
+    fn a_change_outside_the_stored_blocks_or_in_a_shared_window_is_refused_whole() {
+        let (a, ptr) = matrix();
+        let mut delta = change(&a);
+        // Blocks 0 and 4 are more than two blocks apart: no block is stored there.
+        delta = crate::linalg::galerkin::add(
+            1.0,
+            &delta,
+            1.0,
+            &Csr::from_triplets(11, 11, vec![(0, 9, 1.0)]),
+        );
+        let mut b = BlockCsr32::new(&a, &ptr);
+        let before = b.values.clone();
+        assert!(!b.add_in_place(&delta));
+        assert_eq!(b.values, before, "nothing added before the refusal");
+        // Blocks of 3, 1 and 1 DOFs: the last two share the window 2..5.
+        let full = Csr::from_triplets(
+            5,
+            5,
+            (0..5)
+                .flat_map(|i| (0..5).map(move |j| (i, j, 1.0)))
+                .collect(),
+        );
+        let mut shared = BlockCsr32::new(&full, &[0, 3, 4, 5]);
+        let before = shared.values.clone();
+        assert!(!shared.add_in_place(&Csr::from_triplets(5, 5, vec![(0, 4, 1.0)])));
+        assert_eq!(shared.values, before);
+        assert!(shared.add_in_place(&Csr::from_triplets(5, 5, vec![(4, 1, 1.0)])));
+        assert_eq!(shared.get(4, 1), 2.0);
     }
 
     #[test]

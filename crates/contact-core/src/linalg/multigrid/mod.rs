@@ -424,10 +424,12 @@ impl Hierarchy {
 
     /// This hierarchy with `changes` (one per level, the coarsest's last, as
     /// [`Hierarchy::changes_below`] makes them from level 0) added to its operators in place,
-    /// and the smoothers and the coarsest factor made again. A shed level's operator is
-    /// widened from its f32 copy, changed and rounded again (2⁻²⁴ relative, a
-    /// preconditioner's rounding). Each level holds one f64 copy of its operator at a time,
-    /// and the old coarsest factor goes before the new one is made.
+    /// and the smoothers of the changed levels and the coarsest factor made again. A shed
+    /// level takes its change into its f32 blocks ([`BlockCsr32::add_in_place`], each changed
+    /// entry rounded again: 2⁻²⁴ relative, a preconditioner's rounding) and its smoother
+    /// from them; where the blocks do not hold the change, it is widened, changed and
+    /// rounded afresh. Each level holds one f64 copy of its operator at a time, and the old
+    /// coarsest factor goes before the new one is made.
     pub fn with_changes(self, changes: &[Csr]) -> Result<Hierarchy, FactorError> {
         assert_eq!(
             changes.len(),
@@ -444,6 +446,18 @@ impl Hierarchy {
         } = self;
         drop(coarse);
         for (level, delta) in levels.iter_mut().zip(changes) {
+            if delta.nnz() == 0 {
+                continue;
+            }
+            // A level kept in f32 only takes the change into its blocks where they hold it,
+            // instead of being widened, summed and rounded afresh.
+            if let (None, Some(a32)) = (&level.a, &mut level.a32) {
+                if a32.add_in_place(delta) {
+                    let blocks = level.smoother.jacobi.blocks();
+                    level.smoother = Chebyshev::of_single(a32, blocks, params.degree, params.ratio);
+                    continue;
+                }
+            }
             let (shed, single) = (level.a.is_none(), level.a32.is_some());
             let a = match level.a.take() {
                 Some(a) => Arc::unwrap_or_clone(a),
