@@ -75,6 +75,13 @@ pub struct BlockCsr<T: Entry> {
     split_dofs: Vec<usize>,
 }
 
+/// The first DOF of block column c's window of `sc` columns: c's first DOF, moved back at
+/// the end of the vector so that the window stays inside it.
+fn window_start(col_ptr: &[usize], sc: usize, c: usize) -> usize {
+    let m = *col_ptr.last().expect("block bounds");
+    col_ptr[c].min(m - sc)
+}
+
 impl<T: Entry> BlockCsr<T> {
     /// `a` (square) in the blocks of consecutive DOFs ptr[b]..ptr[b + 1] (increasing from 0
     /// to n; [`super::multigrid::Blocks::consecutive_bounds`] of a level's node blocks).
@@ -132,7 +139,7 @@ impl<T: Entry> BlockCsr<T> {
         row.push(cols.len());
         // The entries, in one allocation (the copy is the only transient), each piece of
         // block rows filling its own part.
-        let start = |c: u32| col_ptr[c as usize].min(m - sc);
+        let start = |c: u32| window_start(&col_ptr, sc, c as usize);
         let rc = s * sc;
         let mut values = vec![T::default(); rc * cols.len()];
         let value_bounds: Vec<usize> = split_blocks.iter().map(|&b| rc * row[b]).collect();
@@ -408,11 +415,10 @@ impl<T: Entry> BlockCsr<T> {
     /// nothing changes and it returns false, and the caller forms the sum afresh.
     pub fn add_in_place(&mut self, delta: &Csr) -> bool {
         assert_eq!((delta.nrows, delta.ncols), (self.nrows(), self.ncols()));
-        let last_window = self.ncols() - self.sc;
         let position = |i: usize, j: usize| {
             let b = self.block_row(i);
             let c = self.col_ptr.partition_point(|&p| p <= j) - 1;
-            let window = self.col_ptr[c].min(last_window) as u32;
+            let window = window_start(&self.col_ptr, self.sc, c) as u32;
             let slots = &self.window[self.row[b]..self.row[b + 1]];
             let first = slots.partition_point(|&w| w < window);
             let end = slots.partition_point(|&w| w <= window);
